@@ -1,0 +1,141 @@
+"""Time series of an experiment: what simulation produces and recordings hold.
+
+Arrays are time-first: ``values`` has shape ``(n_samples, n_channels)``.
+Channel names follow one vocabulary everywhere (recordings, CSV import,
+identification): ``zdd`` base absolute acceleration (m/s^2), ``z``/``zd``
+base displacement/velocity (m, m/s), ``a1..ad`` floor absolute accelerations
+(m/s^2), ``q1..qd`` floor displacements relative to the base (m), ``v1..vd``
+floor velocities relative to the base (m/s); floor 1 is the lowest.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import SensorDataError
+from .scenario import Structure
+
+__all__ = ["RunData", "Experiment", "UNITS", "channel_unit"]
+
+#: SI unit of each channel group.
+UNITS = {"zdd": "m/s^2", "z": "m", "zd": "m/s", "a": "m/s^2", "q": "m", "v": "m/s"}
+
+
+def channel_unit(name: str) -> str:
+    """Unit of channel ``name`` (``'a2'`` -> ``'m/s^2'``)."""
+    if name in UNITS:
+        return UNITS[name]
+    group = name.rstrip("0123456789")
+    if group in UNITS and group != name:
+        return UNITS[group]
+    return "1"
+
+
+@dataclass(frozen=True)
+class RunData:
+    """One run of the experiment.
+
+    Attributes
+    ----------
+    name : str
+        Run name (unique in the experiment).
+    added_mass : ndarray, shape (d,)
+        Masses bolted to floors 1..d for this run (kg).
+    time : ndarray, shape (n,)
+        Sample times (s), strictly increasing.
+    channels : tuple of str, length c
+        Channel names, see the module docstring.
+    values : ndarray, shape (n, c)
+        Samples in SI units.
+    """
+
+    name: str
+    added_mass: np.ndarray
+    time: np.ndarray
+    channels: tuple[str, ...]
+    values: np.ndarray
+    meta: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self):
+        n = self.time.shape[0]
+        if self.values.shape != (n, len(self.channels)):
+            raise SensorDataError(
+                f"run {self.name!r}: values have shape {self.values.shape}, expected "
+                f"({n}, {len(self.channels)}) for {n} samples of channels {list(self.channels)}"
+            )
+
+    @property
+    def n_samples(self) -> int:
+        return self.time.shape[0]
+
+    @property
+    def sample_rate(self) -> float:
+        """Mean sample rate (Hz)."""
+        if self.n_samples < 2:
+            return float("nan")
+        return (self.n_samples - 1) / (self.time[-1] - self.time[0])
+
+    def has(self, channel: str) -> bool:
+        return channel in self.channels
+
+    def __getitem__(self, channel: str) -> np.ndarray:
+        """Column of ``channel``, shape (n,)."""
+        try:
+            return self.values[:, self.channels.index(channel)]
+        except ValueError:
+            raise SensorDataError(
+                f"run {self.name!r}: no channel {channel!r}; it has {', '.join(self.channels)}"
+            ) from None
+
+    def group(self, prefix: str, storeys: int | None = None) -> np.ndarray:
+        """Per-floor channels ``prefix1..prefixd`` as shape (n, d)."""
+        d = storeys if storeys is not None else self.added_mass.shape[0]
+        return np.column_stack([self[f"{prefix}{i + 1}"] for i in range(d)])
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """All runs of one experiment plus what the file says about the rig.
+
+    Attributes
+    ----------
+    runs : tuple of RunData
+    structure : Structure or None
+        The nominal (analytic) model the experiment was run or described with.
+    scenario : dict
+        Scenario summary (name, duration, sample rate, excitation, ...).
+    scenario_text : str
+        The scenario file's text, when the experiment came from a scenario.
+    source : str
+        Where it was read from (a path) or ``'<memory>'``.
+    complete : bool
+        False when runs were lost (a truncated recording was recovered).
+    notes : tuple of str
+        What was repaired or recovered while reading.
+    """
+
+    runs: tuple[RunData, ...]
+    structure: Structure | None = None
+    scenario: dict = field(default_factory=dict)
+    scenario_text: str = ""
+    source: str = "<memory>"
+    complete: bool = True
+    notes: tuple[str, ...] = ()
+
+    @property
+    def storeys(self) -> int:
+        return self.runs[0].added_mass.shape[0]
+
+    @property
+    def name(self) -> str:
+        return self.scenario.get("name", "experiment")
+
+    def run(self, name: str) -> RunData:
+        for r in self.runs:
+            if r.name == name:
+                return r
+        raise SensorDataError(
+            f"{self.source}: no run named {name!r}; runs are {', '.join(r.name for r in self.runs)}"
+        )

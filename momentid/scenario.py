@@ -1,0 +1,400 @@
+"""Scenario files: the structure, excitation, added-mass runs and sensors.
+
+A scenario is a TOML file validated strictly into frozen dataclasses; every
+mistake is a one-line :class:`~momentid.errors.ScenarioError` naming the file,
+the dotted key and the offending value.  The format is documented in the
+README ("Scenario format") and by the shipped files in ``scenarios/``.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Union
+
+import numpy as np
+
+from . import analytic
+from ._toml import Table, load_toml
+from .errors import ScenarioError
+
+__all__ = [
+    "Structure",
+    "Harmonics",
+    "RecordedMotion",
+    "BandLimitedNoise",
+    "Excitation",
+    "Run",
+    "Sensors",
+    "Scenario",
+    "load_scenario",
+    "parse_scenario",
+    "default_scenario_path",
+    "SENSOR_GROUPS",
+]
+
+#: Sensor groups a scenario may ask for; ``a``, ``q``, ``v`` expand to one
+#: channel per floor (``a1``..``ad``).
+SENSOR_GROUPS = {
+    "zdd": ("base absolute acceleration", "m/s^2"),
+    "z": ("base (table) displacement", "m"),
+    "zd": ("base (table) velocity", "m/s"),
+    "a": ("floor absolute acceleration", "m/s^2"),
+    "q": ("floor displacement relative to the base", "m"),
+    "v": ("floor velocity relative to the base", "m/s"),
+}
+
+
+@dataclass(frozen=True)
+class Structure:
+    """A shear building; floor 1 is the lowest, storey i joins floor i-1 and i.
+
+    Attributes
+    ----------
+    masses : tuple of float, length d
+        Floor masses (kg).
+    storey_stiffness : tuple of float, length d
+        Storey stiffnesses (N/m).
+    storey_heights : tuple of float, length d
+        Storey heights (m); used for drawing and gravity effects only.
+    rayleigh_mu, rayleigh_kappa : float
+        ``C = mu M + kappa K`` (1/s and s).
+    base_mass : float
+        Mass of the shake-table platen (kg); it does not enter the
+        identification because the base motion is prescribed.
+    """
+
+    masses: tuple[float, ...]
+    storey_stiffness: tuple[float, ...]
+    storey_heights: tuple[float, ...]
+    rayleigh_mu: float
+    rayleigh_kappa: float
+    base_mass: float = 100.0
+
+    @property
+    def storeys(self) -> int:
+        return len(self.masses)
+
+    def mass_matrix(self) -> np.ndarray:
+        """``M``, shape (d, d), kg."""
+        return np.diag(self.masses)
+
+    def stiffness_matrix(self) -> np.ndarray:
+        """``K``, shape (d, d), N/m."""
+        return analytic.shear_stiffness(self.storey_stiffness)
+
+    def damping_matrix(self, added_mass=None) -> np.ndarray:
+        """``C = mu (M + dM) + kappa K``, shape (d, d), N*s/m."""
+        M = self.mass_matrix()
+        if added_mass is not None:
+            M = M + np.diag(added_mass)
+        return self.rayleigh_mu * M + self.rayleigh_kappa * self.stiffness_matrix()
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Structure":
+        return cls(
+            masses=tuple(float(x) for x in data["masses"]),
+            storey_stiffness=tuple(float(x) for x in data["storey_stiffness"]),
+            storey_heights=tuple(float(x) for x in data["storey_heights"]),
+            rayleigh_mu=float(data["rayleigh_mu"]),
+            rayleigh_kappa=float(data["rayleigh_kappa"]),
+            base_mass=float(data.get("base_mass", 100.0)),
+        )
+
+
+@dataclass(frozen=True)
+class Harmonics:
+    """``z(t) = sum_j A_j sin(w_j t + phi_j)`` (m, rad/s, rad)."""
+
+    amplitudes: tuple[float, ...]
+    angular_frequencies: tuple[float, ...]
+    phases: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class RecordedMotion:
+    """A recorded accelerogram turned into a table motion.
+
+    Attributes
+    ----------
+    path : Path
+        The record file (PEER AT2, acceleration in g).
+    scale : float
+        Factor applied to the recorded acceleration.
+    highpass : float
+        Corner (Hz) of the zero-phase high-pass that keeps the table stroke
+        bounded; 0 disables it.
+    taper : float
+        Length (s) of the cosine tapers at both ends.
+    """
+
+    path: Path
+    scale: float = 1.0
+    highpass: float = 0.1
+    taper: float = 1.0
+
+
+@dataclass(frozen=True)
+class BandLimitedNoise:
+    """Seeded band-limited random table acceleration.
+
+    ``rms`` is the RMS acceleration (m/s^2) over the band ``band`` (Hz).
+    """
+
+    rms: float
+    band: tuple[float, float]
+    seed: int
+    taper: float = 1.0
+
+
+Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise]
+
+
+@dataclass(frozen=True)
+class Run:
+    """One added-mass run: ``added_mass`` (kg per floor, shape (d,))."""
+
+    name: str
+    added_mass: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """Which sensor groups are recorded (see :data:`SENSOR_GROUPS`)."""
+
+    groups: tuple[str, ...] = ("zdd", "z", "zd", "a", "q", "v")
+
+    def channels(self, storeys: int) -> tuple[str, ...]:
+        """Channel names in recording order, e.g. ``('zdd', 'a1', ...)``."""
+        out: list[str] = []
+        for g in self.groups:
+            if g in ("a", "q", "v"):
+                out.extend(f"{g}{i + 1}" for i in range(storeys))
+            else:
+                out.append(g)
+        return tuple(out)
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A validated scenario.  ``text`` is the file's own text (kept in recordings)."""
+
+    name: str
+    description: str
+    duration: float
+    sample_rate: float
+    seed: int
+    substeps: int
+    structure: Structure
+    excitation: Excitation
+    runs: tuple[Run, ...]
+    sensors: Sensors = field(default_factory=Sensors)
+    source: str = "<string>"
+    text: str = ""
+
+    @property
+    def n_samples(self) -> int:
+        """Samples per run, at ``t = k / sample_rate`` for k = 0..n-1."""
+        return int(round(self.duration * self.sample_rate)) + 1
+
+    @property
+    def timestep(self) -> float:
+        """Simulation step (s)."""
+        return 1.0 / (self.sample_rate * self.substeps)
+
+    def summary(self) -> dict:
+        """A JSON-friendly description (what recordings store as metadata)."""
+        exc = asdict(self.excitation)
+        exc["type"] = type(self.excitation).__name__
+        if "path" in exc:
+            exc["path"] = str(exc["path"])
+        return {
+            "name": self.name,
+            "description": self.description,
+            "duration": self.duration,
+            "sample_rate": self.sample_rate,
+            "seed": self.seed,
+            "substeps": self.substeps,
+            "excitation": json.loads(json.dumps(exc, default=list)),
+        }
+
+
+def default_scenario_path() -> Path:
+    """Path of the embedded default scenario (``momentid run`` with no file)."""
+    return Path(str(resources.files("momentid") / "default_scenario.toml"))
+
+
+def load_scenario(path) -> Scenario:
+    """Read and validate a scenario file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.  Relative record paths inside it are resolved against
+        the file's folder.
+
+    Raises
+    ------
+    ScenarioError
+        On any invalid content; the message names file, key and value.
+    """
+    path = Path(path)
+    data = load_toml(path)
+    text = path.read_text(encoding="utf-8")
+    return parse_scenario(data, source=path, text=text)
+
+
+def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario:
+    """Validate already-parsed TOML ``data`` (see :func:`load_scenario`)."""
+    source = Path(source) if not isinstance(source, Path) else source
+    top = Table(data, source)
+    meta = top.table("scenario")
+    name = meta.string("name", source.stem if source.suffix else "scenario")
+    description = meta.string("description", "")
+    duration = meta.number("duration", positive=True)
+    sample_rate = meta.number("sample_rate", 1000.0, positive=True)
+    seed = meta.integer("seed", 0, minimum=0)
+    meta.finish()
+
+    structure = _parse_structure(top.table("structure"))
+    d = structure.storeys
+    excitation = _parse_excitation(top.table("excitation"), source, seed)
+    runs = []
+    for i, tab in enumerate(top.tables("runs")):
+        added = tab.numbers("added_mass", length=d, nonnegative=True, scalar_ok=True)
+        runs.append(Run(name=tab.string("name", f"run{i + 1}"), added_mass=added))
+        tab.finish()
+    names = [r.name for r in runs]
+    if len(set(names)) != len(names):
+        dup = next(n for n in names if names.count(n) > 1)
+        raise ScenarioError(f"{source}: key 'runs.name' = {dup!r}: expected unique run names")
+
+    sens = top.table("sensors", {})
+    groups = sens.strings("channels", Sensors().groups)
+    for g in groups:
+        if g not in SENSOR_GROUPS:
+            raise ScenarioError(
+                f"{source}: key 'sensors.channels' = {g!r}: expected one of {', '.join(SENSOR_GROUPS)}"
+            )
+    if len(set(groups)) != len(groups):
+        raise ScenarioError(f"{source}: key 'sensors.channels' = {list(groups)!r}: expected no repeats")
+    sens.finish()
+
+    sim = top.table("simulation", {})
+    substeps = sim.integer("substeps", 1, minimum=1)
+    sim.finish()
+    top.finish()
+
+    n = int(round(duration * sample_rate))
+    if abs(n - duration * sample_rate) > 1e-6 * max(1.0, n):
+        raise ScenarioError(
+            f"{source}: key 'scenario.duration' = {duration!r}: expected a whole number of samples "
+            f"at sample_rate {sample_rate} Hz"
+        )
+    return Scenario(
+        name=name, description=description, duration=duration, sample_rate=sample_rate,
+        seed=seed, substeps=substeps, structure=structure, excitation=excitation,
+        runs=tuple(runs), sensors=Sensors(groups), source=str(source), text=text,
+    )
+
+
+def _parse_structure(tab: Table) -> Structure:
+    masses = tab.numbers("masses", positive=True)
+    d = len(masses)
+    if tab.has("storeys"):
+        storeys = tab.integer("storeys", minimum=1)
+        if storeys != d:
+            raise tab.error("storeys", f"the number of entries in 'masses' ({d})")
+    stiffness = tab.numbers("storey_stiffness", length=d, positive=True, scalar_ok=True)
+    heights = tab.numbers("storey_height", 0.3, length=d, positive=True, scalar_ok=True)
+    if isinstance(heights, float):
+        heights = (heights,) * d
+    base_mass = tab.number("base_mass", 100.0, positive=True)
+    damp = tab.table("damping")
+    M = np.diag(masses)
+    K = analytic.shear_stiffness(stiffness)
+    if damp.has("damping_ratios"):
+        if damp.has("rayleigh_mu") or damp.has("rayleigh_kappa"):
+            raise damp.error("damping_ratios", "either damping_ratios or rayleigh_mu/rayleigh_kappa, not both")
+        if d < 2:
+            raise damp.error("damping_ratios", "rayleigh_mu/rayleigh_kappa (one storey has only one mode)")
+        ratios = damp.numbers("damping_ratios", length=2, nonnegative=True)
+        modes = damp._get("modes", [1, 2])
+        if (not isinstance(modes, list) or len(modes) != 2
+                or not all(isinstance(m, int) and not isinstance(m, bool) for m in modes)):
+            raise damp.error("modes", "two mode numbers, e.g. [1, 2]")
+        mu, kappa = analytic.rayleigh_coefficients(M, K, ratios, tuple(modes), file=tab.file,
+                                                   key=damp.prefix)
+        if mu < 0 or kappa < 0:
+            raise damp.error("damping_ratios",
+                             f"ratios that give non-negative Rayleigh coefficients (got mu={mu:.4g}, kappa={kappa:.4g})")
+    else:
+        mu = damp.number("rayleigh_mu", nonnegative=True)
+        kappa = damp.number("rayleigh_kappa", nonnegative=True)
+    damp.finish()
+    tab.finish()
+    return Structure(masses=masses, storey_stiffness=stiffness, storey_heights=heights,
+                     rayleigh_mu=mu, rayleigh_kappa=kappa, base_mass=base_mass)
+
+
+def _parse_excitation(tab: Table, source: Path, seed: int) -> Excitation:
+    kind = tab.string("type", choices=("harmonic", "harmonics", "record", "noise"))
+    if kind == "harmonic":
+        amp = (tab.number("amplitude", positive=True),)
+        omega = (_angular(tab, "angular_frequency", "frequency", plural=False),)
+        phase = (tab.number("phase", 0.0),)
+        exc: Excitation = Harmonics(amp, omega, phase)
+    elif kind == "harmonics":
+        amp = tab.numbers("amplitudes", positive=True)
+        omega = _angular(tab, "angular_frequencies", "frequencies", plural=True, length=len(amp))
+        phase = tab.numbers("phases", (0.0,) * len(amp), length=len(amp))
+        exc = Harmonics(amp, omega, phase)
+    elif kind == "record":
+        raw = tab.string("file")
+        fmt = tab.string("format", "at2", choices=("at2",))
+        del fmt
+        path = Path(raw).expanduser()
+        if not path.is_absolute():
+            path = (source.parent / path) if source.suffix else path
+        path = path.resolve()
+        if not path.is_file():
+            raise ScenarioError(
+                f"{source}: key '{tab.key('file')}' = {raw!r}: record file not found (looked for {path})"
+            )
+        exc = RecordedMotion(
+            path=path,
+            scale=tab.number("scale", 1.0, positive=True),
+            highpass=tab.number("highpass", 0.1, nonnegative=True),
+            taper=tab.number("taper", 1.0, nonnegative=True),
+        )
+    else:
+        band = tab.numbers("band", length=2, positive=True)
+        if not band[0] < band[1]:
+            raise tab.error("band", "[low, high] in Hz with low < high")
+        exc = BandLimitedNoise(
+            rms=tab.number("rms", positive=True),
+            band=(band[0], band[1]),
+            seed=tab.integer("seed", seed, minimum=0),
+            taper=tab.number("taper", 1.0, nonnegative=True),
+        )
+    tab.finish()
+    return exc
+
+
+def _angular(tab: Table, omega_key: str, hz_key: str, *, plural: bool, length: int | None = None):
+    if tab.has(omega_key) == tab.has(hz_key):
+        raise ScenarioError(
+            f"{tab.file}: table '{tab.prefix}': expected exactly one of '{omega_key}' (rad/s) or '{hz_key}' (Hz)"
+        )
+    if plural:
+        if tab.has(omega_key):
+            return tab.numbers(omega_key, length=length, positive=True)
+        return tuple(2 * np.pi * f for f in tab.numbers(hz_key, length=length, positive=True))
+    if tab.has(omega_key):
+        return tab.number(omega_key, positive=True)
+    return 2 * np.pi * tab.number(hz_key, positive=True)

@@ -1,0 +1,157 @@
+"""The ``momentid`` command line: a thin layer over the Python API.
+
+Every user mistake ends as one line ``error: ...`` on stderr and exit code 2;
+an interrupted run exits 130.  Run ``momentid COMMAND --help`` for details.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from pathlib import Path
+
+from .errors import MomentidError
+
+__all__ = ["main"]
+
+_EPILOG = """examples:
+  momentid run                                        # the embedded default scenario
+  momentid run scenarios/paper_harmonic.toml -o out/  # any scenario file
+  momentid identify out/paper_harmonic.mcap           # identification from the recording alone
+  momentid identify out/paper_harmonic.mcap --json    # machine-readable result
+"""
+
+
+def _json_safe(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
+def _output_path(out: str | None, name: str) -> Path:
+    if out is None:
+        return Path("out") / f"{name}.mcap"
+    p = Path(out)
+    if p.suffix == ".mcap":
+        return p
+    return p / f"{name}.mcap"
+
+
+def _report(experiment, args) -> int:
+    from .compare import compare
+    from .identify import identify
+
+    times = args.time if args.time else None
+    runs = args.runs.split(",") if args.runs else None
+    result = identify(experiment, estimator=args.estimator, runs=runs, times=times)
+    if experiment.structure is not None:
+        comparison = compare(result, experiment.structure)
+        payload = comparison.to_dict()
+        text = comparison.table()
+    else:
+        payload = result.to_dict()
+        payload["analytic"] = None
+        text = "\n".join(f"{k}: {v}" for k, v in payload.items())
+    for note in experiment.notes:
+        print(f"note: {note}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(_json_safe(payload), indent=2, allow_nan=False))
+    else:
+        print(text)
+    return 0
+
+
+def _cmd_run(args) -> int:
+    from .scenario import default_scenario_path, load_scenario
+    from .simulate import run_experiment
+
+    path = Path(args.scenario) if args.scenario else default_scenario_path()
+    scenario = load_scenario(path)
+    out = _output_path(args.output, scenario.name)
+    progress = not args.quiet and sys.stderr.isatty()
+    experiment = run_experiment(scenario, out, progress=progress)
+    if not args.json:
+        print(f"scenario {scenario.name}: {len(experiment.runs)} runs x {scenario.duration:g} s at "
+              f"{scenario.sample_rate:g} Hz -> {out}\n")
+    return _report(experiment, args)
+
+
+def _cmd_identify(args) -> int:
+    from .recording import read_recording
+
+    experiment = read_recording(args.recording)
+    return _report(experiment, args)
+
+
+def _add_identify_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--estimator", choices=("equation", "difference"), default="equation",
+                   help="'equation': every run on its own, all samples in one least-squares problem "
+                        "(method.md eq. 3, default); 'difference': each run minus the reference run "
+                        "(the paper's eq. 2), needs identical table motion")
+    p.add_argument("--time", type=float, action="append", metavar="T",
+                   help="use only the sample nearest time T (s); repeat for several instants "
+                        "(e.g. --estimator difference --time 5 reproduces the paper's system)")
+    p.add_argument("--runs", metavar="NAMES", help="comma-separated run names to use (default: all)")
+    p.add_argument("--json", action="store_true",
+                   help="print one JSON object (M, C, K, mu, kappa, analytic, ...) instead of the table")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="momentid",
+        description="A virtual shake-table laboratory: simulate added-mass runs of a shear building "
+                    "on a MuJoCo rig, record them to MCAP, and identify M, C, K and Rayleigh damping "
+                    "(Majcher 2025, input-output method with system momentum change).",
+        epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    from . import __version__
+    parser.add_argument("--version", action="version", version=f"momentid {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    p = sub.add_parser("run", help="simulate every run of a scenario, record it, identify, compare",
+                       description="Simulate every added-mass run of SCENARIO on the MuJoCo rig, "
+                                   "write the MCAP recording, identify M, C, K, mu, kappa from it "
+                                   "and compare them with the scenario's analytic model.")
+    p.add_argument("scenario", nargs="?", help="scenario TOML file (default: the embedded default scenario)")
+    p.add_argument("-o", "--output", metavar="PATH",
+                   help="output folder (the recording is PATH/<name>.mcap) or a .mcap file (default: out/)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _add_identify_options(p)
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("identify", help="identify M, C, K, mu, kappa from a recording",
+                       description="Identify M, C, K, mu and kappa from an MCAP recording alone and "
+                                   "compare with the nominal model stored in it.")
+    p.add_argument("recording", help="MCAP recording written by momentid (or any rig following "
+                                     "docs/recording-format.md)")
+    _add_identify_options(p)
+    p.set_defaults(func=_cmd_identify)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 2
+    try:
+        return args.func(args)
+    except MomentidError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

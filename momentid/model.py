@@ -1,0 +1,147 @@
+"""The shake-table rig as a MuJoCo model, built through ``mujoco.MjSpec``.
+
+Layout ("star"): a ``base`` body on a slide joint ``base_x`` carries every
+floor as a direct child on its own slide joint ``q<i>``, so a floor joint's
+position is its displacement *relative to the base*.  The storeys are fixed
+tendons ``storey<i> = q_i - q_(i-1)`` (``q_0 = 0``) with stiffness ``k_i`` and
+damping ``kappa k_i``: they carry ``K`` and ``kappa K`` exactly.  The floor
+joints' own damping ``mu (m_i + dm_i)`` carries ``mu (M + dM)``.  An added
+mass is a body welded to its floor (``added<i>``).  The base is driven by a
+motor ``table`` whose force the simulator computes at every integrator
+stage so that the base acceleration equals the prescribed ``z''(t)``.
+
+``models/shear_building/`` holds the paper's rig written out by
+:func:`build_spec`; the README there gives the derivation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import mujoco
+
+from .errors import ModelError
+from .scenario import Structure
+
+__all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout"]
+
+_PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
+_SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
+_MAX_STOREYS = 200
+
+
+def _inertia(mass: float, half: tuple[float, float, float]) -> list[float]:
+    """Box inertia; only needed to make the body valid (slide joints only)."""
+    x, y, z = (2 * h for h in half)
+    return [mass / 12 * (y * y + z * z), mass / 12 * (x * x + z * z), mass / 12 * (x * x + y * y)]
+
+
+def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
+               name: str = "shear_building") -> mujoco.MjSpec:
+    """Build the MJCF specification of the rig for one run.
+
+    Parameters
+    ----------
+    structure : Structure
+        Floor masses, storey stiffnesses and heights, Rayleigh coefficients.
+    added_mass : array_like, shape (d,), optional
+        Masses bolted to floors 1..d in this run (kg); zeros by default.
+    timestep : float
+        Integrator step (s); the integrator is RK4.
+
+    Returns
+    -------
+    mujoco.MjSpec
+        Compile it with :func:`compile_model` (or ``spec.compile()``).
+    """
+    d = structure.storeys
+    if not 1 <= d <= _MAX_STOREYS:
+        raise ModelError(f"structure has {d} storeys: expected 1..{_MAX_STOREYS}")
+    dm = np.zeros(d) if added_mass is None else np.asarray(added_mass, float)
+    if dm.shape != (d,) or np.any(dm < 0) or not np.all(np.isfinite(dm)):
+        raise ModelError(f"added_mass = {dm.tolist()}: expected {d} finite values >= 0 (kg)")
+    if not timestep > 0:
+        raise ModelError(f"timestep = {timestep!r}: expected a positive number of seconds")
+
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.option.timestep = timestep
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_RK4
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    mu, kappa = structure.rayleigh_mu, structure.rayleigh_kappa
+
+    base = spec.worldbody.add_body(name="base", pos=[0, 0, _PLATEN[2]])
+    base.mass = structure.base_mass
+    base.inertia = _inertia(structure.base_mass, _PLATEN)
+    base.add_joint(name="base_x", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+    base.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(_PLATEN), rgba=[0.35, 0.35, 0.4, 1],
+                  contype=0, conaffinity=0)
+    base.add_site(name="base_imu", pos=[0, 0, 0])
+
+    height = _PLATEN[2]
+    for i in range(d):
+        height += structure.storey_heights[i]
+        m_i = structure.masses[i]
+        floor = base.add_body(name=f"floor{i + 1}", pos=[0, 0, height - _PLATEN[2]])
+        floor.mass = m_i
+        floor.inertia = _inertia(m_i, _SLAB)
+        joint = floor.add_joint(name=f"q{i + 1}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+        joint.damping = [mu * (m_i + dm[i]), 0.0, 0.0]
+        floor.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(_SLAB),
+                       rgba=[0.8, 0.6, 0.3, 1], contype=0, conaffinity=0)
+        floor.add_site(name=f"floor{i + 1}_imu", pos=[0, 0, 0])
+        if dm[i] > 0:
+            extra = floor.add_body(name=f"added{i + 1}", pos=[0, 0, _SLAB[2] + 0.02])
+            extra.mass = dm[i]
+            extra.inertia = _inertia(dm[i], (0.05, 0.05, 0.02))
+            extra.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
+                           rgba=[0.2, 0.4, 0.8, 1], contype=0, conaffinity=0)
+
+    for i in range(d):
+        k_i = structure.storey_stiffness[i]
+        tendon = spec.add_tendon(name=f"storey{i + 1}")
+        tendon.wrap_joint(f"q{i + 1}", 1.0)
+        if i > 0:
+            tendon.wrap_joint(f"q{i}", -1.0)
+        tendon.stiffness = [k_i, 0.0, 0.0]
+        tendon.damping = [kappa * k_i, 0.0, 0.0]
+        tendon.springlength = [0.0, 0.0]
+
+    spec.add_actuator(name="table", target="base_x", trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                      gear=[1, 0, 0, 0, 0, 0], ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE)
+
+    def sensor(kind, name, target, objtype):
+        spec.add_sensor(name=name, type=kind, objname=target, objtype=objtype)
+
+    site, joint = mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_JOINT
+    acc, pos, vel = (mujoco.mjtSensor.mjSENS_ACCELEROMETER, mujoco.mjtSensor.mjSENS_JOINTPOS,
+                     mujoco.mjtSensor.mjSENS_JOINTVEL)
+    sensor(acc, "zdd", "base_imu", site)
+    sensor(pos, "z", "base_x", joint)
+    sensor(vel, "zd", "base_x", joint)
+    for i in range(d):
+        sensor(acc, f"a{i + 1}", f"floor{i + 1}_imu", site)
+    for i in range(d):
+        sensor(pos, f"q{i + 1}", f"q{i + 1}", joint)
+    for i in range(d):
+        sensor(vel, f"v{i + 1}", f"q{i + 1}", joint)
+    return spec
+
+
+def compile_model(spec: mujoco.MjSpec) -> mujoco.MjModel:
+    """Compile ``spec``; compiler errors become :class:`ModelError`."""
+    try:
+        return spec.compile()
+    except Exception as exc:  # mujoco raises ValueError with the compiler's text
+        raise ModelError(f"MuJoCo could not compile model '{spec.modelname}': {exc}") from None
+
+
+def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
+    """Map channel name -> index into ``sensordata`` (x axis of accelerometers)."""
+    out = {}
+    for s in range(model.nsensor):
+        out[model.sensor(s).name] = int(model.sensor_adr[s])
+    return out
+
+
+SENSOR_NAMES = ("zdd", "z", "zd", "a", "q", "v")

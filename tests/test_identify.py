@@ -1,0 +1,94 @@
+"""Identification on noise-free virtual data, and refusals when data cannot identify."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import momentid as mi
+from momentid.compare import compare
+from momentid.data import Experiment
+from momentid.identify import identify
+
+from conftest import load, scenario_files
+
+
+@pytest.mark.parametrize("path", scenario_files(), ids=lambda p: p.stem)
+def test_noise_free_identification_is_exact(simulated, path):
+    sc = load(path.stem)
+    result = identify(simulated(path.stem))
+    comparison = compare(result, sc.structure)
+    # Noise-free data satisfy eq. (3) to integration round-off; 1e-6 is the issue's acceptance bound
+    # (observed: ~1e-11), relative to the entry or, for zero entries, to the matrix's largest entry.
+    assert comparison.max_rel_error < 1e-6, comparison.table()
+    assert result.rank == result.n_unknowns
+    assert result.damping_misfit < 1e-8   # Rayleigh damping explains C exactly here
+    # Modal properties agree as well (derived from the matrices above).
+    assert np.allclose(comparison.identified_modes.frequency, comparison.analytic_modes.frequency, rtol=1e-8)
+    assert np.allclose(comparison.identified_modes.damping_ratio, comparison.analytic_modes.damping_ratio,
+                       rtol=1e-6)
+
+
+def test_tall_building_has_121_unknowns(simulated):
+    result = identify(simulated("tall_noise"))
+    assert result.storeys == 10 and result.n_unknowns == 10 + 2 * 55 + 1
+
+
+def test_difference_form_on_all_samples(simulated):
+    sc = load("paper_harmonic")
+    comparison = compare(identify(simulated("paper_harmonic"), estimator="difference"), sc.structure)
+    assert comparison.max_rel_error < 1e-6   # same bound as above; observed ~1e-11
+
+
+def test_refuses_a_single_run(simulated):
+    with pytest.raises(mi.IdentificationError, match="at least two"):
+        identify(simulated("default"), runs=["reference"])
+
+
+def test_refuses_runs_without_added_mass(simulated):
+    ex = simulated("default")
+    ref = ex.runs[0]
+    twin = replace(ref, name="again")
+    with pytest.raises(mi.IdentificationError, match="no run .* adds mass"):
+        identify(Experiment(runs=(ref, twin), structure=ex.structure))
+
+
+def test_refuses_too_little_excitation(simulated):
+    # Two runs at one instant: 6 equations for 16 unknowns.
+    with pytest.raises(mi.IdentificationError, match=r"only \d+ of 16 unknowns"):
+        identify(simulated("default"), times=[5.0])
+    # A structure that never moves.
+    ex = simulated("default")
+    still = tuple(replace(r, values=np.zeros_like(r.values)) for r in ex.runs)
+    with pytest.raises(mi.IdentificationError, match="never appear"):
+        identify(Experiment(runs=still, structure=ex.structure))
+
+
+def test_difference_form_needs_identical_table_motion(simulated):
+    ex = simulated("default")
+    runs = list(ex.runs)
+    values = runs[1].values.copy()
+    values[:, runs[1].channels.index("zdd")] *= 1.01
+    runs[1] = replace(runs[1], values=values)
+    with pytest.raises(mi.IdentificationError, match="same table motion"):
+        identify(Experiment(runs=tuple(runs), structure=ex.structure), estimator="difference")
+
+
+def test_bad_sensor_data_is_named(simulated):
+    ex = simulated("default")
+    r = ex.runs[1]
+    values = r.values.copy()
+    values[123, r.channels.index("a2")] = np.nan
+    with pytest.raises(mi.SensorDataError, match=r"channel a2 is nan at t = 0.123"):
+        identify(Experiment(runs=(ex.runs[0], replace(r, values=values))))
+    keep = [i for i, c in enumerate(r.channels) if c != "v3"]
+    cut = replace(r, channels=tuple(r.channels[i] for i in keep), values=r.values[:, keep])
+    with pytest.raises(mi.SensorDataError, match="no channel 'v3'"):
+        identify(Experiment(runs=(ex.runs[0], cut)))
+
+
+def test_unknown_estimator():
+    with pytest.raises(mi.IdentificationError, match="expected one of equation, difference"):
+        identify(Experiment(runs=()), estimator="magic")

@@ -1,0 +1,89 @@
+"""The MJCF rig: analytic M, C, K exactly, every scenario steps without warnings."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+import momentid as mi
+from momentid import model as rig
+from momentid.scenario import Run, Scenario
+from momentid.simulate import ground_motion_of, simulate_run
+
+from conftest import ROOT, load, scenario_files
+
+
+def structure(d: int) -> mi.Structure:
+    rng = np.random.default_rng(d)
+    return mi.Structure(
+        masses=tuple(rng.uniform(5, 20, d)), storey_stiffness=tuple(rng.uniform(1e3, 5e3, d)),
+        storey_heights=(0.3,) * d, rayleigh_mu=0.05, rayleigh_kappa=0.002,
+    )
+
+
+def floor_matrices(model: mujoco.MjModel, data: mujoco.MjData):
+    """Mass, damping and stiffness of the floor rows, read back from MuJoCo."""
+    nv = model.nv
+    full = np.zeros((nv, nv))
+    mujoco.mj_forward(model, data)
+    mujoco.mj_fullM(model, data, full)
+    d = nv - 1
+    K = np.zeros((d, d))
+    C = np.zeros((d, d))
+    for j in range(d):       # unit displacement / velocity of floor j -> passive force
+        for target, matrix in ((data.qpos, K), (data.qvel, C)):
+            mujoco.mj_resetData(model, data)
+            target[1 + j] = 1.0
+            mujoco.mj_forward(model, data)
+            matrix[:, j] = -data.qfrc_passive[1:]
+    return full[1:, 1:], C, K
+
+
+@pytest.mark.parametrize("d", [1, 2, 3, 7, 20])
+def test_rig_carries_the_analytic_matrices(d):
+    s = structure(d)
+    added = np.linspace(0.0, 1.0, d)
+    model = rig.compile_model(rig.build_spec(s, added))
+    M, C, K = floor_matrices(model, mujoco.MjData(model))
+    # Exact up to round-off of sums of a few products (1e-12 relative).
+    assert np.allclose(M, s.mass_matrix() + np.diag(added), rtol=1e-12, atol=0)
+    assert np.allclose(K, s.stiffness_matrix(), rtol=1e-12, atol=1e-9)
+    assert np.allclose(C, s.damping_matrix(added), rtol=1e-12, atol=1e-12)
+
+
+def test_bad_model_input_is_refused():
+    with pytest.raises(mi.ModelError, match="added_mass"):
+        rig.build_spec(structure(3), [0.1, -0.1, 0.0])
+    with pytest.raises(mi.ModelError, match="timestep"):
+        rig.build_spec(structure(3), None, timestep=0.0)
+
+
+def test_shipped_mjcf_is_the_builders_output():
+    sc = load("paper_harmonic")
+    spec = rig.build_spec(sc.structure, None, timestep=sc.timestep)
+    spec.compiler.saveinertial = True
+    shipped = (ROOT / "models" / "shear_building" / "shear_building.xml").read_text()
+    assert shipped == spec.to_xml(), "regenerate models/shear_building/shear_building.xml (see its README)"
+    scene = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "shear_building" / "scene.xml"))
+    assert scene.njnt == 4 and scene.ntendon == 3
+
+
+@pytest.mark.parametrize("path", scenario_files(), ids=lambda p: p.stem)
+def test_every_scenario_steps_without_warnings(path):
+    sc = load(path.stem)
+    short = Scenario(**{**sc.__dict__, "duration": 0.2})   # 0.2 s: a few hundred steps
+    motion = ground_motion_of(sc)
+    for run in sc.runs:
+        data = simulate_run(short, run, motion)   # raises SimulationError on any MuJoCo warning
+        assert np.all(np.isfinite(data.values))
+
+
+def test_warnings_and_divergence_are_errors():
+    sc = load("default")
+    stiff = mi.Structure(masses=(1e-3,), storey_stiffness=(1e9,), storey_heights=(0.3,),
+                         rayleigh_mu=0.0, rayleigh_kappa=0.0)
+    bad = Scenario(**{**sc.__dict__, "structure": stiff, "duration": 0.1,
+                      "runs": (Run("r", (0.0,)), Run("s", (1.0,)))})
+    with pytest.raises(mi.SimulationError, match="step below"):
+        mi.simulate.simulate(bad)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import re
-import time
 import warnings
 from pathlib import Path
 
@@ -119,22 +118,6 @@ def test_stock_decoder_reads_every_block(tmp_path):
         assert len(got) == 1 and got[0].n_samples == run.n_samples  # 51 samples < block_size 1000
         values = np.array(got[0].values).reshape(run.n_samples, len(got[0].channels))
         assert np.array_equal(values, run.values) and np.array_equal(np.array(got[0].time), run.time)
-
-
-def test_throughput_well_above_a_million_samples_per_second(tmp_path):
-    n, runs = 20_000, 5  # 100 k samples of 10 channels: ~0.1 s here
-    channels = tuple(f"c{j}" for j in range(10))
-    exp = Experiment(tuple(RunData(f"r{i}", np.zeros(2), np.arange(n) / 1e3, channels,
-                                   np.random.default_rng(i).standard_normal((n, 10)))
-                           for i in range(runs)), STRUCTURE, SCENARIO)
-    start = time.perf_counter()
-    write_experiment(tmp_path / "big.mcap", exp)
-    got = read_quietly(tmp_path / "big.mcap")
-    rate = n * runs / (time.perf_counter() - start)
-    assert len(got.runs) == runs
-    # ~2.5 M samples/s measured for write + read; the bar is 4x lower than the 1 M/s target
-    # so that a loaded 2-core machine (fsync per run, other jobs) does not make it flaky.
-    assert rate > 2.5e5, f"write+read {rate:.3g} samples/s"
 
 
 # ----------------------------------------------------------------------------- crashes

@@ -86,4 +86,4 @@ def test_warnings_and_divergence_are_errors():
     bad = Scenario(**{**sc.__dict__, "structure": stiff, "duration": 0.1,
                       "runs": (Run("r", (0.0,)), Run("s", (1.0,)))})
     with pytest.raises(mi.SimulationError, match="step below"):
-        mi.simulate.simulate(bad)
+        mi.simulate(bad)

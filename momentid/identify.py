@@ -34,7 +34,7 @@ from .analytic import Modes, modal_properties
 from .data import Experiment, RunData
 from .errors import IdentificationError, SensorDataError
 
-__all__ = ["Identification", "identify", "ESTIMATORS", "MAX_CONDITION"]
+__all__ = ["Identification", "identify", "equation_residual", "ESTIMATORS", "MAX_CONDITION"]
 
 ESTIMATORS = ("equation", "difference")
 #: Column-scaled condition numbers above this are refused: the data cannot
@@ -322,3 +322,21 @@ def _difference_rows(experiment: Experiment, selected, d: int, times, acc: _Accu
         rel_1 = s1["a"] - z1[:, None]
         acc.add((rel_i - rel_1)[idx], (si["v"] - s1["v"])[idx], (si["q"] - s1["q"])[idx],
                 (si["v"] * dm)[idx], (-si["a"] * dm)[idx])
+
+
+def equation_residual(result: Identification, run: RunData) -> np.ndarray:
+    """Residual of eq. (3) for the identified model on one run.
+
+    ``r = (M + dM) a + (C + mu dM) v + K q`` per floor: the force (N) the
+    identified model cannot explain; zero for a perfect model and perfect data.
+
+    Returns
+    -------
+    ndarray, shape (n_samples, d)
+    """
+    d = result.storeys
+    s = _signals(run, d)
+    dm = np.diag(run.added_mass)
+    Mi = result.M + dm
+    Ci = result.C + result.mu * dm
+    return s["a"] @ Mi.T + s["v"] @ Ci.T + s["q"] @ result.K.T

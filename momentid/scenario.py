@@ -27,7 +27,10 @@ __all__ = [
     "BandLimitedNoise",
     "Excitation",
     "Run",
+    "Instrument",
+    "ChannelFault",
     "Sensors",
+    "SENSOR_SETS",
     "Scenario",
     "load_scenario",
     "parse_scenario",
@@ -164,10 +167,103 @@ class Run:
 
 
 @dataclass(frozen=True)
-class Sensors:
-    """Which sensor groups are recorded (see :data:`SENSOR_GROUPS`)."""
+class Instrument:
+    """Noise and range of one kind of transducer (SI units of its channels).
 
-    groups: tuple[str, ...] = ("zdd", "z", "zd", "a", "q", "v")
+    Attributes
+    ----------
+    noise : float
+        White measurement noise, RMS at the sensor sample rate.
+    noise_density : float
+        Noise spectral density (unit/sqrt(Hz)); adds ``density * sqrt(fs / 2)`` RMS.
+    relative_noise : float
+        Noise RMS as a fraction of each channel's own RMS in the run (for
+        studies: "1 % noise").  The three noise terms add in quadrature.
+    resolution : float
+        Quantisation step (0 = none).
+    range : float
+        Full scale: readings are clipped to +/- range (0 = unlimited).
+    bias : float
+        Constant offset added to every channel of this kind.
+    """
+
+    noise: float = 0.0
+    noise_density: float = 0.0
+    relative_noise: float = 0.0
+    resolution: float = 0.0
+    range: float = 0.0
+    bias: float = 0.0
+
+    @property
+    def ideal(self) -> bool:
+        return not any((self.noise, self.noise_density, self.relative_noise, self.resolution,
+                        self.range, self.bias))
+
+
+@dataclass(frozen=True)
+class ChannelFault:
+    """Per-channel departures: gain factor, bias and clock offset (s, + = late)."""
+
+    gain: float = 1.0
+    bias: float = 0.0
+    clock_offset: float = 0.0
+
+
+#: Sensor sets: which channel groups a lab records.
+SENSOR_SETS = {
+    "all": ("zdd", "z", "zd", "a", "q", "v"),
+    "accel+disp": ("zdd", "z", "a", "q"),
+    "accel": ("zdd", "a"),
+}
+
+#: Which instrument measures each channel group.
+INSTRUMENT_OF = {"zdd": "accelerometer", "a": "accelerometer", "z": "displacement",
+                 "q": "displacement", "zd": "velocity", "v": "velocity"}
+
+
+@dataclass(frozen=True)
+class Sensors:
+    """What the rig measures and how well.
+
+    Attributes
+    ----------
+    set : str
+        ``"all"`` (every channel, the default), ``"accel+disp"``
+        (accelerometers and displacement transducers; velocities derived at
+        identification) or ``"accel"`` (accelerometers only).
+    groups : tuple of str
+        Channel groups recorded (see :data:`SENSOR_GROUPS`).
+    sample_rate : float or None
+        Sensor sample rate (Hz), a divisor of the simulation rate; None = same.
+    antialias : float
+        Corner (Hz) of the 4th-order Butterworth anti-alias filter applied to
+        every channel before sampling (0 = none).
+    accelerometer, displacement, velocity : Instrument
+    faults : tuple of (channel, ChannelFault)
+        Per-channel gain, bias and clock offset.
+    """
+
+    groups: tuple[str, ...] = SENSOR_SETS["all"]
+    set: str = "all"
+    sample_rate: float | None = None
+    antialias: float = 0.0
+    accelerometer: Instrument = field(default_factory=Instrument)
+    displacement: Instrument = field(default_factory=Instrument)
+    velocity: Instrument = field(default_factory=Instrument)
+    faults: tuple[tuple[str, ChannelFault], ...] = ()
+
+    @property
+    def ideal(self) -> bool:
+        """True when the recorded channels are the simulator's exact values."""
+        return (self.accelerometer.ideal and self.displacement.ideal and self.velocity.ideal
+                and not self.faults and not self.antialias and self.sample_rate is None)
+
+    def instrument(self, channel: str) -> Instrument:
+        group = channel.rstrip("0123456789") or channel
+        return getattr(self, INSTRUMENT_OF[group])
+
+    def fault(self, channel: str) -> ChannelFault:
+        return dict(self.faults).get(channel, ChannelFault())
 
     def channels(self, storeys: int) -> tuple[str, ...]:
         """Channel names in recording order, e.g. ``('zdd', 'a1', ...)``."""
@@ -178,6 +274,13 @@ class Sensors:
             else:
                 out.append(g)
         return tuple(out)
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["faults"] = {name: asdict(f) for name, f in self.faults}
+        out["groups"] = list(self.groups)
+        out["ideal"] = self.ideal
+        return out
 
 
 @dataclass(frozen=True)
@@ -221,6 +324,7 @@ class Scenario:
             "seed": self.seed,
             "substeps": self.substeps,
             "excitation": json.loads(json.dumps(exc, default=list)),
+            "sensors": self.sensors.to_dict(),
         }
 
 
@@ -274,17 +378,7 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
         dup = next(n for n in names if names.count(n) > 1)
         raise ScenarioError(f"{source}: key 'runs.name' = {dup!r}: expected unique run names")
 
-    sens = top.table("sensors", {})
-    groups = sens.strings("channels", Sensors().groups)
-    for g in groups:
-        if g not in SENSOR_GROUPS:
-            raise ScenarioError(
-                f"{source}: key 'sensors.channels' = {g!r}: expected one of {', '.join(SENSOR_GROUPS)}"
-            )
-    if len(set(groups)) != len(groups):
-        raise ScenarioError(f"{source}: key 'sensors.channels' = {list(groups)!r}: expected no repeats")
-    sens.finish()
-
+    sensors = _parse_sensors(top.table("sensors", {}), structure.storeys, sample_rate)
     sim = top.table("simulation", {})
     substeps = sim.integer("substeps", 1, minimum=1)
     sim.finish()
@@ -299,8 +393,63 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
     return Scenario(
         name=name, description=description, duration=duration, sample_rate=sample_rate,
         seed=seed, substeps=substeps, structure=structure, excitation=excitation,
-        runs=tuple(runs), sensors=Sensors(groups), source=str(source), text=text,
+        runs=tuple(runs), sensors=sensors, source=str(source), text=text,
     )
+
+
+def _parse_instrument(tab: Table | None) -> Instrument:
+    if tab is None:
+        return Instrument()
+    out = Instrument(**{k: tab.number(k, 0.0, nonnegative=True)
+                        for k in ("noise", "noise_density", "relative_noise", "resolution", "range")},
+                     bias=tab.number("bias", 0.0))
+    tab.finish()
+    return out
+
+
+def _parse_sensors(sens: Table, storeys: int, sample_rate: float) -> Sensors:
+    kind = sens.string("set", "all", choices=tuple(SENSOR_SETS))
+    if kind == "all":
+        groups = sens.strings("channels", SENSOR_SETS["all"])
+    else:
+        if sens.has("channels"):
+            raise sens.error("channels", f"no 'channels' with set = {kind!r} (the set fixes them)")
+        groups = SENSOR_SETS[kind]
+    for g in groups:
+        if g not in SENSOR_GROUPS:
+            raise ScenarioError(
+                f"{sens.file}: key 'sensors.channels' = {g!r}: expected one of {', '.join(SENSOR_GROUPS)}"
+            )
+    if len(set(groups)) != len(groups):
+        raise ScenarioError(f"{sens.file}: key 'sensors.channels' = {list(groups)!r}: expected no repeats")
+    rate = sens.number("sample_rate", None, positive=True)
+    if rate is not None:
+        ratio = sample_rate / rate
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise sens.error("sample_rate", f"a whole divisor of scenario.sample_rate ({sample_rate:g} Hz)")
+        if round(ratio) == 1:
+            rate = None
+    antialias = sens.number("antialias", 0.0, nonnegative=True)
+    nyquist = (rate or sample_rate) / 2
+    if antialias >= nyquist:
+        raise sens.error("antialias", f"a corner below the sensor Nyquist frequency ({nyquist:g} Hz), or 0")
+    instruments = {k: _parse_instrument(sens.table(k, None))
+                   for k in ("accelerometer", "displacement", "velocity")}
+    faults = []
+    ch_tab = sens.table("channel", {})
+    names = Sensors(groups=SENSOR_SETS["all"]).channels(storeys)
+    for name in list(ch_tab.data):
+        if name not in names:
+            raise ch_tab.error(name, f"a channel name ({', '.join(names)})")
+        t = ch_tab.table(name)
+        fault = ChannelFault(gain=t.number("gain", 1.0, positive=True), bias=t.number("bias", 0.0),
+                             clock_offset=t.number("clock_offset", 0.0))
+        t.finish()
+        faults.append((name, fault))
+    ch_tab.finish()
+    sens.finish()
+    return Sensors(groups=tuple(groups), set=kind, sample_rate=rate, antialias=antialias,
+                   faults=tuple(faults), **instruments)
 
 
 def _parse_structure(tab: Table) -> Structure:

@@ -26,7 +26,8 @@ from . import model as rig
 from .data import Experiment, RunData
 from .errors import SimulationError
 from .excitation import GroundMotion, ground_motion
-from .scenario import Run, Scenario
+from .scenario import Run, Scenario, Sensors
+from .sensors import measure
 
 __all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of"]
 
@@ -85,8 +86,10 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     Returns
     -------
     RunData
-        ``n = scenario.n_samples`` samples at ``t = k / sample_rate``; the
-        channels of ``scenario.sensors``.  ``meta['model_xml']`` holds the MJCF.
+        The channels of ``scenario.sensors`` as its instruments record them
+        (:func:`momentid.sensors.measure`); with ideal sensors, exactly
+        ``n = scenario.n_samples`` samples at ``t = k / sample_rate``.
+        ``meta['model_xml']`` holds the MJCF.
     """
     motion = motion if motion is not None else ground_motion_of(scenario)
     spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
@@ -100,7 +103,7 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     data.qvel[0] = float(motion.velocity(0.0))
 
     d = scenario.structure.storeys
-    channels = scenario.sensors.channels(d)
+    channels = Sensors().channels(d)     # every channel, exact; the sensor model picks and degrades
     layout = rig.sensor_layout(model)
     index = np.array([layout[c] for c in channels])
     out = np.empty((n, len(channels)))
@@ -117,7 +120,7 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
         progress(n % report_every)
     _check_run(model, data, out, scenario, run)
     spec.compiler.saveinertial = True
-    return RunData(
+    true = RunData(
         name=run.name,
         added_mass=np.asarray(run.added_mass, float),
         time=np.arange(n) / scenario.sample_rate,
@@ -125,6 +128,14 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
         values=out,
         meta={"model_xml": spec.to_xml()},
     )
+    return measure(true, scenario.sensors, seed=scenario.seed, run_index=_run_index(scenario, run))
+
+
+def _run_index(scenario: Scenario, run: Run) -> int:
+    for i, r in enumerate(scenario.runs):
+        if r.name == run.name:
+            return i
+    return len(scenario.runs)
 
 
 def _check_run(model, data, out, scenario: Scenario, run: Run) -> None:
@@ -164,8 +175,62 @@ def _progress_bar(total: int, enabled: bool, desc: str):
                 leave=False, dynamic_ncols=True)
 
 
+def available_cores() -> int:
+    """CPU cores this process may run on."""
+    import os
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _worker_count(workers: int | None, n_runs: int) -> int:
+    import multiprocessing
+    if workers is None:
+        workers = available_cores()
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise SimulationError(f"workers = {workers!r}: expected an int >= 1 (or None for one per core)")
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return 1  # pragma: no cover - Windows: no fork, simulate in this process
+    return min(workers, n_runs)
+
+
+_FORKED_JOB: tuple | None = None   # (scenario, motion) in a simulation worker process
+
+
+def _set_forked_job(scenario: Scenario, motion: GroundMotion) -> None:
+    global _FORKED_JOB
+    _FORKED_JOB = (scenario, motion)
+
+
+def _simulate_forked(index: int) -> RunData:
+    scenario, motion = _FORKED_JOB
+    return simulate_run(scenario, scenario.runs[index], motion)
+
+
+def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int) -> Iterator[RunData]:
+    """Simulate the runs in ``workers`` forked processes; yield them in run order.
+
+    The workers are forked with the scenario and motion as initializer
+    arguments (inherited, not pickled) and run exactly :func:`simulate_run`,
+    so the numbers equal the serial path's bit for bit.
+    """
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                               initializer=_set_forked_job, initargs=(scenario, motion))
+    try:
+        futures = [pool.submit(_simulate_forked, i) for i in range(len(scenario.runs))]
+        for future in futures:
+            yield future.result()
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
 def simulate(scenario: Scenario, *, progress: bool = False,
-             on_run: Callable[[RunData], None] | None = None) -> Experiment:
+             on_run: Callable[[RunData], None] | None = None,
+             workers: int | None = None) -> Experiment:
     """Simulate every run of ``scenario``.
 
     Parameters
@@ -174,19 +239,35 @@ def simulate(scenario: Scenario, *, progress: bool = False,
     progress : bool
         Show a progress bar on stderr.
     on_run : callable, optional
-        Called with each completed run (e.g. to write it to a recording
-        before the next one starts).
+        Called with each completed run, in run order (e.g. to write it to a
+        recording before the next one is collected).
+    workers : int, optional
+        Processes simulating runs at once: the runs are independent, so they
+        are spread over forked worker processes.  Default: one per available
+        core, at most one per run; ``1`` simulates in this process.  Results
+        are identical to the serial path and come back in run order.
     """
     _stability_check(scenario)
     motion = ground_motion_of(scenario)
+    n_workers = _worker_count(workers, len(scenario.runs))
     runs = []
     with _progress_bar(scenario.n_samples * len(scenario.runs), progress, scenario.name) as bar:
-        for run in scenario.runs:
-            bar.set_postfix_str(run.name)
-            result = simulate_run(scenario, run, motion, progress=bar.update)
-            if on_run is not None:
-                on_run(result)
-            runs.append(result)
+        if n_workers > 1:
+            results = _parallel_runs(scenario, motion, n_workers)
+        else:
+            results = (simulate_run(scenario, run, motion, progress=bar.update)
+                       for run in scenario.runs)
+        try:
+            for run in scenario.runs:
+                bar.set_postfix_str(run.name)
+                result = next(results)
+                if n_workers > 1:
+                    bar.update(scenario.n_samples)
+                if on_run is not None:
+                    on_run(result)
+                runs.append(result)
+        finally:
+            results.close()   # stops the workers when on_run fails or we are interrupted
     return Experiment(
         runs=tuple(runs),
         structure=scenario.structure,

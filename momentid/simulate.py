@@ -230,7 +230,7 @@ def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int) -> It
 
 def simulate(scenario: Scenario, *, progress: bool = False,
              on_run: Callable[[RunData], None] | None = None,
-             workers: int | None = None) -> Experiment:
+             workers: int | None = 1) -> Experiment:
     """Simulate every run of ``scenario``.
 
     Parameters
@@ -243,9 +243,10 @@ def simulate(scenario: Scenario, *, progress: bool = False,
         recording before the next one is collected).
     workers : int, optional
         Processes simulating runs at once: the runs are independent, so they
-        are spread over forked worker processes.  Default: one per available
-        core, at most one per run; ``1`` simulates in this process.  Results
-        are identical to the serial path and come back in run order.
+        are spread over forked worker processes (at most one per run).
+        ``1`` (default) simulates in this process, ``None`` uses one process
+        per available core.  Results are identical to the serial path and
+        come back in run order.
     """
     _stability_check(scenario)
     motion = ground_motion_of(scenario)
@@ -277,11 +278,13 @@ def simulate(scenario: Scenario, *, progress: bool = False,
     )
 
 
-def run_experiment(scenario: Scenario, path, *, progress: bool = False) -> Experiment:
+def run_experiment(scenario: Scenario, path, *, progress: bool = False,
+                   workers: int | None = 1) -> Experiment:
     """Simulate every run and record it to the MCAP file ``path``.
 
-    Each run is written and flushed as soon as it completes, so a crash
-    keeps every completed run readable.
+    Each run is written and flushed as soon as it completes (in run order),
+    so a crash keeps every completed run readable.  ``workers`` as in
+    :func:`simulate`.
     """
     from .recording import RecordingWriter
 
@@ -290,7 +293,7 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False) -> Exper
     with RecordingWriter(path, structure=scenario.structure, scenario=scenario.summary(),
                          scenario_text=scenario.text) as writer:
         experiment = simulate(
-            scenario, progress=progress,
+            scenario, progress=progress, workers=workers,
             on_run=lambda r: writer.write_run(r, model_xml=r.meta.get("model_xml")),
         )
     return Experiment(

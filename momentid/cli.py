@@ -34,6 +34,16 @@ def _json_safe(obj):
     return obj
 
 
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
+    return value
+
+
 def _output_path(out: str | None, name: str) -> Path:
     if out is None:
         return Path("out") / f"{name}.mcap"
@@ -75,7 +85,7 @@ def _cmd_run(args) -> int:
     scenario = load_scenario(path)
     out = _output_path(args.output, scenario.name)
     progress = not args.quiet and sys.stderr.isatty()
-    experiment = run_experiment(scenario, out, progress=progress)
+    experiment = run_experiment(scenario, out, progress=progress, workers=args.workers)
     if not args.json:
         print(f"scenario {scenario.name}: {len(experiment.runs)} runs x {scenario.duration:g} s at "
               f"{scenario.sample_rate:g} Hz -> {out}\n")
@@ -87,6 +97,12 @@ def _cmd_identify(args) -> int:
 
     experiment = read_recording(args.recording)
     return _report(experiment, args)
+
+
+def _cmd_bench(args) -> int:
+    from .bench import run_from_args
+
+    return run_from_args(args)
 
 
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
@@ -122,6 +138,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<name>.mcap) or a .mcap file (default: out/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.add_argument("-j", "--workers", type=_positive_int, metavar="N",
+                   help="simulate up to N runs at once in worker processes (default: one per core; "
+                        "1 = in this process)")
     _add_identify_options(p)
     p.set_defaults(func=_cmd_run)
 
@@ -132,6 +151,15 @@ def build_parser() -> argparse.ArgumentParser:
                                      "docs/recording-format.md)")
     _add_identify_options(p)
     p.set_defaults(func=_cmd_identify)
+
+    from .bench import add_arguments as add_bench_arguments
+    p = sub.add_parser("bench", help="time every stage against raw MuJoCo / MCAP / numpy baselines",
+                       description="Time simulate, record, identify, view and the whole `momentid run` "
+                                   "against raw baselines measured in the same process (mujoco.rollout, "
+                                   "the mcap library, one dense lstsq, rr.send_columns) and print their "
+                                   "ratios; the same as `python -m benchmarks`.")
+    add_bench_arguments(p)
+    p.set_defaults(func=_cmd_bench)
     return parser
 
 

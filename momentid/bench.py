@@ -1,0 +1,664 @@
+"""Benchmarks: every stage of momentid against a raw baseline timed in the same process.
+
+``momentid bench`` and ``python -m benchmarks`` run this module.  Each stage
+prints momentid's time, the baseline's time and their ratio (momentid /
+baseline), and ``--json-out`` writes the same rows as JSON.  Only ratios are
+meaningful across machines; nothing here asserts an absolute time.
+
+Stages and their baselines:
+
+``simulate``
+    All runs of a scenario (``simulate(workers=N)``) against ``mujoco.rollout``
+    of the same compiled models for the same number of steps, twice: with
+    the same exact-drive control callback (the fair comparison: the same
+    computation, the table following ``z''(t)`` at every RK4 stage), and
+    without any callback (MuJoCo's stepping floor: the base is then not
+    driven at all, so that baseline computes something else; it is what a
+    drive written in C would cost).
+``record``
+    ``write_experiment`` + ``read_recording`` against the ``mcap`` library
+    writing the very same records (taken from momentid's file) and reading
+    them back with CRC checks, without decoding them.
+``identify``
+    ``identify(experiment)`` against one dense ``numpy.linalg.lstsq`` of the
+    stacked eq. (3) regressor matrix of all samples, built here.
+``view``
+    The ``.rrd`` writer of ``momentid.visualize`` when that module exists,
+    against ``rr.send_columns`` of the same series into an ``.rrd`` file.
+``run``
+    The whole ``momentid run`` of the default scenario in a fresh
+    interpreter (wall time), against the 3 s target.
+
+Times are the best of ``--repeat`` interleaved repetitions: on a shared
+machine the minimum is the least disturbed measurement.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Callable
+from unittest import mock
+
+import numpy as np
+
+from .errors import MomentidError
+
+__all__ = ["Row", "STAGES", "RUN_TARGET_S", "bench_scenario", "run_benchmarks", "stacked_regressor",
+           "add_arguments", "main"]
+
+STAGES = ("simulate", "record", "identify", "view", "run")
+#: Wall-time target of the whole default ``momentid run`` (s).
+RUN_TARGET_S = 3.0
+#: Record length of ``--quick`` (s): a CI-sized smoke run of every stage.
+QUICK_DURATION = 0.5
+
+
+@dataclass
+class Row:
+    """One line of the report: momentid's time against a baseline's (s)."""
+
+    stage: str
+    momentid_s: float | None
+    baseline_s: float | None
+    momentid: str
+    baseline: str
+    note: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ratio(self) -> float | None:
+        """momentid / baseline (below 1: momentid is faster)."""
+        if self.momentid_s is None or not self.baseline_s:
+            return None
+        return self.momentid_s / self.baseline_s
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["ratio"] = self.ratio
+        return out
+
+
+def _timed(repeat: int, **fns: Callable[[], object]) -> dict[str, list[float]]:
+    """Run every function ``repeat`` times, interleaved; their times (s)."""
+    times: dict[str, list[float]] = {name: [] for name in fns}
+    for _ in range(repeat):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t0)
+    return times
+
+
+# ----------------------------------------------------------------------------- scenarios
+
+def _checkout_scenario(name: str) -> Path | None:
+    path = Path(__file__).resolve().parents[1] / "scenarios" / f"{name}.toml"
+    return path if path.exists() else None
+
+
+def bench_scenario(path=None, *, duration: float | None = None, overrides: dict | None = None):
+    """A scenario for benchmarking: ``path`` (default: the paper's 7 runs,
+    ``scenarios/paper_harmonic.toml`` in a checkout, else the embedded
+    default) with its duration and any ``{"table.key": value}`` replaced."""
+    from ._toml import load_toml
+    from .scenario import default_scenario_path, parse_scenario
+
+    path = Path(path) if path is not None else (_checkout_scenario("paper_harmonic")
+                                                 or default_scenario_path())
+    data = load_toml(path)
+    changes = dict(overrides or {})
+    if duration is not None:
+        changes["scenario.duration"] = duration
+    for key, value in changes.items():
+        *tables, leaf = key.split(".")
+        node = data
+        for t in tables:
+            node = node.setdefault(t, {})
+        node[leaf] = value
+    return parse_scenario(data, source=path, text=path.read_text(encoding="utf-8"))
+
+
+def _describe(scenario) -> dict:
+    return {"name": scenario.name, "source": scenario.source, "runs": len(scenario.runs),
+            "duration_s": scenario.duration, "sample_rate_hz": scenario.sample_rate,
+            "storeys": scenario.structure.storeys, "samples_per_run": scenario.n_samples,
+            "substeps": scenario.substeps}
+
+
+# ----------------------------------------------------------------------------- simulate
+
+class _RawRig:
+    """The compiled models of a scenario's runs, their exact-drive callbacks
+    and initial states, prepared as :func:`momentid.simulate_run` prepares them."""
+
+    def __init__(self, scenario):
+        import mujoco
+
+        from . import model as rig
+        from .simulate import _TableDrive, ground_motion_of
+
+        motion = ground_motion_of(scenario)
+        self.n_steps = scenario.n_samples * scenario.substeps
+        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        self.models, self.drives, self.states = [], [], []
+        for run in scenario.runs:
+            spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
+                                  name=f"{scenario.name}_{run.name}")
+            m = rig.compile_model(spec)
+            d = mujoco.MjData(m)
+            drive = _TableDrive(m, d, motion, self.n_steps)
+            mujoco.mj_resetData(m, d)
+            d.qpos[0], d.qvel[0] = float(motion.displacement(0.0)), float(motion.velocity(0.0))
+            state = np.empty(mujoco.mj_stateSize(m, full))
+            mujoco.mj_getState(m, d, state, full)
+            self.models.append(m)
+            self.drives.append(drive)
+            self.states.append(state)
+        # rollout takes several models at once only when their sizes agree
+        # (the reference run has no added-mass bodies).
+        groups: dict[tuple, list[int]] = {}
+        for i, m in enumerate(self.models):
+            groups.setdefault((m.nq, m.nv, m.nu, m.na, m.nbody, m.nsensordata), []).append(i)
+        self.groups = list(groups.values())
+
+    def rollout(self, threads: int, callback: bool):
+        """``mujoco.rollout`` of every model; sensordata per run, shape (n_steps, nsensordata)."""
+        import mujoco
+        from mujoco import rollout
+
+        from .simulate import _control_callback
+
+        out = [None] * len(self.models)
+        if callback and threads == 1:
+            # One call per model with its own callback installed: no dispatch cost.
+            for i, m in enumerate(self.models):
+                with _control_callback(self.drives[i]):
+                    _, sensors = rollout.rollout(m, mujoco.MjData(m), self.states[i][None],
+                                                 nstep=self.n_steps)
+                out[i] = sensors[0]
+            return out
+        table = {id(m): drive for m, drive in zip(self.models, self.drives)}
+        dispatch = (lambda m, d: table[id(m)](m, d)) if callback else None
+        with _control_callback(dispatch):
+            for group in self.groups:
+                models = [self.models[i] for i in group]
+                datas = [mujoco.MjData(models[0]) for _ in range(min(threads, len(group)))]
+                _, sensors = rollout.rollout(models, datas, np.stack([self.states[i] for i in group]),
+                                             nstep=self.n_steps)
+                for k, i in enumerate(group):
+                    out[i] = sensors[k]
+        return out
+
+
+def _same_computation(scenario, rig_, experiment) -> float | None:
+    """Largest |rollout-with-callback - momentid| over every sample of run 1,
+    relative to the channel's peak: 0 means the baseline computed the same
+    numbers (ideal sensors, one step per sample)."""
+    from . import model as rig
+
+    if scenario.substeps != 1:
+        return None
+    run = experiment.runs[0]
+    sensors = rig_.rollout(1, True)[0]
+    layout = rig.sensor_layout(rig_.models[0])
+    worst = 0.0
+    for c, name in enumerate(run.channels):
+        if name not in layout or run.values.shape[0] != sensors.shape[0]:
+            return None
+        col = run.values[:, c]
+        peak = float(np.max(np.abs(col))) or 1.0
+        worst = max(worst, float(np.max(np.abs(sensors[:, layout[name]] - col))) / peak)
+    return worst
+
+
+def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
+    from .simulate import simulate
+
+    raw = _RawRig(scenario)
+    steps = raw.n_steps * len(scenario.runs)
+    last = {}
+
+    def ours(w):
+        def fn():
+            last[w] = simulate(scenario, workers=w)
+        return fn
+
+    fns = {"momentid": ours(workers), "rollout_cb_1": lambda: raw.rollout(1, True),
+           "rollout_nocb": lambda: raw.rollout(workers, False)}
+    if workers > 1:
+        fns["momentid_1"] = ours(1)
+        fns["rollout_nocb_1"] = lambda: raw.rollout(1, False)
+    t = {k: min(v) for k, v in _timed(repeat, **fns).items()}
+    # Threads do not help a Python callback (each stage waits for the GIL): timed once, to show it.
+    if workers > 1:
+        t["rollout_cb_threads"] = min(_timed(1, x=lambda: raw.rollout(workers, True))["x"])
+    cb_best = min(t["rollout_cb_1"], t.get("rollout_cb_threads", np.inf))
+    extra = {"steps": steps, "workers": workers,
+             "steps_per_s": steps / t["momentid"],
+             "rollout_callback_1_thread_s": t["rollout_cb_1"],
+             "rollout_callback_threads_s": t.get("rollout_cb_threads"),
+             "rollout_no_callback_s": t["rollout_nocb"],
+             "rollout_no_callback_1_thread_s": t.get("rollout_nocb_1", t["rollout_nocb"]),
+             "max_rel_diff_vs_rollout_with_callback": _same_computation(scenario, raw, last[workers])}
+    what = f"simulate(workers={workers}), {len(scenario.runs)} runs"
+    rows = [
+        Row("simulate", t["momentid"], cb_best, what,
+            "mujoco.rollout, same models, same exact-drive callback (best of 1 thread / threads)",
+            note="fair comparison: the same computation (base driven exactly at every RK4 stage)",
+            extra=extra),
+        Row("simulate:floor", t["momentid"], t["rollout_nocb"], what,
+            f"mujoco.rollout, same models, no control callback, {workers} thread(s)",
+            note="MuJoCo's stepping floor: without the callback the table is not driven "
+                 "(a different computation); the gap is the Python callback"),
+    ]
+    if workers > 1:
+        rows.append(Row("simulate:1core", t["momentid_1"], t["rollout_cb_1"],
+                        "simulate(workers=1)", "mujoco.rollout with the same callback, 1 thread",
+                        note=f"per-core overhead; parallel speed-up {t['momentid_1'] / t['momentid']:.2f}x "
+                             f"on {workers} workers",
+                        extra={"parallel_speedup": t["momentid_1"] / t["momentid"]}))
+    return rows
+
+
+# ----------------------------------------------------------------------------- record
+
+def _mcap_records(path: Path) -> list:
+    """Every schema, channel, message, attachment and metadata record of ``path``, in order."""
+    from mcap.records import Attachment, Channel, DataEnd, Message, Metadata, Schema
+    from mcap.stream_reader import StreamReader
+
+    keep = (Schema, Channel, Message, Attachment, Metadata)
+    out = []
+    with open(path, "rb") as f:
+        for record in StreamReader(f).records:
+            if isinstance(record, DataEnd):
+                break
+            if isinstance(record, keep):
+                out.append(record)
+    return out
+
+
+def _raw_write(path: Path, records: list) -> None:
+    """The mcap library writing ``records`` as they are (one chunk per run flush is momentid's)."""
+    from mcap.records import Attachment, Channel, Message, Metadata, Schema
+    from mcap.writer import CompressionType, Writer
+
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.NONE, enable_data_crcs=True)
+        w.start(profile="", library="raw")
+        schemas, channels = {}, {}
+        for r in records:
+            if isinstance(r, Schema):
+                schemas[r.id] = w.register_schema(r.name, r.encoding, r.data)
+            elif isinstance(r, Channel):
+                channels[r.id] = w.register_channel(r.topic, r.message_encoding,
+                                                    schemas[r.schema_id], r.metadata)
+            elif isinstance(r, Message):
+                w.add_message(channels[r.channel_id], r.log_time, r.data, r.publish_time,
+                              sequence=r.sequence)
+            elif isinstance(r, Attachment):
+                w.add_attachment(r.create_time, r.log_time, r.name, r.media_type, r.data)
+            elif isinstance(r, Metadata):
+                w.add_metadata(r.name, r.metadata)
+        w.finish()
+
+
+def _raw_read(path: Path) -> int:
+    """Read every message back with CRC checks (as momentid's reader does); bytes read."""
+    from mcap.records import Message
+    from mcap.stream_reader import StreamReader
+
+    total = 0
+    with open(path, "rb") as f:
+        for record in StreamReader(f, validate_crcs=True).records:
+            if isinstance(record, Message):
+                total += len(record.data)
+    return total
+
+
+def bench_record(experiment, workdir: Path, *, repeat: int) -> list[Row]:
+    from .recording import read_recording, write_experiment
+
+    ours, raw = workdir / "momentid.mcap", workdir / "raw.mcap"
+    write_experiment(ours, experiment)
+    records = _mcap_records(ours)
+    t = {k: min(v) for k, v in _timed(
+        repeat,
+        write=lambda: write_experiment(ours, experiment), read=lambda: read_recording(ours),
+        raw_write=lambda: _raw_write(raw, records), raw_read=lambda: _raw_read(raw),
+    ).items()}
+    # The writer fsyncs every run twice (crash safety); the raw library does not.  Timed
+    # once more with fsync as a no-op to show what the disk's flushes cost.
+    with mock.patch("os.fsync"):
+        no_sync = min(_timed(repeat, x=lambda: write_experiment(ours, experiment))["x"])
+    samples = sum(r.n_samples for r in experiment.runs)
+    ours_s, raw_s = t["write"] + t["read"], t["raw_write"] + t["raw_read"]
+    return [Row(
+        "record", ours_s, raw_s, "write_experiment + read_recording (fsync per run, decode to arrays)",
+        "mcap Writer + StreamReader(validate_crcs) of the same records, no decoding, no fsync",
+        note=f"{samples / ours_s / 1e6:.2f} M samples/s write+read, "
+             f"{samples / (no_sync + t['read']) / 1e6:.2f} M without fsync "
+             f"({len(experiment.runs[0].channels)} channels per sample)",
+        extra={"samples": samples, "samples_per_s": samples / ours_s,
+               "samples_per_s_without_fsync": samples / (no_sync + t["read"]),
+               "bytes": ours.stat().st_size, "write_s": t["write"], "write_without_fsync_s": no_sync,
+               "read_s": t["read"], "raw_write_s": t["raw_write"], "raw_read_s": t["raw_read"],
+               "workdir": str(workdir)},
+    )]
+
+
+# ----------------------------------------------------------------------------- identify
+
+def stacked_regressor(experiment):
+    """The eq. (3) least-squares problem of every sample of every run as one dense matrix.
+
+    Unknowns ``theta = [diag M (d), C upper triangle (d(d+1)/2), K upper
+    triangle, mu]``; rows ``M_jj a_j + sum_k C_jk v_k + sum_k K_jk q_k +
+    mu dm_j v_j = -dm_j a_j`` for every floor ``j`` of every sample.
+
+    Returns
+    -------
+    A : ndarray, shape (samples * d, (d + 1)**2)
+    b : ndarray, shape (samples * d,)
+    unpack : callable
+        ``theta -> (M, C, K, mu)``.
+    """
+    d = experiment.storeys
+    iu = np.triu_indices(d)
+    nsym = iu[0].size
+    sym = np.empty((d, d), dtype=int)
+    sym[iu] = sym[iu[::-1]] = np.arange(nsym)
+    p = d + 2 * nsym + 1
+    blocks, rhs = [], []
+    for run in experiment.runs:
+        a, v, q = (run.group(g, d) for g in ("a", "v", "q"))
+        dm = np.asarray(run.added_mass, float)
+        rows = np.zeros((a.shape[0], d, p))
+        rows[:, np.arange(d), np.arange(d)] = a
+        for j in range(d):
+            rows[:, j, d + sym[j]] = v
+            rows[:, j, d + nsym + sym[j]] = q
+        rows[:, :, p - 1] = v * dm
+        blocks.append(rows.reshape(-1, p))
+        rhs.append((-a * dm).reshape(-1))
+
+    def unpack(theta):
+        C, K = theta[d + sym], theta[d + nsym + sym]
+        return np.diag(theta[:d]), C, K, float(theta[p - 1])
+
+    return np.vstack(blocks), np.concatenate(rhs), unpack
+
+
+def _max_rel_diff(result, theta_parts) -> float:
+    M, C, K, mu = theta_parts
+    return max(float(np.max(np.abs(x - y)) / (np.max(np.abs(y)) or 1.0))
+               for x, y in ((result.M, M), (result.C, C), (result.K, K), (result.mu, mu)))
+
+
+def bench_identify(experiment, *, repeat: int, max_matrix_bytes: float = 2e9) -> list[Row]:
+    from .identify import identify
+
+    d = experiment.storeys
+    samples = sum(r.n_samples for r in experiment.runs)
+    p = (d + 1) ** 2
+    last = {}
+
+    def ours():
+        last["result"] = identify(experiment)
+
+    fns = {"momentid": ours}
+    A = None
+    if samples * d * p * 8 <= max_matrix_bytes:
+        A, b, unpack = stacked_regressor(experiment)
+        fns["lstsq"] = lambda: last.__setitem__("theta", np.linalg.lstsq(A, b, rcond=None)[0])
+    t = {k: min(v) for k, v in _timed(repeat, **fns).items()}
+    extra = {"samples": samples, "samples_per_s": samples / t["momentid"], "storeys": d,
+             "unknowns": p, "equations": samples * d}
+    if A is None:
+        note = f"dense matrix {samples * d}x{p} would take {samples * d * p * 8 / 1e9:.1f} GB: not built"
+    else:
+        extra["matrix_shape"] = list(A.shape)
+        extra["max_rel_diff_vs_lstsq"] = _max_rel_diff(last["result"], unpack(last["theta"]))
+        note = (f"{samples / t['momentid'] / 1e6:.2f} M samples/s; same M, C, K, mu as lstsq to "
+                f"{extra['max_rel_diff_vs_lstsq']:.1e}")
+    return [Row("identify", t["momentid"], t.get("lstsq"), "identify(experiment)",
+                f"one dense numpy.linalg.lstsq of the stacked {samples * d}x{p} eq. (3) matrix",
+                note=note, extra=extra)]
+
+
+# ----------------------------------------------------------------------------- view
+
+def _raw_rrd(experiment, path: Path) -> None:
+    import rerun as rr
+
+    rec = rr.RecordingStream("momentid_bench")
+    rec.save(str(path))
+    for run in experiment.runs:
+        index = [rr.TimeColumn("t", duration=run.time)]
+        for c, name in enumerate(run.channels):
+            rec.send_columns(f"runs/{run.name}/{name}", indexes=index,
+                             columns=rr.Scalars.columns(scalars=run.values[:, c]))
+    rec.flush()
+    rec.disconnect()
+
+
+def _visualize_writer():
+    """The ``.rrd`` writer of ``momentid.visualize``, if that module exists."""
+    if importlib.util.find_spec("momentid.visualize") is None:
+        return None
+    import momentid.visualize as vis
+
+    for name in ("write_rrd", "save_rrd", "to_rrd", "experiment_to_rrd"):
+        if callable(getattr(vis, name, None)):
+            return getattr(vis, name)
+    return None
+
+
+def bench_view(experiment, workdir: Path, *, repeat: int) -> list[Row]:
+    if importlib.util.find_spec("rerun") is None:
+        return [Row("view", None, None, "-", "-", note="rerun-sdk is not installed")]
+    writer = _visualize_writer()
+    fns = {"raw": lambda: _raw_rrd(experiment, workdir / "raw.rrd")}
+    if writer is not None:
+        fns["momentid"] = lambda: writer(experiment, workdir / "momentid.rrd")
+    t = {k: min(v) for k, v in _timed(repeat, **fns).items()}
+    values = sum(r.values.size for r in experiment.runs)
+    note = (f"raw: {values / t['raw'] / 1e6:.1f} M scalars/s" if writer is not None else
+            "momentid.visualize has no .rrd writer yet: only the raw baseline is timed")
+    return [Row("view", t.get("momentid"), t["raw"],
+                f"momentid.visualize.{writer.__name__}" if writer is not None else "n/a",
+                "rr.send_columns of every channel of every run into an .rrd file",
+                note=note, extra={"scalars": values})]
+
+
+# ----------------------------------------------------------------------------- run
+
+def _quick_scenario_file(workdir: Path, duration: float) -> Path:
+    """The default scenario's file with its duration replaced."""
+    from .scenario import default_scenario_path
+
+    text = default_scenario_path().read_text(encoding="utf-8")
+    text, n = re.subn(r"(?m)^duration\s*=\s*[0-9.eE+-]+", f"duration = {duration!r}", text)
+    if n != 1:
+        raise RuntimeError("the default scenario has no single 'duration = ...' line")
+    path = workdir / "default.toml"
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def bench_run(workdir: Path, *, repeat: int, duration: float | None = None) -> list[Row]:
+    cmd = [sys.executable, "-m", "momentid", "run", "-q", "-o", str(workdir / "out")]
+    if duration is not None:
+        cmd.insert(4, str(_quick_scenario_file(workdir, duration)))
+    env = dict(os.environ, PYTHONWARNINGS="ignore")
+
+    def run():
+        subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, env=env)
+
+    def startup():
+        subprocess.run([sys.executable, "-c", "import momentid"], check=True, env=env)
+
+    t = {k: min(v) for k, v in _timed(repeat, run=run, startup=startup).items()}
+    what = "default scenario" + (f" cut to {duration:g} s" if duration is not None else "")
+    return [Row("run", t["run"], RUN_TARGET_S, f"`momentid run` wall time, {what}",
+                f"target: {RUN_TARGET_S:g} s",
+                note=f"of which {t['startup']:.2f} s is starting Python and importing momentid",
+                extra={"import_s": t["startup"], "command": cmd[1:]})]
+
+
+# ----------------------------------------------------------------------------- runner
+
+def _machine() -> dict:
+    import mujoco
+
+    from .simulate import available_cores
+
+    return {"cores": available_cores(), "python": platform.python_version(),
+            "platform": platform.platform(), "numpy": np.__version__, "mujoco": mujoco.__version__,
+            "load_average_1min": os.getloadavg()[0] if hasattr(os, "getloadavg") else None}
+
+
+def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = None,
+                   quick: bool = False, repeat: int | None = None, workers: int | None = None,
+                   workdir=None, log: Callable[[str], None] | None = None) -> dict:
+    """Run the benchmark stages; the report as a JSON-friendly dict.
+
+    Parameters
+    ----------
+    stages : iterable of str
+        Any of :data:`STAGES`.
+    scenario : str or Path, optional
+        Scenario file for simulate, record, identify and view (default: the
+        paper's 7 runs, see :func:`bench_scenario`).
+    duration : float, optional
+        Record length (s) replacing the scenario's; ``quick`` sets 0.5 s
+        (and shortens the ``run`` stage's scenario the same way).
+    repeat : int, optional
+        Repetitions per measurement, the best is kept (default 3; 1 when quick).
+    workers : int, optional
+        Simulation worker processes (default: one per core).
+    """
+    from .simulate import available_cores, simulate
+
+    stages = tuple(stages)
+    unknown = [s for s in stages if s not in STAGES]
+    if unknown:
+        raise ValueError(f"unknown stage {unknown[0]!r}: expected some of {', '.join(STAGES)}")
+    repeat = repeat if repeat is not None else (1 if quick else 3)
+    if duration is None and quick:
+        duration = QUICK_DURATION
+    workers = workers if workers is not None else available_cores()
+    say = log or (lambda s: None)
+    report = {"machine": _machine(), "settings": {"quick": quick, "repeat": repeat, "workers": workers,
+                                                  "stages": list(stages)}, "rows": []}
+    with tempfile.TemporaryDirectory(prefix="momentid-bench-", dir=workdir) as tmp:
+        tmp = Path(tmp)
+        rows: list[Row] = []
+        needs_data = [s for s in stages if s in ("simulate", "record", "identify", "view")]
+        if needs_data:
+            sc = bench_scenario(scenario, duration=duration)
+            report["scenario"] = _describe(sc)
+            experiment = simulate(sc, workers=workers)
+        for stage in stages:
+            say(f"  {stage} ...")
+            if stage == "simulate":
+                rows += bench_simulate(sc, workers=workers, repeat=repeat)
+            elif stage == "record":
+                rows += bench_record(experiment, tmp, repeat=repeat)
+            elif stage == "identify":
+                rows += bench_identify(experiment, repeat=repeat)
+            elif stage == "view":
+                rows += bench_view(experiment, tmp, repeat=repeat)
+            elif stage == "run":
+                rows += bench_run(tmp, repeat=repeat, duration=QUICK_DURATION if quick else None)
+        report["rows"] = [r.to_dict() for r in rows]
+    return report
+
+
+def _fmt_s(x) -> str:
+    return "n/a" if x is None else f"{x:.3f} s"
+
+
+def format_report(report: dict) -> str:
+    """The report as a plain-text table."""
+    m, s = report["machine"], report["settings"]
+    lines = []
+    if "scenario" in report:
+        sc = report["scenario"]
+        lines.append(f"scenario {sc['name']}: {sc['runs']} runs x {sc['duration_s']:g} s at "
+                     f"{sc['sample_rate_hz']:g} Hz, {sc['storeys']} storeys")
+    lines.append(f"{m['cores']} cores, {s['workers']} simulation workers, best of {s['repeat']}, "
+                 f"load average {m['load_average_1min']:.2f} at start")
+    lines.append("")
+    lines.append(f"{'stage':<15} {'momentid':>10} {'baseline':>10} {'ratio':>7}  baseline")
+    for r in report["rows"]:
+        ratio = "n/a" if r["ratio"] is None else f"{r['ratio']:.2f}"
+        lines.append(f"{r['stage']:<15} {_fmt_s(r['momentid_s']):>10} {_fmt_s(r['baseline_s']):>10} "
+                     f"{ratio:>7}  {r['baseline']}")
+        if r["note"]:
+            lines.append(f"{'':<15} {'':>10} {'':>10} {'':>7}  ({r['note']})")
+    lines.append("")
+    lines.append("ratio = momentid / baseline; 'simulate' is the fair simulation comparison (same "
+                 "exact-drive callback), 'simulate:floor' the bare MuJoCo stepping cost.")
+    return "\n".join(lines)
+
+
+def format_markdown(report: dict) -> str:
+    """The report as a Markdown table (for the README)."""
+    lines = ["| stage | momentid | baseline | ratio | baseline is |", "|---|---:|---:|---:|---|"]
+    for r in report["rows"]:
+        ratio = "n/a" if r["ratio"] is None else f"{r['ratio']:.2f}"
+        lines.append(f"| {r['stage']} | {_fmt_s(r['momentid_s'])} | {_fmt_s(r['baseline_s'])} | "
+                     f"{ratio} | {r['baseline']} |")
+    return "\n".join(lines)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of ``momentid bench`` / ``python -m benchmarks``."""
+    p.add_argument("--quick", action="store_true",
+                   help=f"CI-sized: {QUICK_DURATION:g} s records, one repetition")
+    p.add_argument("--stages", default=",".join(STAGES), metavar="LIST",
+                   help=f"comma-separated stages (default: {','.join(STAGES)})")
+    p.add_argument("--scenario", metavar="TOML",
+                   help="scenario for simulate/record/identify/view (default: scenarios/"
+                        "paper_harmonic.toml, the paper's 7 runs x 10 s at 1 kHz)")
+    p.add_argument("--duration", type=float, metavar="S", help="record length replacing the scenario's (s)")
+    p.add_argument("--repeat", type=int, metavar="N", help="repetitions, the best is kept (default 3)")
+    p.add_argument("--workers", type=int, metavar="N", help="simulation workers (default: one per core)")
+    p.add_argument("--json-out", metavar="PATH", help="also write the report as JSON")
+    p.add_argument("--markdown", action="store_true", help="print a Markdown table instead")
+
+
+def run_from_args(args) -> int:
+    stages = [s.strip() for s in args.stages.split(",") if s.strip()]
+    try:
+        report = run_benchmarks(stages=stages, scenario=args.scenario, duration=args.duration,
+                                quick=args.quick, repeat=args.repeat, workers=args.workers,
+                                log=lambda s: print(s, file=sys.stderr))
+    except (ValueError, MomentidError) as e:  # an unknown stage, a bad scenario
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    print(format_markdown(report) if args.markdown else format_report(report))
+    if args.json_out:
+        path = Path(args.json_out)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(report, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        print(f"\nwrote {path}")
+    return 0
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.split("\n\n")[0])
+    add_arguments(parser)
+    return run_from_args(parser.parse_args(argv))

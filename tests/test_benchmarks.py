@@ -1,0 +1,63 @@
+"""The benchmark runner works on a tiny case and writes valid JSON (no timing assertion)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from momentid import cli
+from momentid.bench import STAGES, bench_scenario, run_benchmarks, stacked_regressor
+from momentid.scenario import default_scenario_path
+from momentid.simulate import simulate
+
+
+def _check_rows(rows):
+    for row in rows:
+        for key in ("momentid_s", "baseline_s", "ratio"):
+            assert row[key] is None or (math.isfinite(row[key]) and row[key] > 0), row
+
+
+def test_every_data_stage_runs_on_a_tiny_case(tmp_path):
+    report = run_benchmarks(stages=("simulate", "record", "identify", "view"),
+                            scenario=default_scenario_path(), duration=0.05, repeat=1, workers=2,
+                            workdir=tmp_path)
+    json.dumps(report, allow_nan=False)   # JSON-safe as it stands
+    stages = [r["stage"] for r in report["rows"]]
+    assert stages[:2] == ["simulate", "simulate:floor"] and {"record", "identify", "view"} <= set(stages)
+    _check_rows(report["rows"])
+    simulate_row = report["rows"][0]
+    # The callback baseline recomputes momentid's run bit for bit; 1e-12 of each channel's peak
+    # leaves room only for round-off, should MuJoCo ever sum in another order.
+    assert simulate_row["extra"]["max_rel_diff_vs_rollout_with_callback"] < 1e-12
+    identify_row = next(r for r in report["rows"] if r["stage"] == "identify")
+    # Streamed QR and one dense lstsq solve the same well-conditioned problem (condition ~1e3):
+    # they agree to round-off, observed ~1e-12; 1e-8 leaves margin for other BLAS builds.
+    assert identify_row["extra"]["max_rel_diff_vs_lstsq"] < 1e-8
+
+
+def test_stacked_regressor_is_satisfied_by_the_analytic_model():
+    sc = bench_scenario(default_scenario_path(), duration=0.2)
+    experiment = simulate(sc)
+    A, b, unpack = stacked_regressor(experiment)
+    d = sc.structure.storeys
+    assert A.shape == (3 * sc.n_samples * d, (d + 1) ** 2) and b.shape == (A.shape[0],)
+    theta = np.linalg.lstsq(A, b, rcond=None)[0]
+    M, C, K, mu = unpack(theta)
+    s = sc.structure
+    # Noise-free data satisfy eq. (3) up to integration round-off (~1e-12 in the README's run);
+    # 1e-6 is the project's noise-free identification bound.
+    for got, want in ((M, s.mass_matrix()), (C, s.damping_matrix()), (K, s.stiffness_matrix())):
+        assert np.max(np.abs(got - want)) / np.max(np.abs(want)) < 1e-6
+    assert abs(mu - s.rayleigh_mu) / s.rayleigh_mu < 1e-6
+
+
+def test_cli_bench_quick_writes_json(tmp_path, capsys):
+    out = tmp_path / "bench.json"
+    assert cli.main(["bench", "--quick", "--stages", "identify,run", "--json-out", str(out)]) == 0
+    report = json.loads(out.read_text())
+    assert [r["stage"] for r in report["rows"]] == ["identify", "run"]
+    _check_rows(report["rows"])
+    assert report["settings"]["quick"] and "ratio" in capsys.readouterr().out
+    assert cli.main(["bench", "--stages", "nope"]) == 2 and set(STAGES) >= {"simulate", "run"}

@@ -99,6 +99,35 @@ def _cmd_identify(args) -> int:
     return _report(experiment, args)
 
 
+def _cmd_sweep(args) -> int:
+    from .sweep import load_sweep, run_sweep, write_table
+
+    sweep = load_sweep(args.spec)
+    out = Path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
+    where = f"Dask scheduler {args.address}" if args.address else "local cores"
+    print(f"sweep {args.spec}: {len(sweep.cases)} cases of {sweep.base} over "
+          f"{', '.join(sweep.keys)} on {where}", file=sys.stderr)
+    show = not args.quiet and sys.stderr.isatty()
+
+    def done(row):
+        if show:
+            print(f"  case {row['case']}: {row['status']}", file=sys.stderr)
+
+    rows = run_sweep(sweep, workers=args.workers, address=args.address, on_case=done)
+    write_table(rows, out)
+    widths = [max(len(k), 8) for k in sweep.keys]
+    print(f"{'case':>5}  " + "  ".join(f"{k:>{w}}" for k, w in zip(sweep.keys, widths))
+          + f"  {'max rel err':>11}  status")
+    for row in rows:
+        cells = "  ".join(f"{json.dumps(row['values'][k]):>{w}}" for k, w in zip(sweep.keys, widths))
+        err = row.get("max_rel_error")
+        err = "n/a" if err is None else f"{err:.2e}"
+        print(f"{row['case']:>5}  {cells}  {err:>11}  {row['error'] or 'ok'}")
+    failed = sum(r["status"] != "ok" for r in rows)
+    print(f"\n{len(rows) - failed} of {len(rows)} cases identified; table written to {out}")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from .bench import run_from_args
 
@@ -151,6 +180,23 @@ def build_parser() -> argparse.ArgumentParser:
                                      "docs/recording-format.md)")
     _add_identify_options(p)
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("sweep", help="a campaign: scenario variants x seeds, identified and scored",
+                       description="Run every case of a sweep file (a base scenario and a grid of values "
+                                   "for dotted scenario keys, e.g. scenario.seed = [0, 1, 2]): simulate, "
+                                   "identify and compare each with its analytic model, on every local core "
+                                   "or a Dask cluster, and write one row per case (identified parameters, "
+                                   "relative errors).")
+    p.add_argument("spec", help="sweep TOML file ([sweep] base = scenario file, [grid] key = [values])")
+    p.add_argument("-o", "--output", metavar="PATH",
+                   help="result table, .csv or .json (default: out/<spec name>.csv)")
+    p.add_argument("-j", "--workers", type=_positive_int, metavar="N",
+                   help="local worker processes (default: one per core)")
+    p.add_argument("--address", metavar="ADDR",
+                   help="run on the Dask cluster whose scheduler is at ADDR (e.g. tcp://host:8786; needs "
+                        "pip install 'momentid[cluster]' here and momentid on the workers)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no per-case progress lines")
+    p.set_defaults(func=_cmd_sweep)
 
     from .bench import add_arguments as add_bench_arguments
     p = sub.add_parser("bench", help="time every stage against raw MuJoCo / MCAP / numpy baselines",

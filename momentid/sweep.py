@@ -1,0 +1,330 @@
+"""Campaigns: one base scenario, many variants, each simulated, identified and scored.
+
+A sweep file (TOML) names a base scenario and a grid of values for dotted
+scenario keys; every combination of the values (Cartesian product) is one
+case::
+
+    [sweep]
+    base = "../scenarios/tall_noise.toml"  # relative to this file (default: the embedded default)
+    estimator = "equation"                 # or "difference" (default "equation")
+
+    [grid]
+    scenario.seed = [0, 1, 2, 3]           # seeds every random choice: noise excitation, sensor noise
+    structure.storey_stiffness = [3.0e5, 2.5e5]
+    runs.1.added_mass = [[2.0, 0.0, 1.5, 0.0, 2.0, 0.0, 1.0, 0.0, 1.5, 1.0], 1.0]   # [[runs]] index from 0
+
+Each case is the base scenario's parsed TOML with its values put in and is
+validated by :func:`momentid.scenario.parse_scenario` as strictly as a
+scenario file: an unknown key or a bad value is a :class:`ScenarioError`
+naming the sweep file, the key and the value before anything runs.
+
+:func:`run_sweep` runs the cases on every local core (a process pool), or
+on a Dask cluster when given the scheduler's address (``pip install
+'momentid[cluster]'``; momentid must be installed on the workers).  Each
+case gives one row: its values, the identified parameters, the analytic
+ones and their relative errors, or the error that stopped it.
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+import math
+import os
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from ._toml import Table, load_toml
+from .errors import MomentidError, ScenarioError
+from .scenario import Scenario, default_scenario_path, parse_scenario
+
+__all__ = ["Case", "Sweep", "load_sweep", "parse_sweep", "run_case", "run_sweep", "write_table",
+           "table_columns"]
+
+
+@dataclass(frozen=True)
+class Case:
+    """One scenario variant: ``values`` maps each grid key to this case's value."""
+
+    index: int
+    values: dict
+    scenario: Scenario
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A validated sweep: every case's scenario is already parsed."""
+
+    source: str
+    base: str
+    estimator: str
+    keys: tuple[str, ...]
+    cases: tuple[Case, ...]
+
+
+def load_sweep(path) -> Sweep:
+    """Read and validate a sweep file (see the module docstring)."""
+    path = Path(path)
+    return parse_sweep(load_toml(path), source=path)
+
+
+def _grid_items(node: Any, prefix: str, source: Path) -> list[tuple[str, list]]:
+    """Flatten ``[grid]``: nested tables become dotted keys, arrays are the values."""
+    if isinstance(node, list):
+        if not node:
+            raise ScenarioError(f"{source}: key 'grid.{prefix}' = []: expected a non-empty array of "
+                                "values to sweep")
+        return [(prefix, node)]
+    if not isinstance(node, dict) or not node:
+        raise ScenarioError(f"{source}: key 'grid.{prefix}' = {node!r}: expected an array of values "
+                            "to sweep (e.g. [0, 1, 2])")
+    out = []
+    for key, value in node.items():
+        out += _grid_items(value, f"{prefix}.{key}" if prefix else key, source)
+    return out
+
+
+def _put(data: dict, key: str, value: Any) -> None:
+    """Set the dotted ``key`` of the parsed scenario ``data`` (integers index arrays of tables)."""
+    parts = key.split(".")
+    node: Any = data
+    for depth, part in enumerate(parts):
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise ScenarioError(f"'{'.'.join(parts[:depth])}' is an array of {len(node)} tables: "
+                                    f"expected an index 0..{len(node) - 1} after it, got '{part}'")
+            part = int(part)
+        elif not isinstance(node, dict):
+            raise ScenarioError(f"'{'.'.join(parts[:depth])}' = {node!r} is a value, not a table")
+        if depth == len(parts) - 1:
+            node[part] = value
+        else:
+            if isinstance(node, dict) and part not in node:
+                node[part] = {}   # an optional table the base leaves out; parsing refuses unknown ones
+            node = node[part]
+
+
+def _variant(base: dict, values: dict, base_path: Path, text: str) -> Scenario:
+    import copy
+
+    data = copy.deepcopy(base)
+    for key, value in values.items():
+        _put(data, key, value)
+    return parse_scenario(data, source=base_path, text=text)
+
+
+def parse_sweep(data: dict, *, source="<string>") -> Sweep:
+    """Validate an already-parsed sweep file and build every case's scenario."""
+    from .identify import ESTIMATORS
+
+    source = Path(source)
+    top = Table(data, source)
+    head = top.table("sweep", {})
+    base_name = head.string("base", "")
+    estimator = head.string("estimator", "equation", choices=tuple(ESTIMATORS))
+    head.finish()
+    grid_table = top.table("grid", None)
+    top.finish()
+    grid = None if grid_table is None else grid_table.data
+    if grid is None:
+        raise ScenarioError(f"{source}: missing table [grid]: expected the values to sweep, "
+                            "e.g. scenario.seed = [0, 1, 2]")
+    items = _grid_items(grid, "", source)
+
+    base_path = Path(os.path.normpath(source.parent / base_name)) if base_name else default_scenario_path()
+    if base_name and not base_path.is_file():
+        raise ScenarioError(f"{source}: key 'sweep.base' = {base_name!r}: no such file {base_path}")
+    base = load_toml(base_path)
+    text = base_path.read_text(encoding="utf-8")
+
+    # Each key and value on its own first, so an error names exactly one of them.
+    for key, values in items:
+        for value in values:
+            try:
+                _variant(base, {key: value}, base_path, text)
+            except ScenarioError as e:
+                raise ScenarioError(f"{source}: grid key '{key}' = {value!r}: {e}") from None
+    keys = tuple(k for k, _ in items)
+    cases = []
+    for index, combo in enumerate(itertools.product(*(v for _, v in items))):
+        values = dict(zip(keys, combo))
+        try:
+            scenario = _variant(base, values, base_path, text)
+        except ScenarioError as e:
+            what = ", ".join(f"{k} = {v!r}" for k, v in values.items())
+            raise ScenarioError(f"{source}: case {index} ({what}): {e}") from None
+        cases.append(Case(index, values, scenario))
+    return Sweep(source=str(source), base=str(base_path), estimator=estimator, keys=keys,
+                 cases=tuple(cases))
+
+
+# ----------------------------------------------------------------------------- running
+
+#: MuJoCo's control callback is process-global, so a worker process with
+#: several threads (a Dask worker, say) simulates one case at a time.
+_SIMULATION_LOCK = threading.Lock()
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if math.isfinite(x) else None
+
+
+def run_case(index: int, values: dict, scenario: Scenario, estimator: str) -> dict:
+    """Simulate, identify and compare one case; its row of the result table.
+
+    A module-level function of picklable arguments, so any process pool or
+    cluster can run it.  Errors momentid raises on purpose (a diverging
+    simulation, unidentifiable data) become the row's ``error``.
+    """
+    from .compare import compare
+    from .identify import identify
+    from .simulate import simulate
+
+    row: dict = {"case": index, "values": values, "status": "ok", "error": None}
+    t0 = time.perf_counter()
+    try:
+        with _SIMULATION_LOCK:
+            experiment = simulate(scenario, workers=1)
+        result = identify(experiment, estimator=estimator)
+        comparison = compare(result, scenario.structure)
+    except MomentidError as e:
+        row.update(status="error", error=f"{type(e).__name__}: {e}", seconds=time.perf_counter() - t0)
+        return row
+    row.update(
+        seconds=time.perf_counter() - t0,
+        max_rel_error=_finite(comparison.max_rel_error),
+        condition=_finite(result.condition),
+        residual_rms=_finite(result.residual_rms),
+        n_equations=int(result.n_equations), n_unknowns=int(result.n_unknowns),
+        identified={e.name: _finite(e.identified) for e in comparison.entries},
+        analytic={e.name: _finite(e.analytic) for e in comparison.entries},
+        rel_error={e.name: _finite(e.rel_error) for e in comparison.entries},
+    )
+    return row
+
+
+def _local(payloads: list[tuple], workers: int, done: Callable[[dict], None]) -> list[dict]:
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        futures = [pool.submit(run_case, *p) for p in payloads]
+        for future in as_completed(futures):
+            done(future.result())
+        return [f.result() for f in futures]
+
+
+def _serial(payloads: list[tuple], done: Callable[[dict], None]) -> list[dict]:
+    rows = []
+    for p in payloads:
+        rows.append(run_case(*p))
+        done(rows[-1])
+    return rows
+
+
+def _dask(payloads: list[tuple], address: str, done: Callable[[dict], None]) -> list[dict]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise MomentidError(f"--address {address}: running on a cluster needs Dask "
+                            "(pip install 'momentid[cluster]')") from None
+    try:
+        client = Client(address, timeout="10s")
+    except (OSError, TimeoutError) as e:
+        raise MomentidError(f"--address {address}: cannot reach a Dask scheduler there ({e}); "
+                            "expected the address of a running scheduler, e.g. tcp://host:8786") from None
+    with client:
+        futures = client.map(run_case, *zip(*payloads), pure=False)
+        for future in as_completed(futures):
+            done(future.result())
+        return client.gather(futures)
+
+
+def run_sweep(sweep: Sweep, *, workers: int | None = None, address: str | None = None,
+              on_case: Callable[[dict], None] | None = None) -> list[dict]:
+    """Run every case; the rows in case order (see :func:`run_case`).
+
+    Parameters
+    ----------
+    workers : int, optional
+        Local worker processes (default: one per available core); ``1``
+        runs in this process.  Ignored with ``address``.
+    address : str, optional
+        A Dask scheduler (``tcp://host:8786``, or any address
+        ``distributed.Client`` accepts): the cases run on its workers, which
+        need momentid installed.
+    on_case : callable, optional
+        Called with each row as it completes (in completion order).
+    """
+    from .simulate import available_cores
+
+    payloads = [(c.index, c.values, c.scenario, sweep.estimator) for c in sweep.cases]
+    done = on_case or (lambda row: None)
+    if address is not None:
+        return _dask(payloads, address, done)
+    workers = workers if workers is not None else available_cores()
+    if not isinstance(workers, int) or workers < 1:
+        raise MomentidError(f"workers = {workers!r}: expected an int >= 1")
+    workers = min(workers, len(payloads))
+    if workers == 1:
+        return _serial(payloads, done)
+    return _local(payloads, workers, done)
+
+
+# ----------------------------------------------------------------------------- output
+
+def table_columns(rows: list[dict]) -> list[str]:
+    """CSV columns: case, the grid keys, status, scores, then per parameter
+    ``id:``, ``an:`` and ``err:`` columns (identified, analytic, relative error)."""
+    cols = ["case"]
+    seen = set(cols)
+
+    def add(name):
+        if name not in seen:
+            seen.add(name)
+            cols.append(name)
+
+    for row in rows:
+        for k in row["values"]:
+            add(k)
+    for name in ("status", "max_rel_error", "condition", "residual_rms", "n_equations",
+                 "n_unknowns", "seconds", "error"):
+        add(name)
+    for row in rows:
+        for p in row.get("identified", {}):
+            for prefix in ("id:", "an:", "err:"):
+                add(prefix + p)
+    return cols
+
+
+def _flat(row: dict) -> dict:
+    out = {"case": row["case"]}
+    for k, v in row["values"].items():
+        out[k] = json.dumps(v) if isinstance(v, (list, dict)) else v
+    for name in ("status", "max_rel_error", "condition", "residual_rms", "n_equations",
+                 "n_unknowns", "seconds", "error"):
+        out[name] = row.get(name)
+    for prefix, key in (("id:", "identified"), ("an:", "analytic"), ("err:", "rel_error")):
+        for p, v in row.get(key, {}).items():
+            out[prefix + p] = v
+    return out
+
+
+def write_table(rows: list[dict], path) -> Path:
+    """Write the rows as CSV (``.csv``, one flat row per case) or JSON (``.json``)."""
+    path = Path(path)
+    if path.suffix not in (".csv", ".json"):
+        raise MomentidError(f"output {path}: expected a .csv or .json file name")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".json":
+        path.write_text(json.dumps(rows, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+        return path
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=table_columns(rows))
+        writer.writeheader()
+        for row in rows:
+            writer.writerow(_flat(row))
+    return path

@@ -21,6 +21,7 @@ _EPILOG = """examples:
   momentid run scenarios/paper_harmonic.toml -o out/  # any scenario file
   momentid identify out/paper_harmonic.mcap           # identification from the recording alone
   momentid identify out/paper_harmonic.mcap --json    # machine-readable result
+  momentid view out/paper_harmonic.mcap               # the rerun viewer (--save out.rrd: a file)
 """
 
 
@@ -59,7 +60,7 @@ def _report(experiment, args) -> int:
 
     times = args.time if args.time else None
     runs = args.runs.split(",") if args.runs else None
-    result = identify(experiment, estimator=args.estimator, runs=runs, times=times)
+    result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
     if experiment.structure is not None:
         comparison = compare(result, experiment.structure)
         payload = comparison.to_dict()
@@ -89,7 +90,13 @@ def _cmd_run(args) -> int:
     if not args.json:
         print(f"scenario {scenario.name}: {len(experiment.runs)} runs x {scenario.duration:g} s at "
               f"{scenario.sample_rate:g} Hz -> {out}\n")
-    return _report(experiment, args)
+    status = _report(experiment, args)
+    if args.view:
+        from .visualize import view
+
+        view(experiment, identify_options={"estimator": args.estimator, "times": args.time or None,
+                                           "runs": args.runs.split(",") if args.runs else None})
+    return status
 
 
 def _cmd_identify(args) -> int:
@@ -97,6 +104,16 @@ def _cmd_identify(args) -> int:
 
     experiment = read_recording(args.recording)
     return _report(experiment, args)
+
+
+def _cmd_view(args) -> int:
+    from .visualize import view
+
+    out = view(args.recording, save=args.save, result=args.result, exaggeration=args.exaggeration,
+               run=args.run)
+    if out is not None:
+        print(f"{args.recording} -> {out} (open it with: rerun {out})")
+    return 0
 
 
 def _cmd_sweep(args) -> int:
@@ -135,10 +152,14 @@ def _cmd_bench(args) -> int:
 
 
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--estimator", choices=("equation", "difference"), default="equation",
-                   help="'equation': every run on its own, all samples in one least-squares problem "
-                        "(method.md eq. 3, default); 'difference': each run minus the reference run "
-                        "(the paper's eq. 2), needs identical table motion")
+    p.add_argument("--estimator", choices=("auto", "equation", "difference", "eiv"), default="auto",
+                   help="'auto' (default): 'equation' for noise-free data, else 'eiv'; 'equation': every "
+                        "run on its own, all samples in one least-squares problem (method.md eq. 3); "
+                        "'difference': each run minus the reference run (the paper's eq. 2), needs "
+                        "identical table motion; 'eiv': errors-in-variables maximum likelihood, unbiased "
+                        "by sensor noise, with standard errors")
+    p.add_argument("--mass", choices=("diagonal", "full"), default="diagonal",
+                   help="identify a diagonal (default) or full symmetric mass matrix")
     p.add_argument("--time", type=float, action="append", metavar="T",
                    help="use only the sample nearest time T (s); repeat for several instants "
                         "(e.g. --estimator difference --time 5 reproduces the paper's system)")
@@ -171,6 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="simulate up to N runs at once in worker processes (default: one per core; "
                         "1 = in this process)")
     _add_identify_options(p)
+    p.add_argument("--view", action="store_true",
+                   help="after identification, show the recording in the rerun viewer (momentid view)")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("identify", help="identify M, C, K, mu, kappa from a recording",
@@ -180,6 +203,23 @@ def build_parser() -> argparse.ArgumentParser:
                                      "docs/recording-format.md)")
     _add_identify_options(p)
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("view", help="inspect a recording in the rerun viewer",
+                       description="Show a recording in the rerun viewer, ready to read: per run a 3D "
+                                   "view of the table and floors moving with the recorded (exaggerated) "
+                                   "displacements and every sensor over time, plus the identified vs. "
+                                   "analytic parameters, modes and the equation residual. Spawns the "
+                                   "viewer (or uses one already listening); --save writes a .rrd instead.")
+    p.add_argument("recording", help="MCAP recording written by momentid")
+    p.add_argument("--save", metavar="OUT.rrd", help="write a .rrd file (open later with `rerun OUT.rrd`) "
+                                                     "instead of opening a viewer; needs no display")
+    p.add_argument("--exaggeration", type=float, metavar="X",
+                   help="draw displacements X times their size in 3D (default: about a fifth of the "
+                        "building height for the largest one, a 1-2-5 number)")
+    p.add_argument("--run", metavar="NAME", help="the run whose tab opens first (default: the first run)")
+    p.add_argument("--result", metavar="JSON",
+                   help="show this result of `momentid identify --json` instead of identifying again")
+    p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("sweep", help="a campaign: scenario variants x seeds, identified and scored",
                        description="Run every case of a sweep file (a base scenario and a grid of values "

@@ -1,16 +1,17 @@
 """Identify M, C, K and the Rayleigh coefficients from added-mass runs.
 
-Two estimators, both linear least squares in the unknowns
-``theta = [M entries, C entries (symmetric), K entries (symmetric), mu]``:
+Unknowns ``theta = [M entries, C entries (symmetric), K entries (symmetric),
+mu]``; M is diagonal (the shear model) or, with ``mass="full"``, symmetric
+(the paper's general count ``3/2 d^2 + 3/2 d + 1``).  Estimators:
 
-``"equation"`` (default, method.md eq. 3)
+``"equation"`` (method.md eq. 3)
     Every run on its own, with the absolute floor accelerations ``a``::
 
         M a + C v + K q + mu dM v = -dM a
 
     The reference run (``dM = 0``) fixes the matrices up to scale, runs with
-    added mass fix the scale and ``mu``.  It does not need the table to
-    repeat its motion between runs.
+    added mass fix the scale and ``mu``.  Exact for noise-free data; does not
+    need the table to repeat its motion between runs.
 
 ``"difference"`` (the paper's eq. 2 / 15)
     Each added-mass run minus the reference run, with relative accelerations
@@ -18,10 +19,21 @@ Two estimators, both linear least squares in the unknowns
 
         M (q_i'' - q_1'') + C (v_i - v_1) + K (q_i - q_1) + mu dM_i v_i = -dM_i a_i
 
-The samples are streamed in blocks through a QR update per floor equation
-(each floor's equation touches only ``2d + 2`` of the unknowns), so memory
-stays flat for long records and the problem is never formed as normal
-equations.  ``kappa`` follows from ``C = mu M + kappa K`` by least squares.
+``"eiv"`` (:mod:`momentid.eiv`)
+    Errors-in-variables maximum likelihood in the frequency domain, started
+    from the equation form on low-passed signals: unbiased by noise on every
+    channel (table accelerometer included), with standard errors at the
+    Cramér-Rao bound.
+
+``"auto"`` (default)
+    ``"equation"`` when the data satisfy eq. (3) to round-off (noise-free
+    virtual data) or the recording says its sensors are ideal, ``"eiv"``
+    otherwise.
+
+The equation forms stream the samples in blocks through a QR update per
+floor equation (each floor's equation touches only its own row of unknowns),
+so memory stays flat for long records.  ``kappa`` follows from
+``C = mu M + kappa K`` by least squares.
 """
 
 from __future__ import annotations
@@ -29,18 +41,78 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from .analytic import Modes, modal_properties
 from .data import Experiment, RunData
 from .errors import IdentificationError, SensorDataError
+from .reconstruct import Prefilter, prepare_run, suggest_band
+from .sensors import check_run
 
-__all__ = ["Identification", "identify", "equation_residual", "ESTIMATORS", "MAX_CONDITION"]
+__all__ = ["Identification", "identify", "equation_residual", "ESTIMATORS", "MAX_CONDITION", "Layout"]
 
-ESTIMATORS = ("equation", "difference")
+ESTIMATORS = ("auto", "equation", "difference", "eiv")
 #: Column-scaled condition numbers above this are refused: the data cannot
 #: separate the unknowns (too little excitation, too few runs).
 MAX_CONDITION = 1e10
 _BLOCK = 4096
+
+
+class Layout:
+    """Where each unknown sits in ``theta``.
+
+    Parameters
+    ----------
+    d : int
+        Storeys.
+    mass : {"diagonal", "full"}
+        Diagonal (d unknowns) or symmetric (d(d+1)/2) mass matrix.
+    """
+
+    def __init__(self, d: int, mass: str = "diagonal"):
+        if mass not in ("diagonal", "full"):
+            raise IdentificationError(f"mass = {mass!r}: expected 'diagonal' or 'full'")
+        self.d = d
+        self.mass = mass
+        pairs = [(i, j) for i in range(d) for j in range(i, d)]
+        sym = np.zeros((d, d), dtype=int)
+        for n, (i, j) in enumerate(pairs):
+            sym[i, j] = sym[j, i] = n
+        if mass == "diagonal":
+            self.m = np.diag(np.arange(d))
+            self.m_columns = np.arange(d)
+            start = d
+        else:
+            self.m = sym.copy()
+            self.m_columns = np.arange(len(pairs))
+            start = len(pairs)
+        self.c = start + sym
+        self.k = start + len(pairs) + sym
+        self.mu = start + 2 * len(pairs)
+        self.p = self.mu + 1
+
+    def floor_columns(self, j: int) -> np.ndarray:
+        """The unknowns that floor ``j``'s equation involves, in regressor order."""
+        m = [self.m[j, j]] if self.mass == "diagonal" else list(self.m[j])
+        return np.concatenate([m, self.c[j], self.k[j], [self.mu]])
+
+    def unpack(self, theta: np.ndarray):
+        """``(M, C, K, mu)`` from ``theta``."""
+        if self.mass == "diagonal":
+            M = np.diag(theta[np.diag(self.m)])
+        else:
+            M = theta[self.m]
+        return M, theta[self.c], theta[self.k], float(theta[self.mu])
+
+    def pack(self, M, C, K, mu) -> np.ndarray:
+        theta = np.zeros(self.p)
+        for (idx, X) in ((self.m, M), (self.c, C), (self.k, K)):
+            if X is M and self.mass == "diagonal":
+                theta[np.diag(idx)] = np.diag(X)
+            else:
+                theta[idx] = X
+        theta[self.mu] = mu
+        return theta
 
 
 @dataclass(frozen=True)
@@ -58,18 +130,23 @@ class Identification:
         Stiffness-proportional coefficient (s), least squares of
         ``C - mu M = kappa K``.
     damping_misfit : float
-        ``||C - mu M - kappa K||_F / ||C||_F``: how well Rayleigh damping
-        explains the identified ``C`` (0 for an exact Rayleigh model).
+        ``||C - mu M - kappa K||_F / ||C||_F`` (0 for exact Rayleigh damping).
     estimator : str
-        ``"equation"`` or ``"difference"``.
     n_equations, n_unknowns, rank : int
-        Size and numerical rank of the least-squares problem.
+        Size and numerical rank of the (linearised) least-squares problem.
     condition : float
         2-norm condition number of the column-scaled regressor matrix.
     residual_rms : float
-        RMS of the equation residual (N).
+        RMS of the equation residual (N) of the equation forms, or of the
+        noise-weighted output residual (1 = at the noise level) for output error.
     runs : tuple of str
         The runs used.
+    covariance : ndarray, shape (p, p), optional
+        Covariance of ``theta`` (see :class:`Layout`); from the output-error
+        Jacobian, or the least-squares formula for the equation forms (which
+        ignores the bias that regressor noise causes).
+    notes : tuple of str
+        Repairs and choices made on the way (e.g. interpolated samples).
     """
 
     M: np.ndarray
@@ -85,54 +162,69 @@ class Identification:
     condition: float
     residual_rms: float
     runs: tuple[str, ...]
+    covariance: np.ndarray | None = None
+    mass: str = "diagonal"
     notes: tuple[str, ...] = field(default=())
 
     @property
     def storeys(self) -> int:
         return self.M.shape[0]
 
+    @property
+    def layout(self) -> Layout:
+        return Layout(self.storeys, self.mass)
+
+    @property
+    def theta(self) -> np.ndarray:
+        return self.layout.pack(self.M, self.C, self.K, self.mu)
+
     def modes(self) -> Modes:
         """Natural frequencies and damping ratios of the identified model."""
         return modal_properties(self.M, self.C, self.K)
 
+    def std(self) -> dict | None:
+        """One standard error per entry: ``{'M', 'C', 'K', 'mu', 'kappa'}`` (same shapes)."""
+        if self.covariance is None:
+            return None
+        lay = self.layout
+        var = np.clip(np.diag(self.covariance), 0.0, None)
+        s = np.sqrt(var)
+        M = s[lay.m] if self.mass == "full" else np.diag(s[np.diag(lay.m)])
+        theta = self.theta
+        g = np.zeros_like(theta)
+        for i in range(theta.size):   # kappa(theta) is smooth: central differences
+            step = 1e-6 * max(abs(theta[i]), 1e-12 + np.max(np.abs(theta)) * 1e-9)
+            tp, tm = theta.copy(), theta.copy()
+            tp[i] += step
+            tm[i] -= step
+            g[i] = (_kappa(lay, tp) - _kappa(lay, tm)) / (2 * step)
+        return {"M": M, "C": s[lay.c], "K": s[lay.k], "mu": float(s[lay.mu]),
+                "kappa": float(np.sqrt(max(g @ self.covariance @ g, 0.0)))}
+
     def to_dict(self) -> dict:
-        """JSON-friendly dict: matrices as nested lists in SI units."""
+        """JSON-friendly dict: matrices as nested lists in SI units; ``std`` likewise."""
         modes = self.modes()
-        return {
+        out = {
             "M": self.M.tolist(), "C": self.C.tolist(), "K": self.K.tolist(),
             "mu": self.mu, "kappa": self.kappa,
             "damping_misfit": self.damping_misfit,
             "frequency_hz": modes.frequency.tolist(),
             "damping_ratio": modes.damping_ratio.tolist(),
-            "estimator": self.estimator,
+            "estimator": self.estimator, "mass": self.mass,
             "n_equations": self.n_equations, "n_unknowns": self.n_unknowns,
             "rank": self.rank, "condition": self.condition,
             "residual_rms": self.residual_rms, "runs": list(self.runs),
+            "notes": list(self.notes),
         }
+        std = self.std()
+        if std is not None:
+            out["std"] = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in std.items()}
+        return out
 
 
-class _Layout:
-    """Column indices of the unknowns (diagonal M, symmetric C and K, mu)."""
-
-    def __init__(self, d: int):
-        self.d = d
-        self.m = np.arange(d)
-        pairs = [(i, j) for i in range(d) for j in range(i, d)]
-        sym = np.zeros((d, d), dtype=int)
-        for n, (i, j) in enumerate(pairs):
-            sym[i, j] = sym[j, i] = n
-        self.c = d + sym
-        self.k = d + len(pairs) + sym
-        self.mu = d + 2 * len(pairs)
-        self.p = self.mu + 1
-
-    def floor_columns(self, j: int) -> np.ndarray:
-        """The unknowns that floor ``j``'s equation involves, in row order."""
-        return np.concatenate([[self.m[j]], self.c[j], self.k[j], [self.mu]])
-
-    def unpack(self, theta: np.ndarray):
-        M = np.diag(theta[self.m])
-        return M, theta[self.c], theta[self.k], float(theta[self.mu])
+def _kappa(layout: Layout, theta: np.ndarray) -> float:
+    M, C, K, mu = layout.unpack(theta)
+    return float(np.sum(K * (C - mu * M)) / np.sum(K * K))
 
 
 def _signals(run: RunData, d: int) -> dict[str, np.ndarray]:
@@ -149,23 +241,25 @@ def _signals(run: RunData, d: int) -> dict[str, np.ndarray]:
                 f"run {run.name!r}: channel {g}{col + 1} is {x[row, col]} at t = {run.time[row]:.6g} s: "
                 f"expected finite samples"
             )
+    if run.has("zdd"):
+        out["zdd"] = run["zdd"]
     return out
 
 
 def _sample_index(run: RunData, times) -> np.ndarray:
     if times is None:
         return np.arange(run.n_samples)
-    idx = np.searchsorted(run.time, np.asarray(times, float))
-    idx = np.clip(idx, 1, run.n_samples - 1)
+    times = np.asarray(times, float)
+    idx = np.clip(np.searchsorted(run.time, times), 1, run.n_samples - 1)
     left = run.time[idx - 1]
-    idx = np.where(np.abs(np.asarray(times) - left) <= np.abs(run.time[idx] - np.asarray(times)), idx - 1, idx)
+    idx = np.where(np.abs(times - left) <= np.abs(run.time[idx] - times), idx - 1, idx)
     return np.unique(idx)
 
 
 class _Accumulator:
     """Streaming QR of ``[A | b]``, one small triangular factor per floor."""
 
-    def __init__(self, layout: _Layout):
+    def __init__(self, layout: Layout):
         self.layout = layout
         self.cols = [layout.floor_columns(j) for j in range(layout.d)]
         self.R = [np.zeros((0, len(c) + 1)) for c in self.cols]
@@ -173,10 +267,12 @@ class _Accumulator:
 
     def add(self, acc, vel, disp, vel_mu, rhs) -> None:
         """Add ``n`` samples: regressor signals (n, d) and dM-terms (n, d)."""
+        full = self.layout.mass == "full"
         for start in range(0, acc.shape[0], _BLOCK):
             sl = slice(start, start + _BLOCK)
             for j in range(self.layout.d):
-                block = np.column_stack([acc[sl, j], vel[sl], disp[sl], vel_mu[sl, j], rhs[sl, j]])
+                m = acc[sl] if full else acc[sl, j:j + 1]
+                block = np.column_stack([m, vel[sl], disp[sl], vel_mu[sl, j], rhs[sl, j]])
                 self.R[j] = np.linalg.qr(np.vstack([self.R[j], block]), mode="r")
             self.rows += acc[sl].shape[0] * self.layout.d
 
@@ -188,7 +284,7 @@ class _Accumulator:
             R = self.R[j]
             s = len(cols)
             full = np.zeros((R.shape[0], p + 1))
-            full[:, cols] = R[:, :s]
+            np.add.at(full, (slice(None), cols), R[:, :s])  # a column may repeat (M[j,j] in full M)
             full[:, p] = R[:, s]
             if R.shape[0] > s:
                 rss += float(R[s, s] ** 2)
@@ -200,7 +296,7 @@ class _Accumulator:
         return A, b, rss
 
 
-def _solve(acc: _Accumulator, estimator: str, runs) -> tuple[np.ndarray, int, float, float]:
+def _solve(acc: _Accumulator, estimator: str, runs):
     A, b, rss = acc.solve()
     p = acc.layout.p
     norms = np.linalg.norm(A, axis=0)
@@ -222,25 +318,63 @@ def _solve(acc: _Accumulator, estimator: str, runs) -> tuple[np.ndarray, int, fl
             f"expected a richer excitation (more frequencies than storeys) or more added-mass runs"
         )
     theta_s, *_ = np.linalg.lstsq(As, b, rcond=None)
-    return theta_s / norms, rank, condition, rss
+    theta = theta_s / norms
+    dof = acc.rows - p
+    cov = None
+    if dof > 0:
+        Rinv = np.linalg.inv(As)
+        cov = (Rinv @ Rinv.T) * (rss / dof) / np.outer(norms, norms)
+    return theta, rank, condition, rss, cov
 
 
-def identify(experiment: Experiment, *, estimator: str = "equation", runs=None,
-             times=None) -> Identification:
+def _ideal(experiment: Experiment) -> bool:
+    sensors = experiment.scenario.get("sensors") if experiment.scenario else None
+    return bool(sensors and sensors.get("ideal"))
+
+
+def _result(layout, theta, estimator, rows, rank, condition, residual_rms, names, cov, notes):
+    M, C, K, mu = layout.unpack(theta)
+    kappa = _kappa(layout, theta)
+    misfit = float(np.linalg.norm(C - mu * M - kappa * K) / np.linalg.norm(C))
+    return Identification(
+        M=M, C=C, K=K, mu=mu, kappa=kappa, damping_misfit=misfit, estimator=estimator,
+        n_equations=rows, n_unknowns=layout.p, rank=rank, condition=condition,
+        residual_rms=residual_rms, runs=names, covariance=cov, mass=layout.mass, notes=tuple(notes),
+    )
+
+
+def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "diagonal", runs=None,
+             times=None, prefilter: Prefilter | str | None = "auto") -> Identification:
+    # The work is thousands of small dense products: BLAS threads only add
+    # synchronisation (300x slower for 8x8 expm on a busy 2-core machine).
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _identify(experiment, estimator=estimator, mass=mass, runs=runs, times=times,
+                         prefilter=prefilter)
+
+
+def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
+              prefilter) -> Identification:
     """Identify M, C, K, mu and kappa from the runs of a recording.
 
     Parameters
     ----------
     experiment : Experiment
-        Runs with channels ``a1..ad``, ``q1..qd``, ``v1..vd`` (and ``zdd`` for
-        the difference form), e.g. from :func:`momentid.read_recording`.
-    estimator : {"equation", "difference"}
+        Runs with floor accelerations ``a1..ad``, the base acceleration
+        ``zdd``, and displacements/velocities where measured (missing ones
+        are reconstructed, see :mod:`momentid.reconstruct`).
+    estimator : {"auto", "equation", "difference", "eiv"}
         See the module docstring.
+    mass : {"diagonal", "full"}
+        Shape of the identified mass matrix.
     runs : sequence of str, optional
         Names of the runs to use (all by default).
     times : sequence of float, optional
-        Use only the samples nearest these times (s); all samples by default.
+        Equation forms only: use just the samples nearest these times (s).
         ``times=[5.0]`` with ``estimator="difference"`` is the paper's system.
+    prefilter : Prefilter, "auto" or None
+        Band applied to every channel before the equation forms.  "auto":
+        none for ideal (noise-free) recordings, else a zero-phase low-pass
+        just above the structure's response band.
 
     Raises
     ------
@@ -248,10 +382,11 @@ def identify(experiment: Experiment, *, estimator: str = "equation", runs=None,
         When the runs cannot identify the unknowns: fewer than two runs, no
         added mass, too little excitation.
     SensorDataError
-        A needed channel is missing or not finite.
+        A needed channel is missing, or data are unusable (gaps, clipping).
     """
     if estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator = {estimator!r}: expected one of {', '.join(ESTIMATORS)}")
+    ideal = _ideal(experiment)
     selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
     names = tuple(r.name for r in selected)
     if len(selected) < 2:
@@ -260,68 +395,88 @@ def identify(experiment: Experiment, *, estimator: str = "equation", runs=None,
             f"(a reference run and a run with added mass)"
         )
     d = selected[0].added_mass.shape[0]
-    dms = [r.added_mass for r in selected]
-    if all(not np.any(dm) for dm in dms):
+    if all(not np.any(r.added_mass) for r in selected):
         raise IdentificationError(
             f"{experiment.source}: no run among {list(names)} adds mass: the equations are "
             f"homogeneous and fix M, C, K only up to scale; expected at least one run with added mass"
         )
-    layout = _Layout(d)
+    notes: list[str] = []
+    checked = []
+    for run in selected:
+        if run.has("a1") and not ideal:
+            run, repairs = check_run(run, experiment.source)
+            notes.extend(repairs)
+        checked.append(run)
+    selected = tuple(checked)
+    layout = Layout(d, mass)
+    if estimator == "auto" and times is not None:
+        estimator = "equation"
+    if estimator == "eiv" and times is not None:
+        raise IdentificationError(f"times = {list(times)}: only the equation forms work at chosen instants; "
+                                  f"use estimator 'equation' or 'difference'")
+    if estimator == "auto":
+        exact = _equation_form(experiment, selected, layout, "equation", times, Prefilter(), names, notes)
+        if ideal or exact.residual_rms <= _ROUNDOFF * _force_scale(exact, selected):
+            return exact
+        estimator = "eiv"
+        notes.append(f"equation residual {exact.residual_rms:.3g} N is above round-off: the data carry "
+                     f"noise, so the errors-in-variables estimator is used")
+    if prefilter == "auto":
+        band = (Prefilter() if ideal or estimator == "difference" or times is not None
+                else Prefilter(high=suggest_band(selected[0], d)))
+    else:
+        band = prefilter or Prefilter()
+    if band.active:
+        notes.append(f"equation form on signals filtered to {band.low:g}-{band.high or 'inf'} Hz")
+    eq_name = "difference" if estimator == "difference" else "equation"
+    start = _equation_form(experiment, selected, layout, eq_name, times, band, names, notes)
+    if estimator != "eiv":
+        return start
+    from .eiv import fit_eiv
+    f_top = float(start.modes().frequency.max())
+    f_max = max(band.high or 0.0, 2.0 * f_top)
+    fit = fit_eiv(layout, selected, start.theta, f_max=f_max)
+    notes.append(f"errors-in-variables fit over 0-{f_max:.3g} Hz: {fit.nfev} model evaluations, "
+                 f"residual variance factor {fit.scale:.3g} (1 = at the noise level)")
+    return _result(layout, fit.theta, "eiv", fit.n_residuals, start.rank, start.condition,
+                   float(np.sqrt(fit.scale)), names, fit.covariance, notes)
+
+
+#: Relative equation residual below which data count as noise-free.
+_ROUNDOFF = 1e-8
+
+
+def _force_scale(result: Identification, runs) -> float:
+    """RMS inertia force M a of the runs (N): the scale equation residuals are judged on."""
+    total, count = 0.0, 0
+    for run in runs:
+        f = run.group("a", result.storeys) @ result.M.T
+        total += float(np.sum(f ** 2))
+        count += f.size
+    return float(np.sqrt(total / max(count, 1)))
+
+
+def _equation_form(experiment, selected, layout, eq_name, times, band, names, notes) -> Identification:
+    d = layout.d
     acc = _Accumulator(layout)
-    if estimator == "equation":
+    if eq_name == "equation":
         for run in selected:
-            s = _signals(run, d)
+            s = _prepared(run, d, band)
             idx = _sample_index(run, times)
             dm = run.added_mass
             a, v, q = s["a"][idx], s["v"][idx], s["q"][idx]
             acc.add(a, v, q, v * dm, -a * dm)
     else:
-        _difference_rows(experiment, selected, d, times, acc)
-    theta, rank, condition, rss = _solve(acc, estimator, names)
-    M, C, K, mu = layout.unpack(theta)
-    kappa = float(np.sum(K * (C - mu * M)) / np.sum(K * K))
-    misfit = float(np.linalg.norm(C - mu * M - kappa * K) / np.linalg.norm(C))
-    return Identification(
-        M=M, C=C, K=K, mu=mu, kappa=kappa, damping_misfit=misfit, estimator=estimator,
-        n_equations=acc.rows, n_unknowns=layout.p, rank=rank, condition=condition,
-        residual_rms=float(np.sqrt(rss / max(acc.rows, 1))), runs=names,
-    )
+        _difference_rows(experiment, selected, d, times, acc, band)
+    theta, rank, condition, rss, cov = _solve(acc, eq_name, names)
+    return _result(layout, theta, eq_name, acc.rows, rank, condition,
+                   float(np.sqrt(rss / max(acc.rows, 1))), names, cov, notes)
 
 
-def _difference_rows(experiment: Experiment, selected, d: int, times, acc: _Accumulator) -> None:
-    refs = [r for r in selected if not np.any(r.added_mass)]
-    if not refs:
-        raise IdentificationError(
-            f"{experiment.source}: the difference form needs a reference run without added mass "
-            f"among {[r.name for r in selected]}"
-        )
-    ref = refs[0]
-    s1 = _signals(ref, d)
-    z1 = ref["zdd"]
-    peak = float(np.max(np.abs(z1))) or 1.0
-    for run in selected:
-        if run is ref:
-            continue
-        if run.n_samples != ref.n_samples or not np.allclose(run.time, ref.time, rtol=0, atol=1e-9):
-            raise IdentificationError(
-                f"{experiment.source}: run {run.name!r} and reference {ref.name!r} have different "
-                f"sample times: the difference form needs the same clock; use estimator 'equation'"
-            )
-        zi = run["zdd"]
-        mismatch = float(np.max(np.abs(zi - z1)))
-        if mismatch > 1e-6 * peak:
-            raise IdentificationError(
-                f"{experiment.source}: run {run.name!r} table acceleration differs from reference "
-                f"{ref.name!r} by {mismatch:.3g} m/s^2 (peak {peak:.3g}): the difference form needs the "
-                f"same table motion in every run; use estimator 'equation'"
-            )
-        si = _signals(run, d)
-        idx = _sample_index(run, times)
-        dm = run.added_mass
-        rel_i = si["a"] - zi[:, None]
-        rel_1 = s1["a"] - z1[:, None]
-        acc.add((rel_i - rel_1)[idx], (si["v"] - s1["v"])[idx], (si["q"] - s1["q"])[idx],
-                (si["v"] * dm)[idx], (-si["a"] * dm)[idx])
+def _prepared(run: RunData, d: int, band: Prefilter) -> dict[str, np.ndarray]:
+    if not band.active and run.has("v1") and run.has("q1"):
+        return _signals(run, d)
+    return prepare_run(run, d, band)
 
 
 def equation_residual(result: Identification, run: RunData) -> np.ndarray:
@@ -335,8 +490,47 @@ def equation_residual(result: Identification, run: RunData) -> np.ndarray:
     ndarray, shape (n_samples, d)
     """
     d = result.storeys
-    s = _signals(run, d)
+    s = _prepared(run, d, Prefilter())
     dm = np.diag(run.added_mass)
     Mi = result.M + dm
     Ci = result.C + result.mu * dm
     return s["a"] @ Mi.T + s["v"] @ Ci.T + s["q"] @ result.K.T
+
+
+def _difference_rows(experiment: Experiment, selected, d: int, times, acc: _Accumulator,
+                     band: Prefilter) -> None:
+    refs = [r for r in selected if not np.any(r.added_mass)]
+    if not refs:
+        raise IdentificationError(
+            f"{experiment.source}: the difference form needs a reference run without added mass "
+            f"among {[r.name for r in selected]}"
+        )
+    ref = refs[0]
+    s1 = _prepared(ref, d, band)
+    if "zdd" not in s1:
+        raise SensorDataError(f"run {ref.name!r}: the difference form needs the base acceleration zdd")
+    z1 = s1["zdd"]
+    peak = float(np.max(np.abs(z1))) or 1.0
+    for run in selected:
+        if run is ref:
+            continue
+        if run.n_samples != ref.n_samples or not np.allclose(run.time, ref.time, rtol=0, atol=1e-9):
+            raise IdentificationError(
+                f"{experiment.source}: run {run.name!r} and reference {ref.name!r} have different "
+                f"sample times: the difference form needs the same clock; use estimator 'equation'"
+            )
+        si = _prepared(run, d, band)
+        zi = si["zdd"]
+        mismatch = float(np.max(np.abs(zi - z1)))
+        if mismatch > 1e-6 * peak:
+            raise IdentificationError(
+                f"{experiment.source}: run {run.name!r} table acceleration differs from reference "
+                f"{ref.name!r} by {mismatch:.3g} m/s^2 (peak {peak:.3g}): the difference form needs the "
+                f"same table motion in every run; use estimator 'equation'"
+            )
+        idx = _sample_index(run, times)
+        dm = run.added_mass
+        rel_i = si["a"] - zi[:, None]
+        rel_1 = s1["a"] - z1[:, None]
+        acc.add((rel_i - rel_1)[idx], (si["v"] - s1["v"])[idx], (si["q"] - s1["q"])[idx],
+                (si["v"] * dm)[idx], (-si["a"] * dm)[idx])

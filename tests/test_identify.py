@@ -76,19 +76,23 @@ def test_difference_form_needs_identical_table_motion(simulated):
         identify(Experiment(runs=tuple(runs), structure=ex.structure), estimator="difference")
 
 
-def test_bad_sensor_data_is_named(simulated):
+def test_bad_sensor_data_is_named_or_repaired(simulated):
     ex = simulated("default")
     r = ex.runs[1]
     values = r.values.copy()
-    values[123, r.channels.index("a2")] = np.nan
-    with pytest.raises(mi.SensorDataError, match=r"channel a2 is nan at t = 0.123"):
-        identify(Experiment(runs=(ex.runs[0], replace(r, values=values))))
+    values[123:173, r.channels.index("a2")] = np.nan          # 50 missing samples: not repairable
+    with pytest.raises(mi.SensorDataError, match=r"channel a2 is missing 50 samples from t = 0.123 s"):
+        identify(Experiment(runs=(ex.runs[0], replace(r, values=values))), estimator="equation")
+    values = r.values.copy()
+    values[123, r.channels.index("a2")] = np.nan               # one sample: interpolated and reported
+    result = identify(Experiment(runs=(ex.runs[0], replace(r, values=values))), estimator="equation")
+    assert any("a2: interpolated 1 missing samples" in n for n in result.notes)
     keep = [i for i, c in enumerate(r.channels) if c != "v3"]
     cut = replace(r, channels=tuple(r.channels[i] for i in keep), values=r.values[:, keep])
     with pytest.raises(mi.SensorDataError, match="no channel 'v3'"):
-        identify(Experiment(runs=(ex.runs[0], cut)))
+        identify(Experiment(runs=(ex.runs[0], cut)), estimator="equation", prefilter=None)
 
 
 def test_unknown_estimator():
-    with pytest.raises(mi.IdentificationError, match="expected one of equation, difference"):
+    with pytest.raises(mi.IdentificationError, match="expected one of auto, equation, difference, eiv"):
         identify(Experiment(runs=()), estimator="magic")

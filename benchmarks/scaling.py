@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from momentid.bench import _RawRig, _machine, bench_scenario, stacked_regressor
+from momentid.bench import _RawRig, _machine, bench_scenario, blas_threads, stacked_regressor
 from momentid.errors import IdentificationError
 from momentid.identify import identify
 from momentid.recording import read_recording, write_experiment
@@ -47,7 +47,8 @@ def _best(repeat: int, fn):
     return best, out
 
 
-def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_bytes: float) -> dict:
+def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_bytes: float,
+            blas: int | None = 1) -> dict:
     """Time every stage on ``scenario``; seconds per stage (None where not run)."""
     t_sim, experiment = _best(repeat, lambda: simulate(scenario, workers=workers))
     rig = _RawRig(scenario)
@@ -59,7 +60,8 @@ def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_byt
            "unknowns": (scenario.structure.storeys + 1) ** 2, "simulate": t_sim,
            "rollout_floor": t_floor, "record": t_rec, "identify": None, "lstsq": None, "note": ""}
     try:
-        row["identify"], result = _best(repeat, lambda: identify(experiment))
+        with blas_threads(blas):
+            row["identify"], result = _best(repeat, lambda: identify(experiment))
         row["condition"] = float(result.condition)
     except IdentificationError as e:   # timed all the same: it fails only after the solve
         t0 = time.perf_counter()
@@ -72,7 +74,8 @@ def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_byt
     rows_A = row["samples"] * row["storeys"]
     if rows_A * row["unknowns"] * 8 <= max_dense_bytes:
         A, b, _ = stacked_regressor(experiment)
-        row["lstsq"], _ = _best(repeat, lambda: np.linalg.lstsq(A, b, rcond=None))
+        with blas_threads(blas):
+            row["lstsq"], _ = _best(repeat, lambda: np.linalg.lstsq(A, b, rcond=None))
         del A, b
     else:
         row["note"] += f" dense matrix {rows_A}x{row['unknowns']} not built"
@@ -162,6 +165,8 @@ def main(argv=None) -> int:
     p.add_argument("--workers", type=int, default=None, help="simulation workers (default: one per core)")
     p.add_argument("--images", default=str(ROOT / "docs" / "images"), help="folder of the PNG figures")
     p.add_argument("--json-out", default=str(ROOT / "benchmarks" / "results" / "scaling.json"))
+    p.add_argument("--blas-threads", type=int, default=1,
+                   help="BLAS threads for identify and lstsq (default 1; 0 = library default)")
     p.add_argument("--max-dense-gb", type=float, default=1.0,
                    help="largest dense regressor matrix the lstsq baseline builds (GB)")
     args = p.parse_args(argv)
@@ -174,8 +179,9 @@ def main(argv=None) -> int:
         lengths, storeys, runs = [1, 2, 5, 10, 20, 40], [1, 2, 3, 5, 10, 20, 30, 50], [2, 3, 5, 7, 10, 14, 20]
         storey_len, runs_len = 4.0, 2.0
     images = Path(args.images)
-    kw = dict(workers=workers, repeat=repeat, max_dense_bytes=args.max_dense_gb * 1e9)
-    out = {"machine": _machine(), "workers": workers, "repeat": repeat, "quick": args.quick}
+    kw = dict(workers=workers, repeat=repeat, max_dense_bytes=args.max_dense_gb * 1e9, blas=args.blas_threads)
+    out = {"machine": _machine(), "workers": workers, "repeat": repeat, "quick": args.quick,
+           "blas_threads": args.blas_threads}
 
     def run(label, scenarios):
         rows = []

@@ -36,6 +36,7 @@ machine the minimum is the least disturbed measurement.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib.util
 import json
 import os
@@ -406,7 +407,24 @@ def _max_rel_diff(result, theta_parts) -> float:
                for x, y in ((result.M, M), (result.C, C), (result.K, K), (result.mu, mu)))
 
 
-def bench_identify(experiment, *, repeat: int, max_matrix_bytes: float = 2e9) -> list[Row]:
+@contextlib.contextmanager
+def blas_threads(n: int | None):
+    """Limit BLAS to ``n`` threads inside the block (when threadpoolctl is
+    installed); yields what is in force, for the report."""
+    if not n:
+        yield "library default"
+        return
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        yield "library default (threadpoolctl is not installed)"
+        return
+    with threadpool_limits(n, user_api="blas"):
+        yield str(n)
+
+
+def bench_identify(experiment, *, repeat: int, max_matrix_bytes: float = 2e9,
+                   threads: int | None = 1) -> list[Row]:
     from .identify import identify
 
     d = experiment.storeys
@@ -422,16 +440,17 @@ def bench_identify(experiment, *, repeat: int, max_matrix_bytes: float = 2e9) ->
     if samples * d * p * 8 <= max_matrix_bytes:
         A, b, unpack = stacked_regressor(experiment)
         fns["lstsq"] = lambda: last.__setitem__("theta", np.linalg.lstsq(A, b, rcond=None)[0])
-    t = {k: min(v) for k, v in _timed(repeat, **fns).items()}
+    with blas_threads(threads) as in_force:
+        t = {k: min(v) for k, v in _timed(repeat, **fns).items()}
     extra = {"samples": samples, "samples_per_s": samples / t["momentid"], "storeys": d,
-             "unknowns": p, "equations": samples * d}
+             "unknowns": p, "equations": samples * d, "blas_threads": in_force}
     if A is None:
         note = f"dense matrix {samples * d}x{p} would take {samples * d * p * 8 / 1e9:.1f} GB: not built"
     else:
         extra["matrix_shape"] = list(A.shape)
         extra["max_rel_diff_vs_lstsq"] = _max_rel_diff(last["result"], unpack(last["theta"]))
         note = (f"{samples / t['momentid'] / 1e6:.2f} M samples/s; same M, C, K, mu as lstsq to "
-                f"{extra['max_rel_diff_vs_lstsq']:.1e}")
+                f"{extra['max_rel_diff_vs_lstsq']:.1e}; BLAS threads: {in_force}")
     return [Row("identify", t["momentid"], t.get("lstsq"), "identify(experiment)",
                 f"one dense numpy.linalg.lstsq of the stacked {samples * d}x{p} eq. (3) matrix",
                 note=note, extra=extra)]
@@ -531,7 +550,7 @@ def _machine() -> dict:
 
 def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = None,
                    quick: bool = False, repeat: int | None = None, workers: int | None = None,
-                   workdir=None, log: Callable[[str], None] | None = None) -> dict:
+                   blas: int | None = 1, workdir=None, log: Callable[[str], None] | None = None) -> dict:
     """Run the benchmark stages; the report as a JSON-friendly dict.
 
     Parameters
@@ -548,6 +567,10 @@ def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = Non
         Repetitions per measurement, the best is kept (default 3; 1 when quick).
     workers : int, optional
         Simulation worker processes (default: one per core).
+    blas : int, optional
+        BLAS threads for the identify stage, both sides (default 1: on a
+        shared 2-core machine a second BLAS thread mostly waits; ``None``
+        or 0 keeps the library's default).
     """
     from .simulate import available_cores, simulate
 
@@ -561,7 +584,8 @@ def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = Non
     workers = workers if workers is not None else available_cores()
     say = log or (lambda s: None)
     report = {"machine": _machine(), "settings": {"quick": quick, "repeat": repeat, "workers": workers,
-                                                  "stages": list(stages)}, "rows": []}
+                                                  "blas_threads": blas, "stages": list(stages)},
+              "rows": []}
     with tempfile.TemporaryDirectory(prefix="momentid-bench-", dir=workdir) as tmp:
         tmp = Path(tmp)
         rows: list[Row] = []
@@ -577,7 +601,7 @@ def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = Non
             elif stage == "record":
                 rows += bench_record(experiment, tmp, repeat=repeat)
             elif stage == "identify":
-                rows += bench_identify(experiment, repeat=repeat)
+                rows += bench_identify(experiment, repeat=repeat, threads=blas)
             elif stage == "view":
                 rows += bench_view(experiment, tmp, repeat=repeat)
             elif stage == "run":
@@ -636,6 +660,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--duration", type=float, metavar="S", help="record length replacing the scenario's (s)")
     p.add_argument("--repeat", type=int, metavar="N", help="repetitions, the best is kept (default 3)")
     p.add_argument("--workers", type=int, metavar="N", help="simulation workers (default: one per core)")
+    p.add_argument("--blas-threads", type=int, default=1, metavar="N",
+                   help="BLAS threads for the identify stage, momentid and lstsq alike (default 1; "
+                        "0 = the library default); needs threadpoolctl")
     p.add_argument("--json-out", metavar="PATH", help="also write the report as JSON")
     p.add_argument("--markdown", action="store_true", help="print a Markdown table instead")
 
@@ -645,7 +672,7 @@ def run_from_args(args) -> int:
     try:
         report = run_benchmarks(stages=stages, scenario=args.scenario, duration=args.duration,
                                 quick=args.quick, repeat=args.repeat, workers=args.workers,
-                                log=lambda s: print(s, file=sys.stderr))
+                                blas=args.blas_threads, log=lambda s: print(s, file=sys.stderr))
     except (ValueError, MomentidError) as e:  # an unknown stage, a bad scenario
         print(f"error: {e}", file=sys.stderr)
         return 2

@@ -39,6 +39,14 @@ class Entry:
     identified: float
     analytic: float
     rel_error: float
+    std: float | None = None
+
+    @property
+    def z_score(self) -> float | None:
+        """(identified - analytic) / std, when a standard error is known."""
+        if not self.std:
+            return None
+        return (self.identified - self.analytic) / self.std
 
 
 @dataclass(frozen=True)
@@ -64,17 +72,23 @@ class Comparison:
     def table(self) -> str:
         """A plain-text table for the terminal."""
         r = self.identification
+        residual = (f"residual RMS {r.residual_rms:.3g} N" if r.estimator != "eiv"
+                    else f"residual at {r.residual_rms:.3g} x the noise level")
+        has_std = any(e.std is not None for e in self.entries) and r.estimator == "eiv"
         lines = [
             f"identification: estimator {r.estimator}, runs {', '.join(r.runs)}",
             f"  {r.n_equations} equations, {r.n_unknowns} unknowns, rank {r.rank}, "
-            f"condition {r.condition:.3g}, residual RMS {r.residual_rms:.3g} N, "
-            f"Rayleigh misfit of C {r.damping_misfit:.2e}",
+            f"condition {r.condition:.3g}, {residual}, Rayleigh misfit of C {r.damping_misfit:.2e}",
             "",
-            f"{'parameter':<11} {'unit':<7} {'identified':>14} {'analytic':>14} {'rel. error':>11}",
+            f"{'parameter':<11} {'unit':<7} {'identified':>14} {'analytic':>14} {'rel. error':>11}"
+            + (f" {'std. error':>11} {'z':>6}" if has_std else ""),
         ]
         for e in self.entries:
-            lines.append(f"{e.name:<11} {e.unit:<7} {e.identified:>14.6g} {e.analytic:>14.6g} "
-                         f"{e.rel_error:>11.2e}")
+            line = (f"{e.name:<11} {e.unit:<7} {e.identified:>14.6g} {e.analytic:>14.6g} "
+                    f"{e.rel_error:>11.2e}")
+            if has_std and e.std is not None:
+                line += f" {e.std:>11.3g} {e.z_score:>6.2f}"
+            lines.append(line)
         lines += ["", f"{'mode':<5} {'f id (Hz)':>11} {'f an (Hz)':>11} {'zeta id':>10} {'zeta an':>10}"]
         mi, ma = self.identified_modes, self.analytic_modes
         for k in range(len(ma.frequency)):
@@ -94,11 +108,13 @@ class Comparison:
             "damping_ratio": self.analytic_modes.damping_ratio.tolist(),
         }
         out["rel_error"] = {e.name: e.rel_error for e in self.entries}
+        if any(e.std is not None for e in self.entries):
+            out["z_score"] = {e.name: e.z_score for e in self.entries}
         out["max_rel_error"] = self.max_rel_error
         return out
 
 
-def _matrix_entries(name: str, unit: str, ident: np.ndarray, ref: np.ndarray, diagonal_only=False):
+def _matrix_entries(name: str, unit: str, ident: np.ndarray, ref: np.ndarray, std, diagonal_only=False):
     scale = float(np.max(np.abs(ref))) or 1.0
     d = ref.shape[0]
     out = []
@@ -108,22 +124,24 @@ def _matrix_entries(name: str, unit: str, ident: np.ndarray, ref: np.ndarray, di
                 continue
             a, b = float(ident[i, j]), float(ref[i, j])
             denom = abs(b) if b != 0 else scale
-            out.append(Entry(f"{name}[{i + 1},{j + 1}]", unit, a, b, abs(a - b) / denom))
+            s = None if std is None else float(std[i, j])
+            out.append(Entry(f"{name}[{i + 1},{j + 1}]", unit, a, b, abs(a - b) / denom, s))
     return out
 
 
 def compare(result: Identification, structure: Structure) -> Comparison:
     """Compare ``result`` with the analytic model of ``structure``."""
     an = analytic_parameters(structure)
+    std = result.std() or {}
     entries = (
-        _matrix_entries("M", "kg", result.M, an["M"], diagonal_only=True)
-        + _matrix_entries("C", "N*s/m", result.C, an["C"])
-        + _matrix_entries("K", "N/m", result.K, an["K"])
+        _matrix_entries("M", "kg", result.M, an["M"], std.get("M"), diagonal_only=result.mass == "diagonal")
+        + _matrix_entries("C", "N*s/m", result.C, an["C"], std.get("C"))
+        + _matrix_entries("K", "N/m", result.K, an["K"], std.get("K"))
     )
     for key, unit in (("mu", "1/s"), ("kappa", "s")):
         a, b = getattr(result, key), an[key]
         denom = abs(b) if b != 0 else 1.0
-        entries.append(Entry(key, unit, a, b, abs(a - b) / denom))
+        entries.append(Entry(key, unit, a, b, abs(a - b) / denom, std.get(key)))
     return Comparison(
         entries=tuple(entries),
         identified_modes=result.modes(),

@@ -159,6 +159,19 @@ Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise]
 
 
 @dataclass(frozen=True)
+class Tracking:
+    """Run-to-run table error: the servo never repeats a motion exactly.
+
+    Every run's table acceleration is the nominal one plus its own seeded
+    band-limited random error of RMS ``error`` x (nominal RMS acceleration)
+    in ``band`` (Hz).
+    """
+
+    error: float
+    band: tuple[float, float] = (0.5, 20.0)
+
+
+@dataclass(frozen=True)
 class Run:
     """One added-mass run: ``added_mass`` (kg per floor, shape (d,))."""
 
@@ -297,6 +310,7 @@ class Scenario:
     excitation: Excitation
     runs: tuple[Run, ...]
     sensors: Sensors = field(default_factory=Sensors)
+    tracking: Tracking | None = None
     source: str = "<string>"
     text: str = ""
 
@@ -325,6 +339,7 @@ class Scenario:
             "substeps": self.substeps,
             "excitation": json.loads(json.dumps(exc, default=list)),
             "sensors": self.sensors.to_dict(),
+            "tracking": asdict(self.tracking) if self.tracking else None,
         }
 
 
@@ -367,7 +382,7 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
 
     structure = _parse_structure(top.table("structure"))
     d = structure.storeys
-    excitation = _parse_excitation(top.table("excitation"), source, seed)
+    excitation, tracking = _parse_excitation(top.table("excitation"), source, seed)
     runs = []
     for i, tab in enumerate(top.tables("runs")):
         added = tab.numbers("added_mass", length=d, nonnegative=True, scalar_ok=True)
@@ -393,7 +408,7 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
     return Scenario(
         name=name, description=description, duration=duration, sample_rate=sample_rate,
         seed=seed, substeps=substeps, structure=structure, excitation=excitation,
-        runs=tuple(runs), sensors=sensors, source=str(source), text=text,
+        runs=tuple(runs), sensors=sensors, tracking=tracking, source=str(source), text=text,
     )
 
 
@@ -491,8 +506,14 @@ def _parse_structure(tab: Table) -> Structure:
                      rayleigh_mu=mu, rayleigh_kappa=kappa, base_mass=base_mass)
 
 
-def _parse_excitation(tab: Table, source: Path, seed: int) -> Excitation:
+def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, Tracking | None]:
     kind = tab.string("type", choices=("harmonic", "harmonics", "record", "noise"))
+    tracking = None
+    if tab.has("tracking_error"):
+        band = tab.numbers("tracking_band", (0.5, 20.0), length=2, positive=True)
+        if not band[0] < band[1]:
+            raise tab.error("tracking_band", "[low, high] in Hz with low < high")
+        tracking = Tracking(error=tab.number("tracking_error", positive=True), band=(band[0], band[1]))
     if kind == "harmonic":
         amp = (tab.number("amplitude", positive=True),)
         omega = (_angular(tab, "angular_frequency", "frequency", plural=False),)
@@ -532,7 +553,7 @@ def _parse_excitation(tab: Table, source: Path, seed: int) -> Excitation:
             taper=tab.number("taper", 1.0, nonnegative=True),
         )
     tab.finish()
-    return exc
+    return exc, tracking
 
 
 def _angular(tab: Table, omega_key: str, hz_key: str, *, plural: bool, length: int | None = None):

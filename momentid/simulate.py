@@ -26,7 +26,7 @@ from . import model as rig
 from .data import Experiment, RunData
 from .errors import SimulationError
 from .excitation import GroundMotion, ground_motion
-from .scenario import Run, Scenario, Sensors
+from .scenario import BandLimitedNoise, Run, Scenario, Sensors
 from .sensors import measure
 
 __all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of"]
@@ -92,6 +92,8 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
         ``meta['model_xml']`` holds the MJCF.
     """
     motion = motion if motion is not None else ground_motion_of(scenario)
+    if scenario.tracking is not None:
+        motion = _with_tracking_error(scenario, run, motion)
     spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
                           name=f"{scenario.name}_{run.name}")
     model = rig.compile_model(spec)
@@ -129,6 +131,33 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
         meta={"model_xml": spec.to_xml()},
     )
     return measure(true, scenario.sensors, seed=scenario.seed, run_index=_run_index(scenario, run))
+
+
+class _SumMotion:
+    """The sum of table motions (nominal + this run's tracking error)."""
+
+    def __init__(self, *parts):
+        self.parts = parts
+
+    def displacement(self, t):
+        return sum(p.displacement(t) for p in self.parts)
+
+    def velocity(self, t):
+        return sum(p.velocity(t) for p in self.parts)
+
+    def acceleration(self, t):
+        return sum(p.acceleration(t) for p in self.parts)
+
+
+def _with_tracking_error(scenario: Scenario, run: Run, motion: GroundMotion) -> _SumMotion:
+    """Nominal motion plus a seeded servo error of its own for this run."""
+    t = np.arange(scenario.n_samples) / scenario.sample_rate
+    rms = float(np.sqrt(np.mean(motion.acceleration(t) ** 2)))
+    seed = int(np.random.SeedSequence([scenario.seed, _run_index(scenario, run), 7919]).generate_state(1)[0])
+    error = ground_motion(BandLimitedNoise(rms=scenario.tracking.error * rms, band=scenario.tracking.band,
+                                           seed=seed, taper=min(1.0, scenario.duration / 4)),
+                          scenario.duration)
+    return _SumMotion(motion, error)
 
 
 def _run_index(scenario: Scenario, run: Run) -> int:

@@ -110,26 +110,43 @@ def _fit_slope(x, y) -> float:
     return float(np.polyfit(x, y, 1)[0])
 
 
+def _fit_line(x, y) -> tuple[float, float, float]:
+    """Least-squares ``y = a + b x``: (a, b, R^2)."""
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    b, a = np.polyfit(x, y, 1)
+    ss = float(np.sum((y - y.mean()) ** 2)) or 1.0
+    return float(a), float(b), 1.0 - float(np.sum((y - a - b * x) ** 2)) / ss
+
+
 def plot(rows: list[dict], x_key: str, xlabel: str, title: str, path: Path, *, per_sample=False,
-         guides=()) -> dict:
-    """Log-log plot of every series against ``x_key``; the fitted slopes."""
+         loglog=True, unit="unit", guides=()) -> dict:
+    """Plot every series against ``x_key``: log-log with fitted slopes, or
+    linear axes with straight-line fits ``t = a + b x`` and their R^2."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import matplotlib.ticker
 
     fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    slopes = {}
+    fits = {}
     xs_all = [r[x_key] for r in rows]
     for name in SERIES:
         pts = [(r[x_key], r[name] / (r["samples"] if per_sample else 1)) for r in rows if r.get(name)]
         if len(pts) < 2:
             continue
         x, y = zip(*pts)
-        slopes[name] = _fit_slope(x, y)
         style = "--" if name in ("rollout_floor", "lstsq") else "-"
-        ax.plot(x, y, style, marker="o", color=COLORS[name],
-                label=f"{LABELS[name]}  (slope {slopes[name]:.2f})")
+        if loglog:
+            fits[name] = {"slope": _fit_slope(x, y)}
+            label = f"{LABELS[name]}  (slope {fits[name]['slope']:.2f})"
+            ax.plot(x, y, style, marker="o", color=COLORS[name], label=label)
+        else:
+            a, b, r2 = _fit_line(x, y)
+            fits[name] = {"intercept": a, "per_unit": b, "r2": r2}
+            ax.plot(x, y, "o", color=COLORS[name],
+                    label=f"{LABELS[name]}  ({b * 1e3:.3g} ms per {unit} + {a * 1e3:.3g} ms, R\u00b2 {r2:.3f})")
+            xx = np.array([0.0, max(x)])
+            ax.plot(xx, a + b * xx, style, color=COLORS[name], linewidth=1)
     for r in rows:
         if r["note"].startswith("refused") and r.get("identify"):
             y = r["identify"] / (r["samples"] if per_sample else 1)
@@ -141,27 +158,31 @@ def plot(rows: list[dict], x_key: str, xlabel: str, title: str, path: Path, *, p
         ref = [r for r in rows if r.get("identify")]
         y0 = ref[0]["identify"] / (ref[0]["samples"] if per_sample else 1)
         ax.plot([x0, x1], [y0, y0 * (x1 / x0) ** power], ":", color="grey", label=label)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xticks(xs_all)
-    ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    if loglog:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xticks(xs_all)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    else:
+        ax.set_xlim(left=0)
+        ax.set_ylim(bottom=0)
     ax.set_xlabel(xlabel)
     ax.set_ylabel("seconds per sample" if per_sample else "seconds (best of repeats)")
     ax.set_title(title, fontsize=10)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7.5, loc="upper left")
+    ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return slopes
+    return fits
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.scaling", description=__doc__.split("\n\n")[0])
     p.add_argument("--quick", action="store_true", help="small sizes (a smoke test)")
-    p.add_argument("--repeat", type=int, default=None, help="repetitions, best kept (default 2; quick 1)")
+    p.add_argument("--repeat", type=int, default=None, help="repetitions, best kept (default 3; quick 1)")
     p.add_argument("--workers", type=int, default=None, help="simulation workers (default: one per core)")
     p.add_argument("--images", default=str(ROOT / "docs" / "images"), help="folder of the PNG figures")
     p.add_argument("--json-out", default=str(ROOT / "benchmarks" / "results" / "scaling.json"))
@@ -170,7 +191,7 @@ def main(argv=None) -> int:
     p.add_argument("--max-dense-gb", type=float, default=1.0,
                    help="largest dense regressor matrix the lstsq baseline builds (GB)")
     args = p.parse_args(argv)
-    repeat = args.repeat or (1 if args.quick else 2)
+    repeat = args.repeat or (1 if args.quick else 3)
     workers = args.workers or available_cores()
     if args.quick:
         lengths, storeys, runs = [0.5, 1.0, 2.0], [1, 3, 5], [2, 3, 4]
@@ -196,22 +217,27 @@ def main(argv=None) -> int:
 
     out["length"] = run("length", [bench_scenario(default_scenario_path(), duration=float(t))
                                    for t in lengths])
-    out["length_slopes"] = plot(out["length"], "duration_s", "record length per run (s), 3 runs, 3 storeys",
-                                "Time vs. record length (default scenario): linear", images / "scaling_length.png")
+    out["length_fits"] = plot(out["length"], "duration_s", "record length per run (s); 3 runs, 3 storeys",
+                              "Time vs. record length (default scenario)", images / "scaling_length.png",
+                              loglog=False, unit="s of record")
     out["storeys"] = run("storeys", [storey_scenario(d, storey_len) for d in storeys])
-    out["storeys_slopes"] = plot(
+    out["storeys_fits"] = plot(
         out["storeys"], "storeys", f"storeys d (2 runs x {storey_len:g} s; (d+1)^2 unknowns)",
         "Time per sample vs. number of storeys", images / "scaling_storeys.png", per_sample=True,
         guides=((2, "~ d^2 (reference)"), (3, "~ d^3 (reference)")))
     out["runs"] = run("runs", [runs_scenario(n, runs_len) for n in runs])
-    out["runs_slopes"] = plot(out["runs"], "runs", f"number of runs ({runs_len:g} s each, 3 storeys)",
-                              f"Time vs. number of runs ({workers} simulation workers)", images / "scaling_runs.png")
+    out["runs_fits"] = plot(out["runs"], "runs", f"number of runs ({runs_len:g} s each, 3 storeys)",
+                            f"Time vs. number of runs ({workers} simulation workers)", images / "scaling_runs.png",
+                            loglog=False, unit="run")
     path = Path(args.json_out)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(out, indent=2, allow_nan=False) + "\n", encoding="utf-8")
     print(f"wrote {path} and {images}/scaling_{{length,storeys,runs}}.png")
     for key in ("length", "storeys", "runs"):
-        print(f"{key:>8} slopes (log-log): " + ", ".join(f"{k} {v:.2f}" for k, v in out[f"{key}_slopes"].items()))
+        fits = out[f"{key}_fits"]
+        print(f"{key:>8}: " + ", ".join(
+            f"{k} slope {v['slope']:.2f}" if "slope" in v else
+            f"{k} {v['per_unit'] * 1e3:.3g} ms/unit (R2 {v['r2']:.3f})" for k, v in fits.items()))
     return 0
 
 

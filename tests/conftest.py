@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from pathlib import Path
 
 import pytest
 
 import momentid as mi
+from momentid.scenario import Sensors
 from momentid.simulate import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -38,14 +40,18 @@ def load(name: str) -> mi.Scenario:
 
 
 @functools.lru_cache(maxsize=None)
-def _simulated(name: str):
-    return simulate(mi.load_scenario(SCENARIOS / f"{name}.toml"))
+def _simulated(name: str, ideal: bool):
+    scenario = mi.load_scenario(SCENARIOS / f"{name}.toml")
+    if ideal:
+        scenario = dataclasses.replace(scenario, sensors=Sensors())
+    return simulate(scenario)
 
 
 @pytest.fixture(scope="session")
 def simulated():
-    """``simulated(name)``: the (cached) noise-free simulation of a shipped scenario."""
-    def get(name: str):
+    """``simulated(name, ideal=False)``: the (cached) simulation of a shipped scenario;
+    ``ideal=True`` records every channel exactly (noise-free virtual data)."""
+    def get(name: str, ideal: bool = False):
         load(name)  # skips cleanly when the scenario needs ../shared
-        return _simulated(name)
+        return _simulated(name, ideal)
     return get

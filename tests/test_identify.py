@@ -18,7 +18,8 @@ from conftest import load, scenario_files
 @pytest.mark.parametrize("path", scenario_files(), ids=lambda p: p.stem)
 def test_noise_free_identification_is_exact(simulated, path):
     sc = load(path.stem)
-    result = identify(simulated(path.stem))
+    result = identify(simulated(path.stem, ideal=True))
+    assert result.estimator == "equation"   # auto: the data satisfy eq. (3) to round-off
     comparison = compare(result, sc.structure)
     # Noise-free data satisfy eq. (3) to integration round-off; 1e-6 is the acceptance bound
     # (observed: ~1e-11), relative to the entry or, for zero entries, to the matrix's largest entry.

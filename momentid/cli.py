@@ -145,6 +145,46 @@ def _cmd_sweep(args) -> int:
     return 0
 
 
+def _cmd_plan(args) -> int:
+    from .design import cramer_rao, plan
+    from .scenario import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    designs, best = plan(scenario, target=args.target, max_runs=args.max_runs)
+    as_designed = cramer_rao(scenario)
+    if args.json:
+        payload = {
+            "target": args.target,
+            "scenario_design": as_designed.as_dict(),
+            "designs": [{"label": d.label, "excitation": d.excitation,
+                         "added_mass": [[float(x) for x in r.added_mass] for r in d.runs],
+                         "worst_parameter": d.bound.worst[0], "worst_relative_std": d.bound.worst[1],
+                         "crlb": d.bound.as_dict()} for d in designs],
+            "recommended": None if best is None else {"label": best.label, "excitation": best.excitation,
+                                                      "added_mass": [[float(x) for x in r.added_mass] for r in best.runs]},
+        }
+        print(json.dumps(_json_safe(payload), indent=2))
+        return 0
+    name, worst = as_designed.worst
+    print(f"scenario {scenario.name} as designed ({len(scenario.runs)} runs): worst relative CRLB std "
+          f"{worst:.3g} ({name})\n")
+    print(f"{'excitation':<24} {'design':<38} {'added kg':>9} {'worst':>7} {'rel. std':>9} {'mu':>9}")
+    mu_index = designs[0].bound.names.index("mu") if designs else 0
+    for d in designs:
+        mark = "  <- recommended" if d is best else ""
+        print(f"{d.excitation:<24} {d.label:<38} {d.added_mass_total:>9.3g} {d.bound.worst[0]:>7} "
+              f"{d.bound.worst[1]:>9.3g} {d.bound.relative[mu_index]:>9.3g}{mark}")
+    print()
+    if best is None:
+        print(f"no candidate reaches a relative standard deviation of {args.target:g} for every parameter: "
+              f"lower the sensor noise, lengthen the record or add runs (--max-runs)")
+        return 1
+    print(f"recommended: {best.label} under {best.excitation} excitation; added masses per run (kg):")
+    for r in best.runs:
+        print(f"  {r.name}: {[round(float(x), 4) for x in r.added_mass]}")
+    return 0
+
+
 def _cmd_bench(args) -> int:
     from .bench import run_from_args
 
@@ -220,6 +260,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--result", metavar="JSON",
                    help="show this result of `momentid identify --json` instead of identifying again")
     p.set_defaults(func=_cmd_view)
+
+    p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",
+                       description="Evaluate the Cramér-Rao lower bound of the scenario's experiment and of "
+                                   "candidate designs (added-mass patterns, 2..N runs, the scenario's excitation "
+                                   "or band-limited noise over the modes) with the scenario's sensor noise, and "
+                                   "recommend the cheapest design whose every parameter reaches the target "
+                                   "relative standard deviation.")
+    p.add_argument("scenario", help="scenario TOML file; its [sensors] give the noise")
+    p.add_argument("--target", type=float, default=0.01,
+                   help="target relative standard deviation of every parameter (default 0.01)")
+    p.add_argument("--max-runs", type=_positive_int, default=4, help="largest number of runs to consider")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=_cmd_plan)
 
     p = sub.add_parser("sweep", help="a campaign: scenario variants x seeds, identified and scored",
                        description="Run every case of a sweep file (a base scenario and a grid of values "

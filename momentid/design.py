@@ -1,0 +1,218 @@
+"""Experiment design: Cramér-Rao bounds and a planner for added-mass runs.
+
+How well can an experiment *as designed* identify ``M, C, K, mu``?  The
+Cramér-Rao lower bound (CRLB) answers before anything is built: simulate the
+designed runs without noise (the linear model, :mod:`momentid.linear`),
+evaluate the errors-in-variables Fisher information at the true parameters
+with the scenario's sensor noise (:func:`momentid.eiv.fisher_information`), and
+invert it.  No unbiased estimator can do better; momentid's ``eiv`` estimator
+reaches it (see ``benchmarks/accuracy.py``).
+
+:func:`plan` searches added-mass patterns, numbers of runs and excitations for
+the cheapest design whose worst parameter meets a target relative standard
+deviation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .data import RunData
+from .eiv import fisher_information
+from .errors import IdentificationError, ScenarioError
+from .identify import Layout
+from .linear import discretize, outputs, simulate_linear
+from .scenario import BandLimitedNoise, Run, Scenario, Sensors
+from .simulate import ground_motion_of
+
+__all__ = ["Bound", "cramer_rao", "plan", "Design"]
+
+
+@dataclass(frozen=True)
+class Bound:
+    """Cramér-Rao bound of one experiment design.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Parameter names (``M[1,1]``, ``C[1,2]``, ..., ``mu``), 1-based.
+    values : ndarray, shape (p,)
+        True parameter values.
+    std : ndarray, shape (p,)
+        Lower bound on the standard deviation of each parameter.
+    relative : ndarray, shape (p,)
+        ``std / |value|``; zero entries relative to their matrix's largest entry.
+    covariance : ndarray, shape (p, p)
+    """
+
+    names: tuple[str, ...]
+    values: np.ndarray
+    std: np.ndarray
+    relative: np.ndarray
+    covariance: np.ndarray
+
+    @property
+    def worst(self) -> tuple[str, float]:
+        i = int(np.argmax(self.relative))
+        return self.names[i], float(self.relative[i])
+
+    def as_dict(self) -> dict:
+        return {n: {"value": float(v), "crlb_std": float(s), "relative": float(r)}
+                for n, v, s, r in zip(self.names, self.values, self.std, self.relative)}
+
+
+def parameter_names(layout: Layout) -> tuple[str, ...]:
+    names = [""] * layout.p
+    d = layout.d
+    for i in range(d):
+        for j in range(i, d):
+            if layout.mass == "full" or i == j:
+                names[layout.m[i, j]] = f"M[{i + 1},{j + 1}]"
+            names[layout.c[i, j]] = f"C[{i + 1},{j + 1}]"
+            names[layout.k[i, j]] = f"K[{i + 1},{j + 1}]"
+    names[layout.mu] = "mu"
+    return tuple(names)
+
+
+def _noise_sigma(sensors: Sensors, name: str, x: np.ndarray, fs: float) -> float:
+    inst = sensors.instrument(name)
+    return math.sqrt(inst.noise ** 2 + inst.noise_density ** 2 * fs / 2
+                     + (inst.relative_noise * float(np.sqrt(np.mean(x ** 2)))) ** 2)
+
+
+def _designed_runs(scenario: Scenario, runs) -> tuple[list[RunData], dict]:
+    """Noise-free linear-model runs at the sensor rate, and the noise of every channel."""
+    s = scenario.structure
+    d = s.storeys
+    fs = scenario.sensors.sample_rate or scenario.sample_rate
+    n = int(round(scenario.duration * fs)) + 1
+    t = np.arange(n) / fs
+    zdd = ground_motion_of(scenario).acceleration(t)
+    groups = [g for g in scenario.sensors.groups if g in ("a", "q", "v")]
+    out, sigma = [], {}
+    for k, run in enumerate(runs):
+        dm = np.asarray(run.added_mass, float)
+        model = discretize(s.mass_matrix() + np.diag(dm), s.damping_matrix(dm), s.stiffness_matrix(), 1 / fs)
+        y = outputs(model, simulate_linear(model, zdd))
+        names = ["zdd"] + [f"{g}{i + 1}" for g in groups for i in range(d)]
+        values = np.column_stack([zdd] + [y[g] for g in groups])
+        rd = RunData(run.name, dm, t, tuple(names), values)
+        out.append(rd)
+        for j, name in enumerate(names):
+            sig = _noise_sigma(scenario.sensors, name, values[:, j], fs)
+            sigma.setdefault(run.name, {})[name] = sig
+    return out, sigma
+
+
+def _run_information(scenario: Scenario, run: Run, layout: Layout, theta: np.ndarray, f_max: float,
+                     cache: dict | None) -> np.ndarray:
+    key = (id(scenario), tuple(run.added_mass))
+    if cache is not None and key in cache:
+        return cache[key]
+    data, sigma = _designed_runs(scenario, [run])
+    info = fisher_information(layout, data, theta, sigma[run.name], f_max=f_max)
+    if cache is not None:
+        cache[key] = info
+    return info
+
+
+def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache: dict | None = None) -> Bound:
+    """The CRLB of ``scenario``'s experiment (or of ``runs`` under its excitation).
+
+    The sensor noise comes from the scenario's ``[sensors]``; a scenario with
+    ideal sensors has no finite bound and is refused.  Runs are independent,
+    so their Fisher informations add.
+    """
+    runs = tuple(runs) if runs is not None else scenario.runs
+    if scenario.sensors.ideal:
+        raise ScenarioError(f"{scenario.source}: [sensors] are ideal (noise-free): the Cramér-Rao bound is 0; "
+                            f"give the instruments' noise to plan an experiment")
+    s = scenario.structure
+    layout = Layout(s.storeys, mass)
+    theta = layout.pack(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix(), s.rayleigh_mu)
+    from .analytic import modal_properties
+    f_top = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
+    info = sum(_run_information(scenario, run, layout, theta, 2.0 * f_top, _cache) for run in runs)
+    try:
+        cov = np.linalg.inv(info)
+    except np.linalg.LinAlgError:
+        raise IdentificationError(f"{scenario.source}: the designed runs do not identify the unknowns "
+                                  f"(singular Fisher information)") from None
+    std = np.sqrt(np.clip(np.diag(cov), 0, None))
+    rel = np.empty_like(std)
+    M, C, K, mu = layout.unpack(theta)
+    for idx, X in ((layout.m, M), (layout.c, C), (layout.k, K)):
+        big = float(np.max(np.abs(X)))
+        for i in range(s.storeys):
+            for j in range(s.storeys):
+                if layout.mass == "diagonal" and X is M and i != j:
+                    continue
+                p = idx[i, j]
+                rel[p] = std[p] / (abs(X[i, j]) if X[i, j] != 0 else big)
+    rel[layout.mu] = std[layout.mu] / abs(mu) if mu else std[layout.mu]
+    return Bound(parameter_names(layout), theta, std, rel, cov)
+
+
+@dataclass(frozen=True)
+class Design:
+    """One candidate design and its bound."""
+
+    label: str
+    excitation: str
+    runs: tuple[Run, ...]
+    bound: Bound
+
+    @property
+    def added_mass_total(self) -> float:
+        return float(sum(np.sum(r.added_mass) for r in self.runs))
+
+
+def _patterns(masses: np.ndarray) -> dict[str, np.ndarray]:
+    d = masses.size
+    out = {}
+    for f in (0.05, 0.1, 0.2):
+        out[f"{int(f * 100)} % of every floor"] = f * masses
+    top = np.zeros(d)
+    top[-1] = 0.1 * masses[-1]
+    out["10 % on the top floor"] = top
+    alt = np.where(np.arange(d) % 2 == 0, 0.1 * masses, 0.0)
+    out["10 % on floors 1, 3, ..."] = alt
+    return out
+
+
+def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tuple[list[Design], Design | None]:
+    """Evaluate candidate designs; return all and the recommended one.
+
+    Candidates: the scenario's excitation and a band-limited noise of the
+    same RMS table acceleration covering every mode; a reference run plus
+    1..``max_runs - 1`` runs of each added-mass pattern (scaled 1x, 2x, ...
+    for repeated runs).  Recommended: the design meeting ``target`` (worst
+    relative CRLB std over every parameter, ``mu`` included) with the fewest
+    runs, then the least added mass.
+    """
+    from .analytic import modal_properties
+    s = scenario.structure
+    masses = np.asarray(s.masses)
+    f = modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency
+    fs = scenario.sample_rate
+    t = np.arange(scenario.n_samples) / fs
+    rms = float(np.sqrt(np.mean(ground_motion_of(scenario).acceleration(t) ** 2)))
+    noise = BandLimitedNoise(rms=rms, band=(max(0.5 * f.min(), 0.05), min(1.5 * f.max(), 0.4 * fs)),
+                             seed=scenario.seed)
+    excitations = {"scenario": scenario,
+                   f"noise {noise.band[0]:.2g}-{noise.band[1]:.2g} Hz": replace(scenario, excitation=noise)}
+    designs = []
+    cache: dict = {}
+    reference = Run("reference", tuple(np.zeros(s.storeys)))
+    for ex_label, sc in excitations.items():
+        for label, pattern in _patterns(masses).items():
+            for extra in range(1, max_runs):
+                runs = (reference,) + tuple(Run(f"added{k + 1}", tuple((k + 1) * pattern)) for k in range(extra))
+                bound = cramer_rao(sc, runs, _cache=cache)
+                designs.append(Design(f"{extra + 1} runs, {label}", ex_label, runs, bound))
+    meeting = [d for d in designs if d.bound.worst[1] <= target]
+    best = min(meeting, key=lambda d: (len(d.runs), d.added_mass_total)) if meeting else None
+    return designs, best

@@ -8,12 +8,12 @@ compared as well.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
 from .analytic import Modes, modal_properties
-from .identify import Identification
+from .identify import Identification, damping_models
 from .scenario import Structure
 
 __all__ = ["Entry", "Comparison", "analytic_parameters", "compare"]
@@ -94,6 +94,11 @@ class Comparison:
         for k in range(len(ma.frequency)):
             lines.append(f"{k + 1:<5} {mi.frequency[k]:>11.5f} {ma.frequency[k]:>11.5f} "
                          f"{mi.damping_ratio[k]:>10.5f} {ma.damping_ratio[k]:>10.5f}")
+        lines += ["", f"{'damping model':<14} {'misfit':>9} {'chi2/dof':>10} {'p-value':>9}  coefficients"]
+        for fit in damping_models(r):
+            ratio = fit.chi2 / fit.dof if fit.dof else float("nan")
+            coef = ", ".join(f"{k} = {v:.4g}" for k, v in fit.coefficients.items())
+            lines.append(f"{fit.model:<14} {fit.misfit:>9.2e} {ratio:>10.3g} {fit.p_value:>9.3g}  {coef}")
         lines += ["", f"largest relative error: {self.max_rel_error:.2e}"]
         return "\n".join(lines)
 
@@ -111,6 +116,7 @@ class Comparison:
         if any(e.std is not None for e in self.entries):
             out["z_score"] = {e.name: e.z_score for e in self.entries}
         out["max_rel_error"] = self.max_rel_error
+        out["damping_models"] = [asdict(f) for f in damping_models(self.identification)]
         return out
 
 

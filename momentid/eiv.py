@@ -123,8 +123,11 @@ def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, flo
             raise IdentificationError(
                 f"run {run.name!r}: no noise-only band between {lo:g} and {hi:g} Hz to estimate the sensor "
                 f"noise: expected a sample rate well above the structure's band (raise it or give the noise)")
-        s_u = float(_noise_level(U[:, None], band)[0])
-        s_y = _noise_level(Y, band)
+        # A Hann window keeps the leakage of a record that does not end at rest out of the noise band.
+        w = np.hanning(n)
+        gain = np.sqrt(np.sum(w ** 2))
+        s_u = float(_noise_level(np.fft.rfft(u * w)[:, None] / gain, band)[0])
+        s_y = _noise_level(np.fft.rfft(y * w[:, None], axis=0) / gain, band)
     else:
         s_u = float(sigma["zdd"])
         s_y = np.array([sigma[f"{g}{i + 1}"] for g in groups for i in range(d)], float)
@@ -220,6 +223,30 @@ def _jacobian(problem, theta, scale, base=None):
     return J
 
 
+def _rescaled_start(layout, problem, theta0):
+    """Best overall scale of M, C, K for the start.
+
+    Noise biases the equation-form start mostly as a common scale factor
+    (the scale comes only from the small added-mass terms), and the EIV cost
+    can have a local minimum near such a start: try scales first.
+    """
+    def scaled(f):
+        t = theta0 * f
+        t[layout.mu] = theta0[layout.mu]
+        return t
+
+    factors = np.geomspace(0.5, 3.0, 19)
+    costs = []
+    for f in factors:
+        try:
+            r = problem.residual(scaled(f))
+            costs.append(float(r @ r))
+        except (IdentificationError, np.linalg.LinAlgError, ValueError):
+            costs.append(np.inf)
+    best = int(np.argmin(costs))
+    return scaled(factors[best]) if np.isfinite(costs[best]) else theta0
+
+
 def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
             max_nfev: int = 60) -> EivFit:
     """Refine ``theta0`` by the errors-in-variables ML over ``runs``.
@@ -239,7 +266,7 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
     """
     spectra_list = [spectra(r, layout.d, f_max, sigma=sigma) for r in runs]
     problem = _Problem(layout, spectra_list)
-    theta0 = np.asarray(theta0, float)
+    theta0 = _rescaled_start(layout, problem, np.asarray(theta0, float))
     scale = _scales(layout, theta0)
     result = scipy.optimize.least_squares(
         lambda delta: problem.residual(theta0 + scale * delta), np.zeros_like(theta0),

@@ -463,7 +463,13 @@ def _equation_form(experiment, selected, layout, eq_name, times, band, names, no
     if eq_name == "equation":
         for run in selected:
             s = _prepared(run, d, band)
-            idx = _sample_index(run, times)
+            if s["a"].shape[0] == run.n_samples:
+                idx = _sample_index(run, times)
+            elif times is None:
+                idx = np.arange(s["a"].shape[0])   # weak form: one equation per bump position
+            else:
+                raise IdentificationError(f"times = {list(times)}: chosen instants need measured displacements "
+                                          f"(run {run.name!r} has accelerations only)")
             dm = run.added_mass
             a, v, q = s["a"][idx], s["v"][idx], s["q"][idx]
             acc.add(a, v, q, v * dm, -a * dm)

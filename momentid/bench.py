@@ -223,6 +223,14 @@ def _same_computation(scenario, rig_, experiment) -> float | None:
     return worst
 
 
+def _cpu_seconds() -> float:
+    """CPU time of this process and its finished children (s)."""
+    import resource
+
+    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
+
+
 def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
     from .simulate import simulate
 
@@ -230,9 +238,13 @@ def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
     steps = raw.n_steps * len(scenario.runs)
     last = {}
 
+    cpu: dict[int, float] = {}
+
     def ours(w):
         def fn():
+            c0 = _cpu_seconds()
             last[w] = simulate(scenario, workers=w)
+            cpu[w] = min(cpu.get(w, np.inf), _cpu_seconds() - c0)
         return fn
 
     fns = {"momentid": ours(workers), "rollout_cb_1": lambda: raw.rollout(1, True),
@@ -267,8 +279,10 @@ def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
         rows.append(Row("simulate:1core", t["momentid_1"], t["rollout_cb_1"],
                         "simulate(workers=1)", "mujoco.rollout with the same callback, 1 thread",
                         note=f"per-core overhead; parallel speed-up {t['momentid_1'] / t['momentid']:.2f}x "
-                             f"on {workers} workers",
-                        extra={"parallel_speedup": t["momentid_1"] / t["momentid"]}))
+                             f"on {workers} workers, CPU time {cpu[workers]:.2f} s vs {cpu[1]:.2f} s serial",
+                        extra={"parallel_speedup": t["momentid_1"] / t["momentid"],
+                               "cpu_s_parallel": cpu[workers], "cpu_s_serial": cpu[1],
+                               "cpu_per_wall_parallel": cpu[workers] / t["momentid"]}))
     return rows
 
 

@@ -166,6 +166,19 @@ def test_auto_exaggeration_is_a_nice_factor(rec):
     assert 0.08 <= x * peak / sum(e.structure.storey_heights) <= 0.2
 
 
+def test_shows_what_it_can_without_identification_or_structure(rec, tmp_path):
+    e = rec["experiment"]
+    one = dataclasses.replace(e, runs=e.runs[:1])
+    entities = {c.entity_path for c in
+                rerun_chunk.RrdReader(visualize.write_rrd(one, tmp_path / "one.rrd")).store().stream().to_chunks()}
+    assert "/runs/reference/sensors/a1" in entities and "/runs/reference/rig/base/floor3" in entities
+    assert not {"/identification/modes", "/identification/rel_error", "/runs/reference/residual/r1"} & entities
+    assert "not identified" in visualize._experiment_markdown(visualize.prepare(one))
+    scene = visualize.prepare(dataclasses.replace(e, structure=None))
+    assert scene.result is not None and scene.comparison is None and len(scene.residuals) == 3
+    assert "n/a" in visualize._modes_markdown(scene) and "no analytic comparison" in " ".join(scene.notes)
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

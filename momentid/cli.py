@@ -106,6 +106,15 @@ def _cmd_identify(args) -> int:
     return _report(experiment, args)
 
 
+def _cmd_import(args) -> int:
+    from .importer import import_folder, summary, write_import
+
+    experiment = import_folder(args.folder)
+    out = write_import(experiment, _output_path(args.output, Path(args.folder).resolve().name))
+    print(summary(experiment, out))
+    return 0
+
+
 def _cmd_view(args) -> int:
     from .visualize import view
 
@@ -243,6 +252,16 @@ def build_parser() -> argparse.ArgumentParser:
                                      "docs/recording-format.md)")
     _add_identify_options(p)
     p.set_defaults(func=_cmd_identify)
+
+    p = sub.add_parser("import", help="turn a lab's folder of CSV files into a recording",
+                       description="Write DIR (experiment.toml: the nominal [structure] and [[runs]] "
+                                   "with file and added_mass; one CSV per run: t, zdd, a1..ad, optional "
+                                   "q1..qd, v1..vd, SI units; see docs/recording-format.md) as a recording.")
+    p.add_argument("folder", metavar="DIR", help="folder with experiment.toml and the runs' CSV files")
+    p.add_argument("-o", "--output", metavar="PATH",
+                   help="output folder (the recording is PATH/<folder name>.mcap) or a .mcap file "
+                        "(default: out/)")
+    p.set_defaults(func=_cmd_import)
 
     p = sub.add_parser("view", help="inspect a recording in the rerun viewer",
                        description="Show a recording in the rerun viewer, ready to read: per run a 3D "

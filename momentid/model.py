@@ -22,7 +22,8 @@ import mujoco
 from .errors import ModelError
 from .scenario import Structure
 
-__all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout"]
+__all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
+           "drifts", "FRICTION_SMOOTHING"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -35,8 +36,11 @@ def _inertia(mass: float, half: tuple[float, float, float]) -> list[float]:
     return [mass / 12 * (y * y + z * z), mass / 12 * (x * x + z * z), mass / 12 * (x * x + y * y)]
 
 
+GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
+
+
 def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
-               name: str = "shear_building") -> mujoco.MjSpec:
+               name: str = "shear_building", mechanisms=()) -> mujoco.MjSpec:
     """Build the MJCF specification of the rig for one run.
 
     Parameters
@@ -47,6 +51,14 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         Masses bolted to floors 1..d in this run (kg); zeros by default.
     timestep : float
         Integrator step (s); the integrator is RK4.
+    mechanisms : sequence of Mechanism
+        Physics beyond the linear model (a scenario's ``[truth]``).  The linear
+        ones are built into the MJCF: ``extra_damper`` (storey tendon
+        damping), ``p_delta`` (storey tendon stiffness reduced by ``factor`` x
+        g x (mass above) / height), ``flexible_added_mass`` (the added mass on
+        its own slide joint with a spring and damper).  The nonlinear storey
+        forces (``coulomb_friction``, ``cubic_stiffness``) are applied by the
+        simulator (:func:`storey_forces`).
 
     Returns
     -------
@@ -94,6 +106,12 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
             extra = floor.add_body(name=f"added{i + 1}", pos=[0, 0, _SLAB[2] + 0.02])
             extra.mass = dm[i]
             extra.inertia = _inertia(dm[i], (0.05, 0.05, 0.02))
+            for mech in mechanisms:
+                if mech.type == "flexible_added_mass" and mech.location == i + 1:
+                    w = 2 * np.pi * mech.get("frequency")
+                    j = extra.add_joint(name=f"added{i + 1}_x", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
+                    j.stiffness = [dm[i] * w * w, 0.0, 0.0]
+                    j.damping = [2 * mech.get("damping_ratio") * dm[i] * w, 0.0, 0.0]
             extra.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
                            rgba=[0.2, 0.4, 0.8, 1], contype=0, conaffinity=0)
 
@@ -103,8 +121,17 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         tendon.wrap_joint(f"q{i + 1}", 1.0)
         if i > 0:
             tendon.wrap_joint(f"q{i}", -1.0)
+        c_i = kappa * k_i
+        for mech in mechanisms:
+            if mech.location != i + 1:
+                continue
+            if mech.type == "extra_damper":
+                c_i += mech.get("c")
+            elif mech.type == "p_delta":
+                above = sum(structure.masses[j] + dm[j] for j in range(i, d))
+                k_i -= mech.get("factor") * GRAVITY * above / structure.storey_heights[i]
         tendon.stiffness = [k_i, 0.0, 0.0]
-        tendon.damping = [kappa * k_i, 0.0, 0.0]
+        tendon.damping = [c_i, 0.0, 0.0]
         tendon.springlength = [0.0, 0.0]
 
     spec.add_actuator(name="table", target="base_x", trntype=mujoco.mjtTrn.mjTRN_JOINT,
@@ -126,6 +153,47 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     for i in range(d):
         sensor(vel, f"v{i + 1}", f"q{i + 1}", joint)
     return spec
+
+
+#: Velocity scale (m/s) of the smoothed Coulomb law ``F tanh(v / FRICTION_SMOOTHING)``.
+FRICTION_SMOOTHING = 5e-4
+
+
+def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray) -> np.ndarray:
+    """Nonlinear storey shear forces (N) of ``coulomb_friction`` and ``cubic_stiffness``.
+
+    Parameters
+    ----------
+    drift, drift_velocity : ndarray, shape (..., d)
+        Storey drifts ``q_i - q_(i-1)`` (m) and their rates (m/s).
+
+    Returns
+    -------
+    ndarray, shape (..., d)
+        The force each storey exerts against its drift (positive resists).
+    """
+    f = np.zeros(np.broadcast(drift, drift_velocity).shape)
+    for mech in mechanisms:
+        s = mech.location - 1
+        if mech.type == "coulomb_friction":
+            f[..., s] += mech.get("force") * np.tanh(drift_velocity[..., s] / FRICTION_SMOOTHING)
+        elif mech.type == "cubic_stiffness":
+            f[..., s] += mech.get("k3") * drift[..., s] ** 3
+    return f
+
+
+def storey_to_floor(f: np.ndarray) -> np.ndarray:
+    """Generalised floor forces from storey forces resisting the drifts: shape (..., d)."""
+    out = -f.copy()
+    out[..., :-1] += f[..., 1:]
+    return out
+
+
+def drifts(q: np.ndarray) -> np.ndarray:
+    """Storey drifts ``q_i - q_(i-1)`` from floor displacements (..., d)."""
+    out = q.copy()
+    out[..., 1:] -= q[..., :-1]
+    return out
 
 
 def compile_model(spec: mujoco.MjSpec) -> mujoco.MjModel:

@@ -158,6 +158,29 @@ class BandLimitedNoise:
 Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise]
 
 
+#: Physical mechanisms a rig may carry beyond the linear Rayleigh-damped shear model,
+#: with the parameter names each takes (SI units).
+MECHANISMS = {
+    "coulomb_friction": ("storey", ("force",)),            # N, opposes the storey drift velocity
+    "cubic_stiffness": ("storey", ("k3",)),                # N/m^3, + hardening / - softening
+    "extra_damper": ("storey", ("c",)),                    # N*s/m, a viscous damper across the storey
+    "p_delta": ("storey", ("factor",)),                    # 1 = full gravity P-Delta of the weight above
+    "flexible_added_mass": ("floor", ("frequency", "damping_ratio")),  # Hz, 1: added mass on a spring
+}
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """One piece of physics beyond the linear model, at a storey or floor (1 = lowest)."""
+
+    type: str
+    location: int
+    parameters: tuple[tuple[str, float], ...]
+
+    def get(self, name: str) -> float:
+        return dict(self.parameters)[name]
+
+
 @dataclass(frozen=True)
 class Tracking:
     """Run-to-run table error: the servo never repeats a motion exactly.
@@ -311,6 +334,7 @@ class Scenario:
     runs: tuple[Run, ...]
     sensors: Sensors = field(default_factory=Sensors)
     tracking: Tracking | None = None
+    truth: tuple[Mechanism, ...] = ()
     source: str = "<string>"
     text: str = ""
 
@@ -325,7 +349,11 @@ class Scenario:
         return 1.0 / (self.sample_rate * self.substeps)
 
     def summary(self) -> dict:
-        """A JSON-friendly description (what recordings store as metadata)."""
+        """A JSON-friendly description (what recordings store as metadata).
+
+        Hidden physics (``[truth]``) and per-channel sensor faults are left
+        out: a recording carries no trace of them.
+        """
         exc = asdict(self.excitation)
         exc["type"] = type(self.excitation).__name__
         if "path" in exc:
@@ -338,7 +366,7 @@ class Scenario:
             "seed": self.seed,
             "substeps": self.substeps,
             "excitation": json.loads(json.dumps(exc, default=list)),
-            "sensors": self.sensors.to_dict(),
+            "sensors": {k: v for k, v in self.sensors.to_dict().items() if k != "faults"},
             "tracking": asdict(self.tracking) if self.tracking else None,
         }
 
@@ -394,6 +422,7 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
         raise ScenarioError(f"{source}: key 'runs.name' = {dup!r}: expected unique run names")
 
     sensors = _parse_sensors(top.table("sensors", {}), structure.storeys, sample_rate)
+    truth = _parse_truth(top.table("truth", {}), structure.storeys)
     sim = top.table("simulation", {})
     substeps = sim.integer("substeps", 1, minimum=1)
     sim.finish()
@@ -408,8 +437,41 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
     return Scenario(
         name=name, description=description, duration=duration, sample_rate=sample_rate,
         seed=seed, substeps=substeps, structure=structure, excitation=excitation,
-        runs=tuple(runs), sensors=sensors, tracking=tracking, source=str(source), text=text,
+        runs=tuple(runs), sensors=sensors, tracking=tracking, truth=truth, source=str(source),
+        text=text,
     )
+
+
+def _parse_truth(tab: Table, storeys: int) -> tuple[Mechanism, ...]:
+    if not tab.data:
+        return ()
+    out = []
+    for m in tab.tables("mechanisms"):
+        kind = m.string("type", choices=tuple(MECHANISMS))
+        where, names = MECHANISMS[kind]
+        loc = m.integer(where, minimum=1)
+        if loc > storeys:
+            raise m.error(where, f"a {where} number in 1..{storeys}")
+        params = tuple((n, m.number(n)) for n in names)
+        if kind == "flexible_added_mass" and not (params[0][1] > 0 and params[1][1] >= 0):
+            raise m.error("frequency", "a positive frequency (Hz) and a damping_ratio >= 0")
+        m.finish()
+        out.append(Mechanism(kind, loc, params))
+    tab.finish()
+    return tuple(out)
+
+
+def public_text(text: str) -> str:
+    """Scenario text without what a lab would not know: ``[truth]`` and per-channel sensor faults."""
+    out, hidden = [], False
+    for line in text.splitlines():
+        head = line.strip()
+        if head.startswith("["):
+            name = head.strip("[] ").split("#")[0].strip("[] ")
+            hidden = name == "truth" or name.startswith("truth.") or name.startswith("sensors.channel")
+        if not hidden:
+            out.append(line)
+    return "\n".join(out) + "\n"
 
 
 def _parse_instrument(tab: Table | None) -> Instrument:

@@ -26,7 +26,7 @@ from . import model as rig
 from .data import Experiment, RunData
 from .errors import SimulationError
 from .excitation import GroundMotion, ground_motion
-from .scenario import BandLimitedNoise, Run, Scenario, Sensors
+from .scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
 from .sensors import measure
 
 __all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of"]
@@ -52,8 +52,11 @@ class _TableDrive:
     """Control callback that makes the base joint follow ``z''(t)`` exactly."""
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, motion: GroundMotion,
-                 n_steps: int):
+                 n_steps: int, mechanisms=()):
         h = model.opt.timestep
+        self.nonlinear = tuple(m for m in mechanisms if m.type in ("coulomb_friction", "cubic_stiffness"))
+        d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
+        self.floor_dofs = np.array([model.jnt_dofadr[model.joint(f"q{i + 1}").id] for i in range(d)])
         self.per_half_step = 2.0 / h
         stage_times = np.arange(2 * n_steps + 3) * (h / 2)
         self.zdd = np.ascontiguousarray(motion.acceleration(stage_times), dtype=float)
@@ -66,7 +69,13 @@ class _TableDrive:
 
     def __call__(self, model, data) -> None:
         k = int(data.time * self.per_half_step + 0.5)
-        data.ctrl[0] = self.zdd[k] * self.scale - self.row @ (data.qfrc_passive - data.qfrc_bias)
+        if self.nonlinear:   # storey forces the MJCF cannot express, applied to the floor joints
+            q = data.qpos[self.floor_dofs]
+            v = data.qvel[self.floor_dofs]
+            f = rig.storey_forces(self.nonlinear, rig.drifts(q), rig.drifts(v))
+            data.qfrc_applied[self.floor_dofs] = rig.storey_to_floor(f)
+        data.ctrl[0] = self.zdd[k] * self.scale - self.row @ (data.qfrc_passive - data.qfrc_bias
+                                                              + data.qfrc_applied)
 
 
 def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = None,
@@ -95,11 +104,11 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     if scenario.tracking is not None:
         motion = _with_tracking_error(scenario, run, motion)
     spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
-                          name=f"{scenario.name}_{run.name}")
+                          name=f"{scenario.name}_{run.name}", mechanisms=scenario.truth)
     model = rig.compile_model(spec)
     data = mujoco.MjData(model)
     n, sub = scenario.n_samples, scenario.substeps
-    drive = _TableDrive(model, data, motion, n * sub)
+    drive = _TableDrive(model, data, motion, n * sub, scenario.truth)
     mujoco.mj_resetData(model, data)
     data.qpos[0] = float(motion.displacement(0.0))
     data.qvel[0] = float(motion.velocity(0.0))
@@ -121,6 +130,9 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     if progress is not None:
         progress(n % report_every)
     _check_run(model, data, out, scenario, run)
+    if scenario.truth:   # the recording must not reveal the hidden physics: attach the nominal rig
+        spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
+                              name=f"{scenario.name}_{run.name}")
     spec.compiler.saveinertial = True
     true = RunData(
         name=run.name,
@@ -302,7 +314,7 @@ def simulate(scenario: Scenario, *, progress: bool = False,
         runs=tuple(runs),
         structure=scenario.structure,
         scenario=scenario.summary(),
-        scenario_text=scenario.text,
+        scenario_text=public_text(scenario.text),
         source="<simulation>",
     )
 
@@ -320,7 +332,7 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False,
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with RecordingWriter(path, structure=scenario.structure, scenario=scenario.summary(),
-                         scenario_text=scenario.text) as writer:
+                         scenario_text=public_text(scenario.text)) as writer:
         experiment = simulate(
             scenario, progress=progress, workers=workers,
             on_run=lambda r: writer.write_run(r, model_xml=r.meta.get("model_xml")),

@@ -63,7 +63,10 @@ def _one(job):
     truth = _truth(n_runs)
     sens = _sensors(kind, noise)
     runs = tuple(measure(r, sens, seed=seed, run_index=i) for i, r in enumerate(truth.runs))
-    result = mi.identify(Experiment(runs=runs, structure=truth.structure))
+    try:
+        result = mi.identify(Experiment(runs=runs, structure=truth.structure))
+    except mi.MomentidError as exc:   # counted as a failure, not hidden
+        return None, None, f"failed: {exc}"
     return result.theta, np.sqrt(np.diag(result.covariance)), result.estimator
 
 
@@ -79,11 +82,13 @@ def run(seeds: int, noises, kinds, run_counts, workers: int | None = None) -> li
                 for noise in noises:
                     jobs = [(kind, noise, n_runs, seed) for seed in range(seeds if noise else 1)]
                     out = list(pool.map(_one, jobs))
+                    failed = sum(o[0] is None for o in out)
+                    out = [o for o in out if o[0] is not None]
                     est = np.array([o[0] for o in out])
                     reported = np.array([o[1] for o in out]).mean(axis=0)
                     bias = est.mean(axis=0) - truth
                     big = np.array([np.max(np.abs(truth)) if v == 0 else abs(v) for v in truth])
-                    row = {"sensor_set": kind, "noise": noise, "runs": n_runs, "seeds": len(jobs),
+                    row = {"sensor_set": kind, "noise": noise, "runs": n_runs, "seeds": len(jobs), "failed": failed,
                            "estimator": out[0][2], "max_rel_error": float(np.max(np.abs(est - truth) / big))}
                     if noise:
                         std = est.std(axis=0, ddof=1)
@@ -105,15 +110,17 @@ def run(seeds: int, noises, kinds, run_counts, workers: int | None = None) -> li
 
 def _line(r: dict) -> str:
     if not r["noise"]:
-        return (f"| {r['sensor_set']} | {r['runs']} | 0 % | {r['estimator']} | {r['max_rel_error']:.1e} | - | - | - | - |")
+        return (f"| {r['sensor_set']} | {r['runs']} | 0 % | {r['estimator']} | {r['max_rel_error']:.1e} | - | - | - | - "
+                f"| - | {r['failed']} |")
     ok = r["std_over_crlb_max"] <= 1.5 and r["bias_over_std_max"] < 1.0
     return (f"| {r['sensor_set']} | {r['runs']} | {100 * r['noise']:g} % | {r['estimator']} | "
             f"{r['max_rel_error']:.1e} | {r['worst_rel_std']:.2e} | {r['worst_rel_crlb']:.2e} | "
-            f"{r['std_over_crlb_max']:.2f} | {r['bias_over_std_max']:.2f} |" + (" yes |" if ok else " no |"))
+            f"{r['std_over_crlb_max']:.2f} | {r['bias_over_std_max']:.2f} |" + (" yes |" if ok else " no |")
+            + f" {r['failed']} |")
 
 
 HEADER = ("| sensor set | runs | noise | estimator | worst rel. error | worst rel. std | worst rel. CRLB | "
-          "max std/CRLB | max abs(bias)/std | target met |\n|---|---|---|---|---|---|---|---|---|---|")
+          "max std/CRLB | max abs(bias)/std | target met | failed fits |\n|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def plot(rows: list[dict], path: Path) -> None:

@@ -22,6 +22,9 @@ _EPILOG = """examples:
   momentid identify out/paper_harmonic.mcap           # identification from the recording alone
   momentid identify out/paper_harmonic.mcap --json    # machine-readable result
   momentid view out/paper_harmonic.mcap               # the rerun viewer (--save out.rrd: a file)
+  momentid plan scenarios/lab_noisy.toml              # runs and masses for a target accuracy (CRLB)
+  momentid import lab_data/ -o lab.mcap               # a real rig's CSV files -> recording
+  momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
 """
 
 
@@ -154,6 +157,25 @@ def _cmd_sweep(args) -> int:
     return 0
 
 
+def _cmd_diagnose(args) -> int:
+    from .discrepancy import diagnose, write_report
+    from .recording import read_recording
+
+    experiment = read_recording(args.recording)
+    diag = diagnose(experiment)
+    out = Path(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
+    write_report(diag, out)
+    for note in experiment.notes:
+        print(f"note: {note}", file=sys.stderr)
+    if args.json:
+        print(json.dumps(_json_safe(diag.to_dict()), indent=2))
+    else:
+        print(diag.summary)
+        print(f"\nreport written to {out}/ (report.json, summary.txt"
+              + (", model_augmented.xml, replay.png" if diag.augmented_xml else "") + ")")
+    return 0
+
+
 def _cmd_plan(args) -> int:
     from .design import cramer_rao, plan
     from .scenario import load_scenario
@@ -279,6 +301,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--result", metavar="JSON",
                    help="show this result of `momentid identify --json` instead of identifying again")
     p.set_defaults(func=_cmd_view)
+
+    p = sub.add_parser("diagnose", help="locate a model/recording mismatch and name the missing physics",
+                       description="Compare the linear shear model (identified from the recording and the nominal "
+                                   "one stored in it) with the recordings, locate the mismatch, test candidate "
+                                   "mechanisms (Coulomb friction, cubic stiffness, extra damper, P-Delta, flexible "
+                                   "added mass, sensor delay/gain/bias), add the best one to the MuJoCo model and "
+                                   "replay a held-out run before and after.")
+    p.add_argument("recording", help="MCAP recording (momentid run or momentid import)")
+    p.add_argument("-o", "--output", metavar="DIR",
+                   help="report folder (default: out/<recording>_diagnosis)")
+    p.add_argument("--json", action="store_true", help="print report.json to stdout")
+    p.set_defaults(func=_cmd_diagnose)
 
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",
                        description="Evaluate the Cramér-Rao lower bound of the scenario's experiment and of "

@@ -42,7 +42,7 @@ import scipy.optimize
 
 from .data import RunData
 from .errors import IdentificationError
-from .linear import discretize, frequency_response, output_matrix
+from .linear import discretize, force_response, frequency_response, output_matrix
 
 __all__ = ["EivFit", "fit_eiv", "Spectra", "spectra", "fisher_information", "output_groups"]
 
@@ -86,6 +86,8 @@ class Spectra:
     sigma_u: float
     sigma_y: np.ndarray
     freq: np.ndarray
+    forces: np.ndarray | None = None     # (d, m) floor directions of extra force signals
+    F: np.ndarray | None = None          # (bins, m) DFTs of the extra force signals
 
 
 def _noise_level(X: np.ndarray, band: slice) -> np.ndarray:
@@ -140,12 +142,15 @@ def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, flo
 
 
 def _whitened_residual(layout, theta, sp: Spectra, *, noise=True):
-    M, C, K, mu = layout.unpack(theta)
+    M, C, K, mu = layout.unpack(theta[:layout.p])
     dm = np.diag(sp.added_mass)
     model = discretize(M + dm, C + mu * dm, K, sp.h)
     H = output_matrix(model, sp.groups)
     G, T = frequency_response(model, H, sp.z)
     e = sp.Y - G * sp.U[:, None]                              # (m, n_out)
+    if sp.F is not None:                                      # extra force signals, coefficients theta[p:]
+        Gf = force_response(M + dm, C + mu * dm, K, sp.h, sp.forces, H, sp.z, model.lam, model.V, sp.groups)
+        e = e - np.einsum("mok,mk->mo", Gf, sp.F * theta[layout.p:][None, :])
     # Whitening by C_k^-1/2, C_k = D + s_u^2 g g^H, D = diag(s_y^2): a rank-one update.
     inv_sd = 1.0 / sp.sigma_y
     gt = G * inv_sd[None, :]                                  # D^-1/2 g
@@ -182,7 +187,14 @@ class _Problem:
         parts = []
         self.n_nuisance = 0
         for sp in self.spectra:
-            r, k = _whitened_residual(self.layout, theta, sp)
+            try:
+                r, k = _whitened_residual(self.layout, theta, sp)
+            except (IdentificationError, np.linalg.LinAlgError, ValueError):
+                # A trial step into a physically impossible model (singular or defective): make it
+                # so costly the optimiser steps back.
+                r, k = np.full(2 * sp.Y.size, 1e6), 0
+            if not np.all(np.isfinite(r)):
+                r = np.full(2 * sp.Y.size, 1e6)
             parts.append(r)
             self.n_nuisance += k
         return np.concatenate(parts)
@@ -204,7 +216,8 @@ class EivFit:
 
 def _scales(layout, theta):
     s = np.ones_like(theta)
-    M, C, K, mu = layout.unpack(theta)
+    M, C, K, mu = layout.unpack(theta[:layout.p])
+    s[layout.p:] = np.maximum(np.abs(theta[layout.p:]), 1e-6 * max(np.max(np.abs(K)), 1e-12))
     s[layout.m_columns] = max(np.max(np.abs(M)), 1e-12)
     s[np.unique(layout.c)] = max(np.max(np.abs(C)), 1e-12)
     s[np.unique(layout.k)] = max(np.max(np.abs(K)), 1e-12)
@@ -223,6 +236,15 @@ def _jacobian(problem, theta, scale, base=None):
     return J
 
 
+def _with_forces(sp: Spectra, run: RunData, force) -> Spectra:
+    directions, signals = force
+    n = run.n_samples
+    F = np.fft.rfft(np.asarray(signals, float), axis=0) / np.sqrt(n)
+    k = np.rint(np.angle(sp.z) / (2 * np.pi) * n).astype(int) % n
+    from dataclasses import replace as _replace
+    return _replace(sp, forces=np.asarray(directions, float), F=F[k])
+
+
 def _rescaled_start(layout, problem, theta0):
     """Best overall scale of M, C, K for the start.
 
@@ -233,9 +255,10 @@ def _rescaled_start(layout, problem, theta0):
     def scaled(f):
         t = theta0 * f
         t[layout.mu] = theta0[layout.mu]
+        t[layout.p:] = theta0[layout.p:] * f
         return t
 
-    factors = np.geomspace(0.5, 3.0, 19)
+    factors = np.geomspace(0.3, 30.0, 41)
     costs = []
     for f in factors:
         try:
@@ -248,7 +271,7 @@ def _rescaled_start(layout, problem, theta0):
 
 
 def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
-            max_nfev: int = 60) -> EivFit:
+            max_nfev: int = 60, forces=None) -> EivFit:
     """Refine ``theta0`` by the errors-in-variables ML over ``runs``.
 
     Parameters
@@ -263,8 +286,13 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
         Upper edge (Hz) of the band fitted.
     sigma : dict, optional
         Known noise RMS per channel; estimated from the noise-only band otherwise.
+    forces : list of (directions (d, m), signals (n, m)) per run, optional
+        Extra generalised floor forces of known shape (a mechanism's
+        signature); their m coefficients are appended to ``theta``.
     """
     spectra_list = [spectra(r, layout.d, f_max, sigma=sigma) for r in runs]
+    if forces is not None:
+        spectra_list = [_with_forces(sp, r, f) for sp, r, f in zip(spectra_list, runs, forces)]
     problem = _Problem(layout, spectra_list)
     theta0 = _rescaled_start(layout, problem, np.asarray(theta0, float))
     scale = _scales(layout, theta0)

@@ -341,3 +341,58 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False,
         runs=experiment.runs, structure=experiment.structure, scenario=experiment.scenario,
         scenario_text=experiment.scenario_text, source=str(path),
     )
+
+
+class _SampledMotion:
+    """A table motion known only by its acceleration samples (linear between them)."""
+
+    def __init__(self, t: np.ndarray, zdd: np.ndarray):
+        self.t, self.zdd = t, zdd
+
+    def acceleration(self, t):
+        return np.interp(t, self.t, self.zdd, right=self.zdd[-1])
+
+    def displacement(self, t):
+        return np.zeros_like(np.asarray(t, float))
+
+    def velocity(self, t):
+        return np.zeros_like(np.asarray(t, float))
+
+
+def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """Replay a recorded run's table acceleration through a MuJoCo model.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model (e.g. identified) to replay.
+    mechanisms : sequence of Mechanism
+        Physics added to the linear model (see :func:`momentid.model.build_spec`).
+    run : RunData
+        Supplies the clock, the added masses and (unless ``zdd`` is given) the
+        measured base acceleration ``zdd``.
+
+    Returns
+    -------
+    dict
+        ``'a'``, ``'q'``, ``'v'``: simulated floor channels, each (n, d); the
+        floors start at rest relative to the table.
+    """
+    zdd = run["zdd"] if zdd is None else zdd
+    h = 1.0 / run.sample_rate
+    spec = rig.build_spec(structure, run.added_mass, timestep=h, name="replay", mechanisms=mechanisms)
+    model = rig.compile_model(spec)
+    data = mujoco.MjData(model)
+    n = run.n_samples
+    drive = _TableDrive(model, data, _SampledMotion(run.time - run.time[0], zdd), n, mechanisms)
+    mujoco.mj_resetData(model, data)
+    layout = rig.sensor_layout(model)
+    d = structure.storeys
+    names = [f"{g}{i + 1}" for g in ("a", "q", "v") for i in range(d)]
+    index = np.array([layout[c] for c in names])
+    out = np.empty((n, len(names)))
+    with _control_callback(drive):
+        for k in range(n):
+            mujoco.mj_step(model, data)
+            out[k] = data.sensordata[index]
+    return {g: out[:, i * d:(i + 1) * d] for i, g in enumerate(("a", "q", "v"))}

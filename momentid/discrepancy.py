@@ -1,0 +1,687 @@
+"""When model and recordings disagree: locate the mismatch, name the physics, add it.
+
+Pipeline (:func:`diagnose`):
+
+1. **Linear model** identified from the recordings themselves (``identify``,
+   errors-in-variables for noisy data), beside the nominal model the lab states.
+2. **Residuals** in two domains.  *Equation residual*: the force per floor
+   (and storey shear) the identified linear model leaves unexplained, on
+   band-limited signals, compared with what sensor noise alone leaves
+   (the same propagation applied to synthetic noise of the measured levels).
+   *Replay residual*: each run's measured table acceleration replayed
+   through the model, compared with the recorded floor channels.
+3. **Screening**: every candidate mechanism at every location is a
+   parametrised force signature (or a sensor transformation); its
+   coefficient is fitted by least squares together with the linear
+   confounds the identified model may already have absorbed, on half of the
+   data (alternate time blocks), and scored on the other half by the share of
+   the *excess over noise* it explains.  A linear damper hides in the
+   identified C, so ``extra_damper`` is tested on the identified matrices
+   (the damping-model check) instead.
+4. **Verdict**: ``none`` when residuals sit at the noise level;
+   ``unexplained`` when no candidate explains most of the excess; otherwise the
+   best candidate, whose augmented MuJoCo model is replayed on a held-out run
+   (NRMSE before/after, on band-limited channels).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import scipy.signal
+
+from . import model as rig
+from .analytic import modal_properties, shear_stiffness
+from .data import Experiment, RunData
+from .errors import IdentificationError
+from .identify import damping_models, identify
+from .linear import discretize, outputs, simulate_linear
+from .reconstruct import Prefilter, prepare_run, suggest_band
+from .scenario import Mechanism, Structure
+
+__all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "MECHANISM_IDS"]
+
+MECHANISM_IDS = ("none", "unexplained", "coulomb_friction", "cubic_stiffness", "extra_damper", "p_delta",
+                 "flexible_added_mass", "sensor_delay", "sensor_gain", "sensor_bias")
+#: Residual RMS above this multiple of the noise-only level counts as a mismatch.
+EXCESS = 1.3
+#: A candidate must explain this share of the excess (on held-out blocks) to be named.
+EXPLAINED = 0.5
+_BLOCK_S = 1.0
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One fitted candidate mechanism."""
+
+    mechanism: str
+    location: dict
+    parameters: dict
+    std: dict
+    explained: float          # share of the excess residual explained on held-out blocks
+    domain: str               # "equation" or "replay"
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """Result of :func:`diagnose` (see ``report.json`` for the serialised form)."""
+
+    mechanism: str
+    location: dict
+    parameters: dict
+    std: dict
+    nrmse_before: float
+    nrmse_after: float
+    excess_equation: dict      # per floor: residual RMS / noise-only RMS
+    excess_replay: dict        # per channel: replay NRMSE / noise-only NRMSE
+    candidates: tuple[Candidate, ...]
+    summary: str
+    holdout: str
+    parameter_pattern: dict = field(default_factory=dict)
+    augmented_xml: str = ""
+    curves: dict = field(default_factory=dict, repr=False)
+
+    def to_dict(self) -> dict:
+        return {
+            "mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
+            "std": self.std, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
+            "summary": self.summary, "holdout": self.holdout,
+            "excess_equation": self.excess_equation, "excess_replay": self.excess_replay,
+            "parameter_pattern": self.parameter_pattern,
+            "candidates": [asdict(c) for c in self.candidates],
+        }
+
+
+# ----------------------------------------------------------------------------- helpers
+
+def _noise_sigma(run: RunData) -> dict[str, float]:
+    """White-noise RMS of every channel from the top of its spectrum (Hann window)."""
+    fs = run.sample_rate
+    n = run.n_samples
+    w = np.hanning(n)
+    gain = np.sqrt(np.sum(w ** 2))
+    X = np.fft.rfft(run.values * w[:, None], axis=0) / gain
+    f = np.fft.rfftfreq(n, 1 / fs)
+    band = (f > 0.25 * fs) & (f < 0.45 * fs)
+    level = np.sqrt(np.median(np.abs(X[band]) ** 2, axis=0) / np.log(2))
+    return dict(zip(run.channels, level))
+
+
+def _with_values(run: RunData, values: np.ndarray) -> RunData:
+    return replace(run, values=values)
+
+
+def _signals(run: RunData, d: int, band: Prefilter) -> dict[str, np.ndarray]:
+    s = prepare_run(run, d, band)
+    if "zdd" not in s and run.has("zdd"):
+        s["zdd"] = run["zdd"]
+    return s
+
+
+def _floor_residual(result, s, dm) -> np.ndarray:
+    D = np.diag(dm)
+    return s["a"] @ (result.M + D).T + s["v"] @ (result.C + result.mu * D).T + s["q"] @ result.K.T
+
+
+def _blocks(n: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
+    """Alternate blocks of ``_BLOCK_S`` seconds: (train mask, test mask)."""
+    idx = (np.arange(n) / (fs * _BLOCK_S)).astype(int) % 2
+    return idx == 0, idx == 1
+
+
+def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndarray, train, test,
+         noise_rss_test: float):
+    """LS of ``target`` on signature + confound columns on ``train``; score on ``test``."""
+    X = np.column_stack(columns + confounds)
+    scale = np.linalg.norm(X[train], axis=0)
+    if np.any(scale == 0):
+        return None
+    Xs = X / scale
+    coef, *_ = np.linalg.lstsq(Xs[train], target[train], rcond=None)
+    before = float(np.sum(target[test] ** 2))
+    after = float(np.sum((target[test] - Xs[test] @ coef) ** 2))
+    # Confounds alone: the part of the improvement that needs no mechanism.
+    base_coef, *_ = np.linalg.lstsq(Xs[train][:, len(columns):], target[train], rcond=None) \
+        if confounds else (np.zeros(0),)
+    base = float(np.sum((target[test] - Xs[test][:, len(columns):] @ base_coef) ** 2)) if confounds else before
+    if base <= 1.02 * noise_rss_test:
+        return coef[:len(columns)] / scale[:len(columns)], np.zeros(len(columns)), 0.0   # nothing to explain
+    explained = (base - after) / (base - noise_rss_test)
+    resid = target[train] - Xs[train] @ coef
+    dof = max(int(train.sum()) - X.shape[1], 1)
+    s2 = float(resid @ resid) / dof
+    cov = np.linalg.pinv(Xs[train].T @ Xs[train]) * s2
+    k = len(columns)
+    return coef[:k] / scale[:k], np.sqrt(np.diag(cov)[:k]) / scale[:k], float(explained)
+
+
+# ----------------------------------------------------------------------------- the diagnosis
+
+def _nominal_result(structure: Structure, like):
+    """The nominal model in the shape of an identification result."""
+    return replace(like, M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
+                   mu=structure.rayleigh_mu, kappa=structure.rayleigh_kappa, covariance=None)
+
+
+def _identified_structure(result, nominal: Structure | None) -> Structure:
+    d = result.storeys
+    A = np.stack([shear_stiffness(np.eye(d)[s]) for s in range(d)], axis=-1).reshape(d * d, d)
+    k, *_ = np.linalg.lstsq(A, result.K.ravel(), rcond=None)
+    heights = nominal.storey_heights if nominal else (0.3,) * d
+    base = nominal.base_mass if nominal else 100.0
+    return Structure(masses=tuple(np.diag(result.M)), storey_stiffness=tuple(np.maximum(k, 1e-9)),
+                     storey_heights=tuple(heights), rayleigh_mu=max(result.mu, 0.0),
+                     rayleigh_kappa=max(result.kappa, 0.0), base_mass=base)
+
+
+def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
+    """Find, name and model the physics the linear shear model leaves out.
+
+    Parameters
+    ----------
+    experiment : Experiment
+        At least two runs (one with added mass); with three or more, the last
+        run is held out for the before/after replay.
+    replay : bool
+        Replay the held-out run through the linear and augmented MuJoCo models
+        (the NRMSE figures); off only for quick screening.
+    """
+    runs = experiment.runs
+    d = experiment.storeys
+    if len(runs) < 2:
+        raise IdentificationError(f"{experiment.source}: diagnosis needs at least two runs, got {len(runs)}")
+    hold = runs[-1] if len(runs) >= 3 else None
+    train_runs = tuple(r for r in runs if r is not hold)
+    train_exp = replace(experiment, runs=train_runs)
+    result = identify(train_exp)
+    f_top = float(result.modes().frequency.max())
+    if experiment.structure is not None:   # a badly disturbed fit must not shrink the band
+        s0 = experiment.structure
+        f_nom = float(modal_properties(s0.mass_matrix(), s0.damping_matrix(), s0.stiffness_matrix()).frequency.max())
+        f_top = max(f_top, f_nom) if np.isfinite(f_top) else f_nom
+    ideal = result.estimator == "equation"
+    band = Prefilter() if ideal else Prefilter(high=min(max(suggest_band(runs[0], d), 2.5 * f_top),
+                                                         0.4 * runs[0].sample_rate))
+    # ---- equation-domain residuals and their noise-only level
+    rows = []
+    for k, run in enumerate(train_runs):
+        s = _signals(run, d, band)
+        r = _floor_residual(result, s, run.added_mass)
+        sig = _noise_sigma(run)
+        rng = np.random.default_rng(k)
+        noise = np.column_stack([rng.standard_normal(run.n_samples) * sig[c] for c in run.channels])
+        sn = _signals(_with_values(run, noise), d, band)
+        rn = _floor_residual(result, sn, run.added_mass)
+        rows.append((run, s, r, rn))
+    rms = np.sqrt(np.mean(np.concatenate([x[2] for x in rows]) ** 2, axis=0))
+    rms_noise = np.sqrt(np.mean(np.concatenate([x[3] for x in rows]) ** 2, axis=0))
+    floor_scale = np.sqrt(np.mean(np.concatenate([x[1]["a"] @ result.M.T for x in rows]) ** 2, axis=0))
+    noise_floor = np.maximum(rms_noise, 1e-7 * floor_scale)   # noise-free data: round-off
+    excess_eq = {f"floor{j + 1}": float(rms[j] / noise_floor[j]) for j in range(d)}
+    candidates = _screen_equation(result, rows, d, noise_floor, f_top)
+    nom_mismatch = False
+    if experiment.structure is not None:
+        # The nominal model the lab states: when it is right but for the missing physics, its residual
+        # is that physics alone, undisturbed by what a linear fit absorbed.
+        nom = _nominal_result(experiment.structure, result)
+        nrows = [(run, s, _floor_residual(nom, s, run.added_mass), rn) for run, s, _, rn in rows]
+        nom_rms = np.sqrt(np.mean(np.concatenate([x[2] for x in nrows]) ** 2, axis=0))
+        nom_mismatch = bool(np.max(nom_rms / noise_floor) > EXCESS)
+        for c in _screen_equation(nom, nrows, d, noise_floor, f_top):
+            candidates.append(replace(c, domain="equation (nominal model)"))
+    # ---- replay-domain residuals (table accelerometer effects). Eq. (3) does not involve the table
+    # accelerometer, so when the nominal model explains the floor equations, it is the fair model
+    # to replay (a fit driven by a faulty base channel has partly absorbed the fault).
+    replay_model = nom if (experiment.structure is not None and not nom_mismatch) else result
+    excess_rep, rep_candidates = _screen_replay(replay_model, train_runs, d, band)
+    candidates += rep_candidates
+    pattern = _damping_pattern(result, d)
+    if pattern:
+        candidates.append(pattern[0])
+    eq_mismatch = max(excess_eq.values()) > EXCESS
+    rep_mismatch = max(excess_rep.values(), default=0) > EXCESS
+    if experiment.structure is not None and not nom_mismatch and rep_mismatch:
+        # Floors obey the nominal equations, yet replays from the table channel miss: the table channel.
+        pool = [c for c in candidates if c.domain == "replay"]
+    else:
+        pool = [c for c in candidates
+                if (c.domain == "equation" and eq_mismatch) or (c.domain == "replay" and rep_mismatch)
+                or (c.domain == "equation (nominal model)" and nom_mismatch)]
+    best = max(pool, key=lambda c: c.explained) if pool else None
+    if best is not None and best.explained >= EXPLAINED:
+        chosen = best
+    elif pattern:
+        # A linear damper leaves no residual (the identified C absorbs it): the pattern decides.
+        chosen = pattern[0]
+    elif eq_mismatch or rep_mismatch:
+        chosen = "unexplained"
+    else:
+        chosen = None
+    nominal = experiment.structure
+    ident_structure = _identified_structure(result, nominal)
+    linear_structure = ident_structure
+    if chosen is None:
+        mech, loc, params, std = "none", {}, {}, {}
+    elif chosen == "unexplained":
+        worst = max(excess_eq, key=excess_eq.get)
+        if max(excess_rep.values(), default=0) > max(excess_eq.values()):
+            worst = max(excess_rep, key=excess_rep.get)
+            loc = {"channel": worst}
+        else:
+            loc = {"floor": int(worst[5:])}
+        mech, params, std = "unexplained", {}, {}
+    else:
+        mech, loc, params, std = chosen.mechanism, chosen.location, chosen.parameters, chosen.std
+    before = after = float("nan")
+    curves: dict = {}
+    xml = ""
+    if mech in ("coulomb_friction", "cubic_stiffness", "flexible_added_mass", "p_delta") and not ideal:
+        refit = _refit(mech, loc, params, train_runs, result, band, f_top)
+        if refit is not None:
+            result, params, std = refit
+            ident_structure = _identified_structure(result, nominal)
+    if mech == "extra_damper":
+        # Rayleigh part + the storey damper: from the pattern fit of the identified C when there is one,
+        # else the nominal Rayleigh coefficients.
+        if pattern and pattern[0].location == loc:
+            a_, b_, c_ = pattern[1]["coefficients"]
+            params = {"c": float(c_)}
+        elif nominal is not None:
+            a_, b_ = nominal.rayleigh_mu, nominal.rayleigh_kappa
+        else:
+            a_, b_ = ident_structure.rayleigh_mu, ident_structure.rayleigh_kappa
+        ident_structure = replace(ident_structure, rayleigh_mu=max(a_, 0.0), rayleigh_kappa=max(b_, 0.0))
+    if mech in ("sensor_delay", "sensor_gain", "sensor_bias"):
+        fixed = replace(train_exp, runs=tuple(_correct(r, mech, loc, params) for r in train_runs))
+        ident_structure = _identified_structure(identify(fixed), nominal)
+    mechanisms = _as_mechanisms(mech, loc, params)
+    eval_run = hold if hold is not None else runs[-1]
+    if replay:
+        before, after, curves, xml = _replay_check(linear_structure, ident_structure, mech, loc, params,
+                                                   mechanisms, eval_run, d, band, f_top)
+    summary = _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, eval_run.name, hold)
+    return Diagnosis(mechanism=mech, location=loc, parameters=params, std=std, nrmse_before=before,
+                     nrmse_after=after, excess_equation=excess_eq, excess_replay=excess_rep,
+                     candidates=tuple(sorted(candidates, key=lambda c: -c.explained)[:8]), summary=summary,
+                     holdout=eval_run.name if hold is not None else f"{eval_run.name} (no run held out)",
+                     parameter_pattern=pattern[1] if pattern else {}, augmented_xml=xml, curves=curves)
+
+
+def _screen_equation(result, rows, d, noise_floor, f_top) -> list[Candidate]:
+    """Candidates whose signature lives in the floor-force residual."""
+    fs = rows[0][0].sample_rate
+    train = np.concatenate([_blocks(r[0].n_samples if r[1]["a"].shape[0] == r[0].n_samples
+                                    else r[1]["a"].shape[0], fs)[0] for r in rows])
+    test = ~train
+    target = np.concatenate([r[2] for r in rows])                     # (N, d)
+    n_test = int(test.sum())
+    noise_rss = float(np.sum(noise_floor ** 2)) * n_test
+    a = np.concatenate([r[1]["a"] for r in rows])
+    v = np.concatenate([r[1]["v"] for r in rows])
+    q = np.concatenate([r[1]["q"] for r in rows])
+    dm = np.concatenate([np.broadcast_to(r[0].added_mass, r[1]["a"].shape) for r in rows])
+    drift, dvel = rig.drifts(q), rig.drifts(v)
+    jerk = np.gradient(a, 1 / fs, axis=0)
+    ones = np.ones(len(a))
+    out = []
+
+    def storey_cols(phi, s):
+        e = np.zeros((len(phi), d))
+        e[:, s] = phi
+        return rig.storey_to_floor(e)
+
+    def floor_cols(phi, j):
+        e = np.zeros((len(phi), d))
+        e[:, j] = phi
+        return e
+
+    def add(mech, loc, cols, conf, to_params):
+        res = _fit([c.ravel() for c in cols], [c.ravel() for c in conf], target.ravel(),
+                   np.repeat(train, d), np.repeat(test, d), noise_rss)
+        if res is None:
+            return
+        coef, std, explained = res
+        params, pstd = to_params(coef, std)
+        out.append(Candidate(mech, loc, params, pstd, explained, "equation"))
+
+    g = rig.GRAVITY
+    for s in range(d):
+        conf = [storey_cols(drift[:, s], s), storey_cols(dvel[:, s], s)]
+        eps = 0.05 * float(np.sqrt(np.mean(dvel[:, s] ** 2))) or 1e-9
+        add("coulomb_friction", {"storey": s + 1}, [storey_cols(np.tanh(dvel[:, s] / eps), s)], conf,
+            lambda c, e: ({"force": float(c[0])}, {"force": float(e[0])}))
+        add("cubic_stiffness", {"storey": s + 1}, [storey_cols(drift[:, s] ** 3, s)], conf,
+            lambda c, e: ({"k3": float(c[0])}, {"k3": float(e[0])}))
+        add("extra_damper", {"storey": s + 1}, [storey_cols(dvel[:, s], s)], [storey_cols(drift[:, s], s)],
+            lambda c, e: ({"c": float(c[0])}, {"c": float(e[0])}))
+        above = dm[:, s:].sum(axis=1)
+        if np.any(above > 0):
+            h = result.storeys and 1.0
+            add("p_delta", {"storey": s + 1}, [storey_cols(-g * above * drift[:, s], s)], conf,
+                lambda c, e: ({"weight_per_height": float(c[0])}, {"weight_per_height": float(e[0])}))
+    Mdiag = np.diag(result.M)
+    # Floor accelerations the model predicts from the table channel: a flexible attachment's
+    # resonance would amplify the sensor noise of the measured ones into its signature.
+    same_length = all(r[1]["a"].shape[0] == r[0].n_samples for r in rows)
+    a_model = (np.concatenate([_replay_outputs(result, r[0], d)["a"] for r in rows]) if same_length else None)
+    for j in range(d):
+        tag = f"a{j + 1}"
+        if np.any(dm[:, j] > 0):
+            add("sensor_gain", {"channel": tag}, [floor_cols(dm[:, j] * a[:, j], j)],
+                [floor_cols(a[:, j], j)],
+                lambda c, e: ({"gain": float(1 / (1 - c[0]))}, {"gain": float(e[0] / (1 - c[0]) ** 2)}))
+        if np.any(dm[:, j] > 0) and a_model is not None:
+            best = None
+            for f_a in np.geomspace(1.2 * f_top, 0.3 * fs, 24):
+                w = 2 * np.pi * f_a
+                osc = discretize(np.eye(1), np.eye(1) * 2 * 0.05 * w, np.eye(1) * w * w, 1 / fs)
+                rel = outputs(osc, simulate_linear(osc, a_model[:, j]))["a"][:, 0] - a_model[:, j]
+                phi = np.where(dm[:, j] > 0, -dm[:, j] * rel, 0.0)
+                res = _fit([floor_cols(phi, j).ravel()], [floor_cols(a[:, j], j).ravel()], target.ravel(),
+                           np.repeat(train, d), np.repeat(test, d), noise_rss)
+                if res and (best is None or res[2] > best[2]):
+                    best = (f_a, *res)
+            if best:
+                f_a, coef, std, explained = best
+                out.append(Candidate("flexible_added_mass", {"floor": j + 1},
+                                     {"frequency": float(f_a), "damping_ratio": 0.05, "amplitude": float(coef[0])},
+                                     {"amplitude": float(std[0])}, explained, "equation"))
+        add("sensor_delay", {"channel": tag}, [floor_cols(-(Mdiag[j] + dm[:, j]) * jerk[:, j], j)], [],
+            lambda c, e: ({"delay": float(c[0])}, {"delay": float(e[0])}))
+        add("sensor_bias", {"channel": tag}, [floor_cols((Mdiag[j] + dm[:, j]) * ones, j)], [],
+            lambda c, e: ({"bias": float(c[0])}, {"bias": float(e[0])}))
+        qtag = f"q{j + 1}"
+        kcol = np.outer(q[:, j], result.K[:, j]) + np.outer(v[:, j], result.C[:, j])
+        add("sensor_gain", {"channel": qtag}, [kcol], [],
+            lambda c, e: ({"gain": float(1 / (1 - c[0]))}, {"gain": float(e[0] / (1 - c[0]) ** 2)}))
+        add("sensor_delay", {"channel": qtag}, [-np.outer(v[:, j], result.K[:, j])], [],
+            lambda c, e: ({"delay": float(c[0])}, {"delay": float(e[0])}))
+        add("sensor_bias", {"channel": qtag}, [np.outer(ones, result.K[:, j])], [],
+            lambda c, e: ({"bias": float(c[0])}, {"bias": float(e[0])}))
+    return out
+
+
+def _lowpass(x, fs, band):
+    if not band.high:
+        return x
+    sos = scipy.signal.butter(4, band.high, fs=fs, output="sos")
+    return scipy.signal.sosfiltfilt(sos, x, axis=0)
+
+
+def _replay_outputs(result, run, d, zdd=None):
+    dm = np.diag(run.added_mass)
+    model = discretize(result.M + dm, result.C + result.mu * dm, result.K, 1 / run.sample_rate)
+    y = outputs(model, simulate_linear(model, run["zdd"] if zdd is None else zdd))
+    return y
+
+
+def _screen_replay(result, runs, d, band):
+    """Table-accelerometer effects: visible only when the model is driven by the recorded base."""
+    fs = runs[0].sample_rate
+    target, sims, dsims, steps, noise = [], [], [], [], []
+    for run in runs:
+        y = _replay_outputs(result, run, d)
+        meas = _lowpass(run.group("a", d), fs, band)
+        sim = _lowpass(y["a"], fs, band)
+        target.append(meas - sim)
+        sims.append(sim)
+        dsims.append(np.gradient(sim, 1 / fs, axis=0))
+        steps.append(_lowpass(_replay_outputs(result, run, d, np.ones(run.n_samples))["a"], fs, band))
+        sig = _noise_sigma(run)
+        gain = math.sqrt(2 * band.high / fs) if band.high else 1.0
+        noise.append(np.array([sig[f"a{j + 1}"] for j in range(d)]) * gain)
+    target = np.concatenate(target)
+    scale = np.sqrt(np.mean(np.concatenate(sims) ** 2, axis=0))
+    noise_lvl = np.mean(noise, axis=0)
+    rms = np.sqrt(np.mean(target ** 2, axis=0))
+    floor = np.maximum(noise_lvl, 1e-6 * scale)
+    excess = {f"a{j + 1}": float(rms[j] / floor[j]) for j in range(d)}
+    train = np.concatenate([_blocks(r.n_samples, fs)[0] for r in runs])
+    test = ~train
+    noise_rss = float(np.sum(floor ** 2)) * int(test.sum())
+    cands = []
+    specs = (("sensor_delay", np.concatenate(dsims), lambda c, e: ({"delay": float(c)}, {"delay": float(e)})),
+             ("sensor_gain", np.concatenate(sims),
+              lambda c, e: ({"gain": float(1 / (1 + c))}, {"gain": float(e / (1 + c) ** 2)})),
+             ("sensor_bias", -np.concatenate(steps), lambda c, e: ({"bias": float(c)}, {"bias": float(e)})))
+    for mech, col, conv in specs:
+        res = _fit([col.ravel()], [], target.ravel(), np.repeat(train, d), np.repeat(test, d), noise_rss)
+        if res:
+            params, std = conv(res[0][0], res[1][0])
+            cands.append(Candidate(mech, {"channel": "zdd"}, params, std, res[2], "replay"))
+    return excess, cands
+
+
+def _damping_pattern(result, d):
+    """A linear damper across one storey hides in the identified C: look for its pattern."""
+    fits = {f.model: f for f in damping_models(result)}
+    ray = fits["rayleigh"]
+    if not (ray.p_value < 1e-3 and ray.misfit > 0.02):
+        return None
+    iu = np.triu_indices(d)
+    c = result.C[iu]
+    best = None
+    for s in range(d):
+        e = np.zeros(d)
+        e[s] = 1.0
+        if s > 0:
+            e[s - 1] = -1.0
+        P = np.outer(e, e)[iu]
+        A = np.column_stack([result.M[iu], result.K[iu], P])
+        coef, *_ = np.linalg.lstsq(A, c, rcond=None)
+        mis = float(np.linalg.norm(c - A @ coef) / np.linalg.norm(c))
+        if best is None or mis < best[1]:
+            best = (s, mis, coef)
+    s, mis, coef = best
+    explained = 1.0 - mis / ray.misfit
+    cand = Candidate("extra_damper", {"storey": s + 1}, {"c": float(coef[2])}, {}, float(explained), "parameters")
+    return cand, {"rayleigh_misfit": ray.misfit, "rayleigh_p_value": ray.p_value, "with_damper_misfit": mis,
+                  "coefficients": [float(x) for x in coef]}
+
+
+def _signature(mech, loc, params, run, s, d):
+    """Floor direction (d, 1) and signal (n, 1) of a mechanism's force on one run."""
+    e = np.zeros((1, d))
+    if mech in ("coulomb_friction", "cubic_stiffness", "p_delta"):
+        k = loc["storey"] - 1
+        e[0, k] = 1.0
+        direction = rig.storey_to_floor(e).T
+        if mech == "coulomb_friction":
+            sig = np.tanh(rig.drifts(s["v"])[:, k] / rig.FRICTION_SMOOTHING)
+        elif mech == "cubic_stiffness":
+            sig = rig.drifts(s["q"])[:, k] ** 3
+        else:
+            sig = -rig.GRAVITY * run.added_mass[k:].sum() * rig.drifts(s["q"])[:, k]
+    else:
+        j = loc["floor"] - 1
+        e[0, j] = 1.0
+        direction = e.T
+        w = 2 * np.pi * params["frequency"]
+        osc = discretize(np.eye(1), np.eye(1) * 2 * params["damping_ratio"] * w, np.eye(1) * w * w,
+                         1 / run.sample_rate)
+        a_j = s["a_model"][:, j]
+        sig = -run.added_mass[j] * (outputs(osc, simulate_linear(osc, a_j))["a"][:, 0] - a_j)
+    return direction, sig[:, None]
+
+
+_PARAM = {"coulomb_friction": "force", "cubic_stiffness": "k3", "p_delta": "weight_per_height",
+          "flexible_added_mass": "amplitude"}
+
+
+def _refit(mech, loc, params, runs, result, band, f_top):
+    """Errors-in-variables fit of the linear model together with the mechanism's force."""
+    from .eiv import fit_eiv
+    d = result.storeys
+    forces = []
+    for run in runs:
+        if not run.has("q1") and mech != "flexible_added_mass":
+            return None
+        # The signature is computed from measured signals: a band just above the modes keeps sensor
+        # noise from flipping the sign of small drift velocities (which would shrink the fitted force).
+        s = _signals(run, d, Prefilter(high=1.5 * f_top) if band.high else band)
+        if s["a"].shape[0] != run.n_samples:
+            return None
+        s["a_model"] = _replay_outputs(result, run, d)["a"]
+        forces.append(_signature(mech, loc, params, run, s, d))
+    lay = result.layout
+    theta0 = np.concatenate([result.theta, [params[_PARAM[mech]]]])
+    fit = fit_eiv(lay, runs, theta0, f_max=2.0 * f_top, forces=forces)
+    M, C, K, mu = lay.unpack(fit.theta[:lay.p])
+    kappa = float(np.sum(K * (C - mu * M)) / np.sum(K * K))
+    new = replace(result, M=M, C=C, K=K, mu=mu, kappa=kappa, covariance=fit.covariance[:lay.p, :lay.p])
+    value = float(fit.theta[lay.p])
+    err = float(np.sqrt(fit.covariance[lay.p, lay.p]))
+    params = dict(params)
+    params[_PARAM[mech]] = value
+    return new, params, {_PARAM[mech]: err}
+
+
+def _correct(run: RunData, mech: str, loc: dict, params: dict) -> RunData:
+    """Undo a diagnosed sensor fault on one run's recorded channel."""
+    ch = loc["channel"]
+    if not run.has(ch):
+        return run
+    j = run.channels.index(ch)
+    x = run.values[:, j]
+    if mech == "sensor_delay":
+        x = np.interp(run.time + params["delay"], run.time, x)
+    elif mech == "sensor_gain":
+        x = x / params["gain"]
+    else:
+        x = x - params["bias"]
+    values = run.values.copy()
+    values[:, j] = x
+    return replace(run, values=values)
+
+
+def _as_mechanisms(mech, loc, params) -> tuple[Mechanism, ...]:
+    if mech == "coulomb_friction":
+        return (Mechanism(mech, loc["storey"], (("force", params["force"]),)),)
+    if mech == "cubic_stiffness":
+        return (Mechanism(mech, loc["storey"], (("k3", params["k3"]),)),)
+    if mech == "extra_damper":
+        return (Mechanism(mech, loc["storey"], (("c", params["c"]),)),)
+    if mech == "p_delta":
+        return (Mechanism(mech, loc["storey"], (("factor", 1.0),)),)
+    if mech == "flexible_added_mass":
+        return (Mechanism(mech, loc["floor"], (("frequency", params["frequency"]),
+                                               ("damping_ratio", params["damping_ratio"]))),)
+    return ()
+
+
+def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, run, d, band, f_top):
+    """NRMSE of the held-out run: linear model vs. augmented model, both in MuJoCo."""
+    from .simulate import replay
+    fs = run.sample_rate
+    zdd = run["zdd"].copy()
+    measured = {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
+    if mech == "p_delta":
+        # The identified K already holds the reference run's geometric stiffness; the MJCF mechanism
+        # subtracts g (m_above + dm_above) / h, so add the static part back: net -g dm_above / h.
+        s = loc["storey"] - 1
+        h_eff = 1.0 / params["weight_per_height"] if params["weight_per_height"] > 0 else float("inf")
+        k = list(structure.storey_stiffness)
+        k[s] += rig.GRAVITY * sum(structure.masses[s:]) / h_eff
+        structure = replace(structure, storey_stiffness=tuple(k), storey_heights=tuple(
+            h_eff if i == s else h for i, h in enumerate(structure.storey_heights)))
+    corrected = dict(measured)
+    if mech in ("sensor_delay", "sensor_gain", "sensor_bias"):
+        fixed = _correct(run, mech, loc, params)
+        zdd = fixed["zdd"]
+        corrected = {g: fixed.group(g, d) for g in measured}
+    lin = replay(linear_structure, (), run, run["zdd"])
+    aug = replay(structure, mechanisms, run, zdd)
+
+    def nrmse(sim, meas):
+        errs = []
+        for g in meas:
+            m = _lowpass(meas[g], fs, band)
+            s = _lowpass(sim[g], fs, band)
+            errs.append(np.sqrt(np.mean((m - s) ** 2, axis=0)) / np.sqrt(np.mean(m ** 2, axis=0)))
+        return float(np.mean(np.concatenate(errs)))
+
+    before = nrmse(lin, measured)
+    after = nrmse(aug, corrected) if (mechanisms or mech.startswith("sensor")) else before
+    spec = rig.build_spec(structure, run.added_mass, timestep=1 / fs, name="augmented",
+                          mechanisms=mechanisms)
+    spec.compiler.saveinertial = True
+    curves = {"time": run.time, "measured": measured, "linear": lin, "augmented": aug}
+    return before, after, curves, spec.to_xml()
+
+
+def _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, hold) -> str:
+    worst = max(excess_eq, key=excess_eq.get)
+    lines = [f"Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
+             f"Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
+    if mech == "none":
+        lines.append("No missing physics: the linear model explains the recordings to the noise level.")
+    elif mech == "unexplained":
+        lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
+                     f"explains at least {int(EXPLAINED * 100)} % of it.")
+    else:
+        where = ", ".join(f"{k} {v}" for k, v in loc.items())
+        p = ", ".join(f"{k} = {v:.4g}" + (f" +/- {std[k]:.2g}" if k in std else "") for k, v in params.items())
+        lines.append(f"Best explanation: {mech.replace('_', ' ')} at {where}: {p}.")
+    if math.isfinite(before):
+        which = f"held-out run {run_name}" if hold is not None else f"run {run_name}"
+        lines.append(f"{which} NRMSE {100 * before:.2f} % -> {100 * after:.2f} %.")
+    return " ".join(lines)
+
+
+def write_report(diag: Diagnosis, folder) -> Path:
+    """``report.json``, ``summary.txt``, ``model_augmented.xml`` and PNG plots in ``folder``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "report.json").write_text(json.dumps(_finite(diag.to_dict()), indent=2))
+    (folder / "summary.txt").write_text(diag.summary + "\n")
+    if diag.augmented_xml:
+        (folder / "model_augmented.xml").write_text(diag.augmented_xml)
+    if diag.curves:
+        _plots(diag, folder)
+    return folder
+
+
+def _finite(obj):
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj
+
+
+def _plots(diag: Diagnosis, folder: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    c = diag.curves
+    t = c["time"]
+    g = "q" if "q" in c["measured"] else "a"
+    d = c["measured"][g].shape[1]
+    fig, axes = plt.subplots(d, 2, figsize=(12, 2.4 * d), squeeze=False, sharex=True)
+    unit = "m" if g == "q" else "m/s^2"
+    for j in range(d):
+        m, lin, aug = c["measured"][g][:, j], c["linear"][g][:, j], c["augmented"][g][:, j]
+        ax = axes[j, 0]
+        ax.plot(t, m, "k", lw=0.8, label="recorded")
+        ax.plot(t, lin, "C0", lw=0.8, label="linear model")
+        ax.plot(t, aug, "C3--", lw=0.8, label="augmented model")
+        ax.set_ylabel(f"{g}{j + 1} ({unit})")
+        ax = axes[j, 1]
+        ax.plot(t, m - lin, "C0", lw=0.6, label="residual, linear")
+        ax.plot(t, m - aug, "C3", lw=0.6, label="residual, augmented")
+        ax.set_ylabel(f"{g}{j + 1} residual ({unit})")
+    axes[0, 0].legend(fontsize=7)
+    axes[0, 1].legend(fontsize=7)
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[-1, 1].set_xlabel("time (s)")
+    fig.suptitle(f"{diag.mechanism} {json.dumps(diag.location)}: held-out NRMSE "
+                 f"{100 * diag.nrmse_before:.2f} % -> {100 * diag.nrmse_after:.2f} %")
+    fig.tight_layout()
+    fig.savefig(folder / "replay.png", dpi=90)
+    plt.close(fig)

@@ -26,8 +26,9 @@ def shared_file(*parts: str) -> Path:
     return path
 
 
-def scenario_files() -> list[Path]:
-    return sorted(SCENARIOS.glob("*.toml"))
+def scenario_files(recursive: bool = False) -> list[Path]:
+    """Shipped scenarios; ``recursive`` adds the hidden-physics rigs in ``scenarios/hidden/``."""
+    return sorted(SCENARIOS.rglob("*.toml") if recursive else SCENARIOS.glob("*.toml"))
 
 
 def load(name: str) -> mi.Scenario:

@@ -11,7 +11,7 @@ from momentid import model as rig
 from momentid.scenario import Run, Scenario
 from momentid.simulate import ground_motion_of, simulate_run
 
-from conftest import ROOT, load, scenario_files
+from conftest import ROOT, SCENARIOS, load, scenario_files
 
 
 def structure(d: int) -> mi.Structure:
@@ -69,9 +69,9 @@ def test_shipped_mjcf_is_the_builders_output():
     assert scene.njnt == 4 and scene.ntendon == 3
 
 
-@pytest.mark.parametrize("path", scenario_files(), ids=lambda p: p.stem)
+@pytest.mark.parametrize("path", scenario_files(recursive=True), ids=lambda p: p.stem)
 def test_every_scenario_steps_without_warnings(path):
-    sc = load(path.stem)
+    sc = load(str(path.relative_to(SCENARIOS).with_suffix("")))
     short = Scenario(**{**sc.__dict__, "duration": 0.2})   # 0.2 s: a few hundred steps
     motion = ground_motion_of(sc)
     for run in sc.runs:

@@ -437,6 +437,16 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     f_top = float(start.modes().frequency.max())
     f_max = max(band.high or 0.0, 2.0 * f_top)
     fit = fit_eiv(layout, selected, start.theta, f_max=f_max)
+    if fit.scale > 1.5 and experiment.structure is not None and layout.mass == "diagonal":
+        # The residual sits well above the noise: the equation-form start (biased by noise, badly so
+        # for accelerometer-only data) may have led to a local minimum. Try the lab's nominal model.
+        s0 = experiment.structure
+        nominal = layout.pack(s0.mass_matrix(), s0.damping_matrix(), s0.stiffness_matrix(), s0.rayleigh_mu)
+        second = fit_eiv(layout, selected, nominal, f_max=max(f_max, 2.0 * float(
+            modal_properties(s0.mass_matrix(), s0.damping_matrix(), s0.stiffness_matrix()).frequency.max())))
+        if second.cost < fit.cost:
+            fit = second
+            notes.append("errors-in-variables fit restarted from the nominal model (lower cost)")
     notes.append(f"errors-in-variables fit over 0-{f_max:.3g} Hz: {fit.nfev} model evaluations, "
                  f"residual variance factor {fit.scale:.3g} (1 = at the noise level)")
     return _result(layout, fit.theta, "eiv", fit.n_residuals, start.rank, start.condition,

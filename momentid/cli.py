@@ -172,7 +172,7 @@ def _cmd_diagnose(args) -> int:
     else:
         print(diag.summary)
         print(f"\nreport written to {out}/ (report.json, summary.txt"
-              + (", model_augmented.xml, replay.png" if diag.augmented_xml else "") + ")")
+              + (", model_augmented.xml, replay.png, diagnosis.rrd" if diag.augmented_xml else "") + ")")
     return 0
 
 

@@ -642,7 +642,36 @@ def write_report(diag: Diagnosis, folder) -> Path:
         (folder / "model_augmented.xml").write_text(diag.augmented_xml)
     if diag.curves:
         _plots(diag, folder)
+        _rerun(diag, folder / "diagnosis.rrd")
     return folder
+
+
+def _rerun(diag: Diagnosis, path: Path) -> None:
+    """Recorded, linear-model and augmented-model responses overlaid, for ``rerun diagnosis.rrd``."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    c = diag.curves
+    rec = rr.RecordingStream("momentid_diagnosis")
+    views = []
+    time = rr.TimeColumn("time", duration=np.asarray(c["time"], float))
+    styles = {"recorded": [20, 20, 20], "linear": [31, 119, 180], "augmented": [214, 39, 40]}
+    for g, unit in (("a", "m/s^2"), ("q", "m")):
+        if g not in c["measured"]:
+            continue
+        for j in range(c["measured"][g].shape[1]):
+            base = f"/{g}{j + 1}"
+            for label, data in (("recorded", c["measured"]), ("linear", c["linear"]), ("augmented", c["augmented"])):
+                entity = f"{base}/{label}"
+                rec.log(entity, rr.SeriesLines(colors=[styles[label]], names=[f"{g}{j + 1} {label} ({unit})"]),
+                        static=True)
+                rec.send_columns(entity, indexes=[time], columns=rr.Scalars.columns(scalars=data[g][:, j]))
+            views.append(rrb.TimeSeriesView(origin=base, name=f"{g}{j + 1} ({unit})"))
+    rec.log("/report", rr.TextDocument(diag.summary, media_type=rr.MediaType.MARKDOWN), static=True)
+    layout = rrb.Horizontal(rrb.Grid(*views), rrb.TextDocumentView(origin="/report", name="diagnosis"),
+                            column_shares=[3, 1])
+    rec.save(str(path), default_blueprint=rrb.Blueprint(layout))
+    rec.flush()
 
 
 def _finite(obj):

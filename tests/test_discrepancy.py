@@ -80,4 +80,8 @@ def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):
     xml = (tmp_path / "report" / "model_augmented.xml").read_text()
     assert "<mujoco" in xml
     assert (tmp_path / "report" / "replay.png").stat().st_size > 10_000
+    import rerun as rr
+    store = rr.chunk.RrdReader(str(tmp_path / "report" / "diagnosis.rrd")).store()
+    paths = {str(c.entity_path) for c in store.stream().to_chunks()}
+    assert {"/a1/recorded", "/a1/linear", "/a1/augmented", "/q3/augmented", "/report"} <= paths
     assert main(["diagnose", str(tmp_path / "missing.mcap")]) == 2

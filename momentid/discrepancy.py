@@ -364,10 +364,9 @@ def _screen_equation(result, rows, d, noise_floor, f_top) -> list[Candidate]:
             add("p_delta", {"storey": s + 1}, [storey_cols(-g * above * drift[:, s], s)], conf,
                 lambda c, e: ({"weight_per_height": float(c[0])}, {"weight_per_height": float(e[0])}))
     Mdiag = np.diag(result.M)
-    # Floor accelerations the model predicts from the table channel: a flexible attachment's
-    # resonance would amplify the sensor noise of the measured ones into its signature.
-    same_length = all(r[1]["a"].shape[0] == r[0].n_samples for r in rows)
-    a_model = (np.concatenate([_replay_outputs(result, r[0], d)["a"] for r in rows]) if same_length else None)
+    # The attachment oscillator is driven by the measured (band-limited) floor acceleration; its
+    # resonance amplifies that channel's noise too, which biases the fitted amplitude low.
+    a_model = a
     for j in range(d):
         tag = f"a{j + 1}"
         if np.any(dm[:, j] > 0):
@@ -503,7 +502,7 @@ def _signature(mech, loc, params, run, s, d):
         w = 2 * np.pi * params["frequency"]
         osc = discretize(np.eye(1), np.eye(1) * 2 * params["damping_ratio"] * w, np.eye(1) * w * w,
                          1 / run.sample_rate)
-        a_j = s["a_model"][:, j]
+        a_j = s["a"][:, j]
         sig = -run.added_mass[j] * (outputs(osc, simulate_linear(osc, a_j))["a"][:, 0] - a_j)
     return direction, sig[:, None]
 
@@ -525,7 +524,6 @@ def _refit(mech, loc, params, runs, result, band, f_top):
         s = _signals(run, d, Prefilter(high=1.5 * f_top) if band.high else band)
         if s["a"].shape[0] != run.n_samples:
             return None
-        s["a_model"] = _replay_outputs(result, run, d)["a"]
         forces.append(_signature(mech, loc, params, run, s, d))
     lay = result.layout
     theta0 = np.concatenate([result.theta, [params[_PARAM[mech]]]])

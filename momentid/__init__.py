@@ -13,7 +13,9 @@ momentum change), with MuJoCo standing in for the rig::
 
 One module per pipeline stage: ``scenario`` (files), ``excitation`` (table
 motion), ``model`` (MJCF rig), ``simulate``, ``recording`` (MCAP),
-``identify``, ``analytic`` and ``compare``, ``cli``.
+``identify`` (with ``reconstruct``, ``linear``, ``eiv``), ``analytic`` and
+``compare``, ``design`` (Cramér-Rao bounds), ``discrepancy`` (missing
+physics), ``importer`` (CSV folders), ``visualize`` (rerun), ``cli``.
 """
 
 from .analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
@@ -36,6 +38,9 @@ from .model import build_spec, compile_model
 from .recording import RecordingWriter, read_recording, write_experiment
 from .scenario import Scenario, Structure, default_scenario_path, load_scenario
 from .simulate import run_experiment, simulate, simulate_run
+from .design import cramer_rao, plan
+from .discrepancy import Diagnosis, diagnose
+from .importer import import_folder, import_recording
 
 __version__ = "0.1.0"
 
@@ -45,7 +50,7 @@ __all__ = [
     "analytic_parameters", "build_spec", "compare", "compile_model", "default_scenario_path",
     "ground_motion", "identify", "load_scenario", "modal_properties", "rayleigh_coefficients",
     "read_at2", "read_recording", "run_experiment", "shear_stiffness", "simulate", "simulate_run",
-    "write_experiment",
+    "write_experiment", "cramer_rao", "plan", "Diagnosis", "diagnose", "import_folder", "import_recording",
     "MomentidError", "ScenarioError", "ModelError", "SimulationError", "RecordingError",
     "TruncatedRecordingError", "IdentificationError", "SensorDataError", "ViewerError",
 ]

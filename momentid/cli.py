@@ -105,8 +105,26 @@ def _cmd_run(args) -> int:
 def _cmd_identify(args) -> int:
     from .recording import read_recording
 
+    if args.stream:
+        from .compare import compare
+        from .identify import identify_stream
+        result = identify_stream(args.recording, mass=args.mass)
+        meta = read_recording_meta(args.recording)
+        payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
+        print(json.dumps(_json_safe(payload), indent=2) if args.json
+              else (compare(result, meta).table() if meta is not None else json.dumps(_json_safe(payload))))
+        return 0
     experiment = read_recording(args.recording)
     return _report(experiment, args)
+
+
+def read_recording_meta(path):
+    """The nominal structure stored in a recording, read without its samples."""
+    from .recording import stream_recording
+    from .scenario import Structure
+    exp, _, _ = stream_recording(path, lambda *a: None)
+    text = exp.get("structure")
+    return Structure.from_dict(json.loads(text)) if text and text != "null" else None
 
 
 def _cmd_import(args) -> int:
@@ -273,6 +291,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", help="MCAP recording written by momentid (or any rig following "
                                      "docs/recording-format.md)")
     _add_identify_options(p)
+    p.add_argument("--stream", action="store_true",
+                   help="equation form read block by block: flat memory for records of any length "
+                        "(needs a, v, q of every floor)")
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("import", help="turn a lab's folder of CSV files into a recording",

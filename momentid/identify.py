@@ -618,3 +618,53 @@ def damping_models(result: Identification) -> list[DampingFit]:
         out.append(DampingFit(name, dict(zip(basis, map(float, coef))), misfit, chi2, dof, p))
     out.append(DampingFit("general", {}, 0.0, 0.0, 0, 1.0))
     return out
+
+
+def identify_stream(path, *, mass: str = "diagonal") -> Identification:
+    """Equation-form identification straight from a recording, block by block.
+
+    Every sensor block is folded into per-run QR factors as it is read, so
+    memory stays flat however long the record (an hour at 1 kHz included);
+    runs the file does not complete are dropped with their factors.  Needs
+    the channels ``a``, ``v``, ``q`` of every floor (ideal or reconstructed
+    data); for noisy recordings use :func:`identify` (errors-in-variables).
+    """
+    from .recording import stream_recording
+
+    per_run: dict[str, tuple[_Accumulator, np.ndarray]] = {}
+    state: dict = {}
+
+    def on_block(name, added, channels, first, t, values):
+        if "layout" not in state:
+            d = sum(1 for c in channels if c.startswith("a") and c[1:].isdigit())
+            missing = [f"{g}{i + 1}" for g in "avq" for i in range(d) if f"{g}{i + 1}" not in channels]
+            if missing:
+                raise SensorDataError(f"{path}: run {name!r} lacks channels {', '.join(missing)}: streaming "
+                                      f"identification needs a, v, q of every floor; use identify()")
+            state["layout"] = Layout(d, mass)
+            state["index"] = [np.array([channels.index(f"{g}{i + 1}") for i in range(d)]) for g in "avq"]
+        if name not in per_run:
+            per_run[name] = (_Accumulator(state["layout"]), np.asarray(added, float))
+        acc, dm = per_run[name]
+        ia, iv, iq = state["index"]
+        a, v, q = values[:, ia], values[:, iv], values[:, iq]
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(v)) and np.all(np.isfinite(q))):
+            raise SensorDataError(f"{path}: run {name!r} has non-finite samples from sample {first}; "
+                                  f"use identify(), which repairs or refuses them")
+        acc.add(a, v, q, v * dm, -a * dm)
+
+    with threadpool_limits(limits=1, user_api="blas"):
+        _, complete, notes = stream_recording(path, on_block)
+        if len(complete) < 2 or all(not np.any(per_run[n][1]) for n in complete):
+            raise IdentificationError(f"{path}: complete runs {complete}: expected at least two, one with "
+                                      f"added mass")
+        layout = state["layout"]
+        merged = _Accumulator(layout)
+        for j in range(layout.d):
+            stacked = np.vstack([per_run[n][0].R[j] for n in complete])
+            merged.R[j] = np.linalg.qr(stacked, mode="r")
+        merged.rows = sum(per_run[n][0].rows for n in complete)
+        names = tuple(complete)
+        theta, rank, condition, rss, cov = _solve(merged, "equation", names)
+    return _result(layout, theta, "equation", merged.rows, rank, condition,
+                   float(np.sqrt(rss / max(merged.rows, 1))), names, cov, notes)

@@ -374,6 +374,7 @@ class _Scan:
     data_crc_bad: bool = False
     failure: str | None = None  # where and why the stream stopped early
     at_end: bool = True  # the stream stopped at the end of the file
+    on_block: object = None  # streaming: called with each decoded block instead of keeping it
 
 
 _DAMAGE = (McapError, struct.error, ValueError, EOFError, RuntimeError, OverflowError)
@@ -416,7 +417,52 @@ def read_recording(path) -> Experiment:
     return _assemble(path, _scan(path))
 
 
-def _scan(path: Path) -> _Scan:
+def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
+    """Read a recording block by block without keeping its samples (flat memory).
+
+    Parameters
+    ----------
+    on_block : callable
+        ``on_block(run_name, added_mass, channels, first_sample, time, values)`` for every sensor
+        block as it is read: ``time`` (n,) s, ``values`` (n, c) SI, in file order.
+
+    Returns
+    -------
+    experiment : dict
+        The ``momentid.experiment`` metadata (structure and scenario JSON strings).
+    complete : list of str
+        Runs whose every block arrived and whose completion record was written.
+    notes : list of str
+        Runs left out and why (the caller must discard what it accumulated for them).
+    """
+    path = Path(path)
+
+    def hook(run, first, t, v):
+        meta = run.channel_meta or {}
+        added = np.array(json.loads(meta["added_mass"]), float) if "added_mass" in meta else None
+        on_block(run.name, added, run.channels, first, t, v)
+
+    scan = _scan(path, on_block=hook)
+    if scan.experiment is None:
+        raise RecordingError(f"{path}: no {EXPERIMENT_RECORD!r} metadata record; expected a momentid recording")
+    complete, notes = [], []
+    for name, run in scan.runs.items():
+        rec = run.record
+        spans = sorted((b[0], b[4]) for b in run.blocks)
+        expected = 0
+        ok = rec is not None and rec.get("complete") == "true"
+        for first, n in spans:
+            ok = ok and first == expected
+            expected = first + n
+        ok = ok and rec is not None and str(expected) == rec.get("n_samples")
+        (complete if ok else notes).append(name if ok else f"{path}: run {name!r} is incomplete; left out")
+    if scan.failure or not scan.data_end:
+        notes.append(f"{path}: the recording ends early ({scan.failure or 'no end-of-data record'}); "
+                     f"only completed runs were used")
+    return scan.experiment, complete, notes
+
+
+def _scan(path: Path, on_block=None) -> _Scan:
     try:
         f = open(path, "rb")
     except OSError as e:
@@ -433,7 +479,7 @@ def _scan(path: Path) -> _Scan:
             raise RecordingError(f"{path}: not an MCAP file (starts with {magic!r}, expected "
                                  f"the MCAP magic {MCAP_MAGIC!r})")
         f.seek(0)
-        scan = _Scan()
+        scan = _Scan(on_block=on_block)
         records = StreamReader(f, validate_crcs=True, record_size_limit=size).records
         while True:
             try:
@@ -467,7 +513,7 @@ def _take(path: Path, scan: _Scan, record) -> None:
     elif isinstance(record, Message):
         name = scan.channel_runs.get(record.channel_id)
         if name is not None:
-            _take_block(path, scan.runs[name], record)
+            _take_block(path, scan.runs[name], record, scan.on_block)
     elif isinstance(record, Metadata):
         if record.name == EXPERIMENT_RECORD:
             if scan.experiment is not None:
@@ -550,7 +596,7 @@ def _check_schema(where: str, schema: Schema) -> None:
                                  f"(number, type, label) = {(number, type_, label)!r}")
 
 
-def _take_block(path: Path, run: _Run, msg: Message) -> None:
+def _take_block(path: Path, run: _Run, msg: Message, on_block=None) -> None:
     """Decode and check one SensorBlock; shapes time (n,), values (n, c)."""
     k = len(run.blocks)
     where = f"{path}: run {run.name!r} block {k}"
@@ -571,6 +617,10 @@ def _take_block(path: Path, run: _Run, msg: Message) -> None:
         raise RecordingError(f"{where}: {t.size} times and {v.size} values; expected n_samples = {n} "
                              f"times and {n} x {c} = {n * c} values")
     _check_times(t, where)
+    if on_block is not None:   # streaming: hand the block on, keep only where it sits
+        on_block(run, block.first_sample, t, v.reshape(n, c))
+        run.blocks.append((block.first_sample, k, None, None, n))   # no view: keeps no samples alive
+        return
     run.blocks.append((block.first_sample, k, t, v.reshape(n, c)))
 
 

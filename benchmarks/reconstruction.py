@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 import momentid as mi
-from momentid.data import Experiment
 from momentid.reconstruct import Prefilter, prepare_run, suggest_band, weak_form
 from momentid.scenario import Instrument, Sensors
 from momentid.sensors import measure

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
+from .data import json_safe
 from .errors import MomentidError
 
 __all__ = ["main"]
@@ -26,16 +26,6 @@ _EPILOG = """examples:
   momentid import lab_data/ -o lab.mcap               # a real rig's CSV files -> recording
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
 """
-
-
-def _json_safe(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_safe(v) for v in obj]
-    return obj
 
 
 def _positive_int(text: str) -> int:
@@ -75,7 +65,7 @@ def _report(experiment, args) -> int:
     for note in experiment.notes:
         print(f"note: {note}", file=sys.stderr)
     if args.json:
-        print(json.dumps(_json_safe(payload), indent=2, allow_nan=False))
+        print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
     else:
         print(text)
     return 0
@@ -111,8 +101,8 @@ def _cmd_identify(args) -> int:
         result = identify_stream(args.recording, mass=args.mass)
         meta = read_recording_meta(args.recording)
         payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
-        print(json.dumps(_json_safe(payload), indent=2) if args.json
-              else (compare(result, meta).table() if meta is not None else json.dumps(_json_safe(payload))))
+        print(json.dumps(json_safe(payload), indent=2) if args.json
+              else (compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload))))
         return 0
     experiment = read_recording(args.recording)
     return _report(experiment, args)
@@ -186,7 +176,7 @@ def _cmd_diagnose(args) -> int:
     for note in experiment.notes:
         print(f"note: {note}", file=sys.stderr)
     if args.json:
-        print(json.dumps(_json_safe(diag.to_dict()), indent=2))
+        print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
         print(diag.summary)
         print(f"\nreport written to {out}/ (report.json, summary.txt"
@@ -212,7 +202,7 @@ def _cmd_plan(args) -> int:
             "recommended": None if best is None else {"label": best.label, "excitation": best.excitation,
                                                       "added_mass": [[float(x) for x in r.added_mass] for r in best.runs]},
         }
-        print(json.dumps(_json_safe(payload), indent=2))
+        print(json.dumps(json_safe(payload), indent=2))
         return 0
     name, worst = as_designed.worst
     print(f"scenario {scenario.name} as designed ({len(scenario.runs)} runs): worst relative CRLB std "

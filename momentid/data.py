@@ -10,6 +10,7 @@ floor velocities relative to the base (m/s); floor 1 is the lowest.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,10 +18,21 @@ import numpy as np
 from .errors import SensorDataError
 from .scenario import Structure
 
-__all__ = ["RunData", "Experiment", "UNITS", "channel_unit"]
+__all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe"]
 
 #: SI unit of each channel group.
 UNITS = {"zdd": "m/s^2", "z": "m", "zd": "m/s", "a": "m/s^2", "q": "m", "v": "m/s"}
+
+
+def json_safe(obj):
+    """``obj`` with non-finite floats as None (strict JSON), through dicts, lists and tuples."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    return obj
 
 
 def channel_unit(name: str) -> str:

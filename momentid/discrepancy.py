@@ -36,7 +36,7 @@ import scipy.signal
 
 from . import model as rig
 from .analytic import modal_properties, shear_stiffness
-from .data import Experiment, RunData
+from .data import Experiment, RunData, json_safe
 from .errors import IdentificationError
 from .identify import damping_models, identify
 from .linear import discretize, outputs, simulate_linear
@@ -360,7 +360,6 @@ def _screen_equation(result, rows, d, noise_floor, f_top) -> list[Candidate]:
             lambda c, e: ({"c": float(c[0])}, {"c": float(e[0])}))
         above = dm[:, s:].sum(axis=1)
         if np.any(above > 0):
-            h = result.storeys and 1.0
             add("p_delta", {"storey": s + 1}, [storey_cols(-g * above * drift[:, s], s)], conf,
                 lambda c, e: ({"weight_per_height": float(c[0])}, {"weight_per_height": float(e[0])}))
     Mdiag = np.diag(result.M)
@@ -613,8 +612,8 @@ def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, ru
 
 def _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, hold) -> str:
     worst = max(excess_eq, key=excess_eq.get)
-    lines = [f"Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
-             f"Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
+    lines = ["Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
+             "Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
     if mech == "none":
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
     elif mech == "unexplained":
@@ -634,7 +633,7 @@ def write_report(diag: Diagnosis, folder) -> Path:
     """``report.json``, ``summary.txt``, ``model_augmented.xml`` and PNG plots in ``folder``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "report.json").write_text(json.dumps(_finite(diag.to_dict()), indent=2))
+    (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))
     (folder / "summary.txt").write_text(diag.summary + "\n")
     if diag.augmented_xml:
         (folder / "model_augmented.xml").write_text(diag.augmented_xml)
@@ -670,16 +669,6 @@ def _rerun(diag: Diagnosis, path: Path) -> None:
                             column_shares=[3, 1])
     rec.save(str(path), default_blueprint=rrb.Blueprint(layout))
     rec.flush()
-
-
-def _finite(obj):
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _finite(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_finite(v) for v in obj]
-    return obj
 
 
 def _plots(diag: Diagnosis, folder: Path) -> None:

@@ -24,7 +24,7 @@ See ``docs/reconstruction.md`` for the comparison behind these choices.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft

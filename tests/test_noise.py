@@ -11,7 +11,7 @@ import pytest
 
 import momentid as mi
 from momentid.cli import main
-from momentid.data import Experiment, RunData
+from momentid.data import Experiment
 from momentid.design import cramer_rao
 from momentid.identify import damping_models
 from momentid.scenario import Instrument, Sensors, parse_scenario
@@ -160,7 +160,6 @@ def test_standard_errors_match_monte_carlo_and_the_crlb(truth):
     # The estimator's standard errors sit at the Cramér-Rao bound (same noise model): within 15 %.
     assert np.allclose(predicted, bound.std, rtol=0.15), predicted / bound.std
     # Bias under one standard deviation: the mean of 8 estimates is within 3/sqrt(8) std of the truth.
-    s = sc.structure
     truth_theta = mi.identify(ex).theta
     assert np.all(np.abs(estimates.mean(axis=0) - truth_theta) < 3 * empirical / np.sqrt(8) + 1e-12)
 

@@ -9,7 +9,6 @@ import tomllib
 import numpy as np
 import pytest
 
-from momentid.compare import compare
 from momentid.identify import identify
 
 from conftest import load, shared_file

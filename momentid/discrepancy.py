@@ -239,6 +239,8 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     replay_model = nom if (experiment.structure is not None and not nom_mismatch) else result
     excess_rep, rep_candidates = _screen_replay(replay_model, train_runs, d, band)
     candidates += rep_candidates
+    if experiment.structure is not None:
+        candidates += _screen_flexible(_nominal_result(experiment.structure, result), train_runs, d, band, f_top)
     pattern = _damping_pattern(result, d)
     if pattern:
         candidates.append(pattern[0])
@@ -279,11 +281,15 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     before = after = float("nan")
     curves: dict = {}
     xml = ""
-    if mech in ("coulomb_friction", "cubic_stiffness", "flexible_added_mass", "p_delta") and not ideal:
+    if mech in ("coulomb_friction", "cubic_stiffness", "p_delta") and not ideal:
         refit = _refit(mech, loc, params, train_runs, result, band, f_top)
         if refit is not None:
             result, params, std = refit
             ident_structure = _identified_structure(result, nominal)
+    if mech == "flexible_added_mass" and nominal is not None:
+        # Found by replaying the nominal model (the identified one has absorbed part of the attachment's
+        # dynamics in the runs that carry it): augment the nominal model.
+        ident_structure = nominal
     if mech == "extra_damper":
         # Rayleigh part + the storey damper: from the pattern fit of the identified C when there is one,
         # else the nominal Rayleigh coefficients.
@@ -452,6 +458,59 @@ def _screen_replay(result, runs, d, band):
             params, std = conv(res[0][0], res[1][0])
             cands.append(Candidate(mech, {"channel": "zdd"}, params, std, res[2], "replay"))
     return excess, cands
+
+
+def _flex_replay(result, run, d, j, f_a, zeta=0.05):
+    """Floor accelerations of the model with run's added mass on floor j on a spring (an extra DOF)."""
+    dm = np.asarray(run.added_mass, float).copy()
+    m_a = dm[j]
+    dm[j] = 0.0
+    w = 2 * np.pi * f_a
+    n = d + 1
+    M = np.zeros((n, n))
+    C = np.zeros((n, n))
+    K = np.zeros((n, n))
+    M[:d, :d] = result.M + np.diag(dm)
+    C[:d, :d] = result.C + result.mu * np.diag(np.asarray(run.added_mass))   # floor damping as before
+    K[:d, :d] = result.K
+    M[d, d] = m_a
+    k_a, c_a = m_a * w * w, 2 * zeta * m_a * w
+    for X, v in ((K, k_a), (C, c_a)):
+        X[j, j] += v
+        X[d, d] += v
+        X[j, d] -= v
+        X[d, j] -= v
+    model = discretize(M, C, K, 1 / run.sample_rate)
+    return outputs(model, simulate_linear(model, run["zdd"]))["a"][:, :d]
+
+
+def _screen_flexible(result, runs, d, band, f_top) -> list[Candidate]:
+    """A flexibly attached added mass, tested by replay (sensor noise does not enter the signature)."""
+    fs = runs[0].sample_rate
+    out = []
+    for j in range(d):
+        loaded = [r for r in runs if r.added_mass[j] > 0 and r.has("a1")]
+        if not loaded:
+            continue
+        meas = [_lowpass(r.group("a", d), fs, band) for r in loaded]
+        rigid = [_lowpass(_replay_outputs(result, r, d)["a"], fs, band) for r in loaded]
+        sig = [_noise_sigma(r) for r in loaded]
+        gain = math.sqrt(2 * band.high / fs) if band.high else 1.0
+        noise = sum(r.n_samples * sum((s[f"a{i + 1}"] * gain) ** 2 for i in range(d)) for r, s in zip(loaded, sig))
+        base = sum(float(np.sum((m - y) ** 2)) for m, y in zip(meas, rigid))
+        if base <= 1.02 * noise:
+            continue
+        best = None
+        for f_a in np.geomspace(1.1 * f_top, min(0.4 * fs, 20 * f_top), 28):
+            rss = sum(float(np.sum((m - _lowpass(_flex_replay(result, r, d, j, f_a), fs, band)) ** 2))
+                      for m, r in zip(meas, loaded))
+            if best is None or rss < best[1]:
+                best = (f_a, rss)
+        f_a, rss = best
+        explained = (base - rss) / (base - noise)
+        out.append(Candidate("flexible_added_mass", {"floor": j + 1},
+                             {"frequency": float(f_a), "damping_ratio": 0.05}, {}, float(explained), "replay"))
+    return out
 
 
 def _damping_pattern(result, d):

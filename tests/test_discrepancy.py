@@ -26,6 +26,7 @@ CASES = {   # rig -> (mechanism, location)
     "delay_a2": ("sensor_delay", {"channel": "a2"}),
     "bias_a2": ("sensor_bias", {"channel": "a2"}),
     "gain_zdd": ("sensor_gain", {"channel": "zdd"}),
+    "flexible_floor3": ("flexible_added_mass", {"floor": 3}),
 }
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -26,6 +27,16 @@ _EPILOG = """examples:
   momentid import lab_data/ -o lab.mcap               # a real rig's CSV files -> recording
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
 """
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number")
+    return value
 
 
 def _positive_int(text: str) -> int:
@@ -332,7 +343,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "recommend the cheapest design whose every parameter reaches the target "
                                    "relative standard deviation.")
     p.add_argument("scenario", help="scenario TOML file; its [sensors] give the noise")
-    p.add_argument("--target", type=float, default=0.01,
+    p.add_argument("--target", type=_positive_float, default=0.01,
                    help="target relative standard deviation of every parameter (default 0.01)")
     p.add_argument("--max-runs", type=_positive_int, default=4, help="largest number of runs to consider")
     p.add_argument("--json", action="store_true", help="print one JSON object")

@@ -80,3 +80,10 @@ def test_help_explains_itself(capsys):
     text = capsys.readouterr().out
     assert "run" in text and "identify" in text and "examples:" in text
     assert main([]) == 2
+
+
+def test_plan_refuses_a_non_positive_target(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["plan", str(SCENARIOS / "lab_noisy.toml"), "--target", "-1"])
+    assert info.value.code == 2
+    assert "--target: '-1': expected a positive number" in capsys.readouterr().err

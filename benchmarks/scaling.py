@@ -4,8 +4,8 @@
     python -m benchmarks.scaling --quick         # small sizes, a smoke test (CI-sized)
 
 For every size it times, best of ``--repeat``: ``simulate`` (all runs,
-one worker per core), MuJoCo's stepping floor (``mujoco.rollout`` of the same
-models without a control callback), ``record`` (MCAP write + read back),
+one worker per core), raw ``mujoco.rollout`` of the same models, states and
+controls on as many threads, ``record`` (MCAP write + read back),
 ``identify`` and one dense ``numpy.linalg.lstsq`` of the stacked regressor
 (when that matrix fits in ``--max-dense-gb``).
 """
@@ -30,7 +30,7 @@ from momentid.simulate import available_cores, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SERIES = ("simulate", "rollout_floor", "record", "identify", "lstsq")
-LABELS = {"simulate": "simulate (momentid, exact drive)", "rollout_floor": "mujoco.rollout, no callback",
+LABELS = {"simulate": "simulate (momentid)", "rollout_floor": "raw mujoco.rollout, same models",
           "record": "record (MCAP write + read)", "identify": "identify (momentid)",
           "lstsq": "one dense lstsq (baseline)"}
 
@@ -52,7 +52,7 @@ def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_byt
     """Time every stage on ``scenario``; seconds per stage (None where not run)."""
     t_sim, experiment = _best(repeat, lambda: simulate(scenario, workers=workers))
     rig = _RawRig(scenario)
-    t_floor, _ = _best(repeat, lambda: rig.rollout(workers, False))
+    t_floor, _ = _best(repeat, lambda: rig.rollout(workers))
     path = workdir / "scaling.mcap"
     t_rec, _ = _best(repeat, lambda: (write_experiment(path, experiment), read_recording(path)))
     row = {"storeys": scenario.structure.storeys, "runs": len(scenario.runs),

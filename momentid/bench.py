@@ -8,13 +8,12 @@ meaningful across machines; nothing here asserts an absolute time.
 Stages and their baselines:
 
 ``simulate``
-    All runs of a scenario (``simulate(workers=N)``) against ``mujoco.rollout``
-    of the same compiled models for the same number of steps, twice: with
-    the same exact-drive control callback (the fair comparison: the same
-    computation, the table following ``z''(t)`` at every RK4 stage), and
-    without any callback (MuJoCo's stepping floor: the base is then not
-    driven at all, so that baseline computes something else; it is what a
-    drive written in C would cost).
+    All runs of a scenario (``simulate(workers=N)``) against one
+    ``mujoco.rollout`` call of the same compiled models from the same initial
+    states under the same control sequences (the table drive is inside the
+    model, so this is the same computation with nothing of momentid's
+    around it), on N threads; and ``simulate(workers=1)`` against the same
+    rollout on one thread.
 ``record``
     ``write_experiment`` + ``read_recording`` against the ``mcap`` library
     writing the very same records (taken from momentid's file) and reading
@@ -140,32 +139,28 @@ def _describe(scenario) -> dict:
 # ----------------------------------------------------------------------------- simulate
 
 class _RawRig:
-    """The compiled models of a scenario's runs, their exact-drive callbacks
-    and initial states, prepared as :func:`momentid.simulate_run` prepares them."""
+    """The compiled models of a scenario's runs, their initial states and
+    table control sequences, prepared as :func:`momentid.simulate_run` prepares them."""
 
     def __init__(self, scenario):
-        import mujoco
-
         from . import model as rig
-        from .simulate import _TableDrive, ground_motion_of
+        from .simulate import _initial_state, _jerk, ground_motion_of
 
+        if rig.needs_callback(scenario.truth):
+            raise MomentidError(f"{scenario.source}: the simulate benchmark needs a rig without "
+                                f"callback physics ([truth] friction or cubic stiffness)")
         motion = ground_motion_of(scenario)
         self.n_steps = scenario.n_samples * scenario.substeps
-        full = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        self.models, self.drives, self.states = [], [], []
+        nodes = np.asarray(motion.acceleration(np.arange(self.n_steps + 1) * scenario.timestep), float)
+        self.control = _jerk(nodes, scenario.timestep)[None, :, None]
+        self.models, self.states = [], []
         for run in scenario.runs:
             spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
-                                  name=f"{scenario.name}_{run.name}")
+                                  name=f"{scenario.name}_{run.name}", mechanisms=scenario.truth)
             m = rig.compile_model(spec)
-            d = mujoco.MjData(m)
-            drive = _TableDrive(m, d, motion, self.n_steps)
-            mujoco.mj_resetData(m, d)
-            d.qpos[0], d.qvel[0] = float(motion.displacement(0.0)), float(motion.velocity(0.0))
-            state = np.empty(mujoco.mj_stateSize(m, full))
-            mujoco.mj_getState(m, d, state, full)
             self.models.append(m)
-            self.drives.append(drive)
-            self.states.append(state)
+            self.states.append(_initial_state(m, float(motion.displacement(0.0)),
+                                              float(motion.velocity(0.0)), nodes[0]))
         # rollout takes several models at once only when their sizes agree
         # (the reference run has no added-mass bodies).
         groups: dict[tuple, list[int]] = {}
@@ -173,53 +168,38 @@ class _RawRig:
             groups.setdefault((m.nq, m.nv, m.nu, m.na, m.nbody, m.nsensordata), []).append(i)
         self.groups = list(groups.values())
 
-    def rollout(self, threads: int, callback: bool):
-        """``mujoco.rollout`` of every model; sensordata per run, shape (n_steps, nsensordata)."""
+    def rollout(self, threads: int):
+        """``mujoco.rollout`` of every model on ``threads`` threads; sensordata per run, (n_steps, nsensordata)."""
         import mujoco
         from mujoco import rollout
 
-        from .simulate import _control_callback
-
         out = [None] * len(self.models)
-        if callback and threads == 1:
-            # One call per model with its own callback installed: no dispatch cost.
-            for i, m in enumerate(self.models):
-                with _control_callback(self.drives[i]):
-                    _, sensors = rollout.rollout(m, mujoco.MjData(m), self.states[i][None],
-                                                 nstep=self.n_steps)
-                out[i] = sensors[0]
-            return out
-        table = {id(m): drive for m, drive in zip(self.models, self.drives)}
-        dispatch = (lambda m, d: table[id(m)](m, d)) if callback else None
-        with _control_callback(dispatch):
-            for group in self.groups:
-                models = [self.models[i] for i in group]
-                datas = [mujoco.MjData(models[0]) for _ in range(min(threads, len(group)))]
-                _, sensors = rollout.rollout(models, datas, np.stack([self.states[i] for i in group]),
-                                             nstep=self.n_steps)
-                for k, i in enumerate(group):
-                    out[i] = sensors[k]
+        for group in self.groups:
+            models = [self.models[i] for i in group]
+            datas = [mujoco.MjData(models[0]) for _ in range(min(threads, len(group)))]
+            _, sensors = rollout.rollout(models, datas, np.stack([self.states[i] for i in group]),
+                                         self.control)
+            for k, i in enumerate(group):
+                out[i] = sensors[k]
         return out
 
 
 def _same_computation(scenario, rig_, experiment) -> float | None:
-    """Largest |rollout-with-callback - momentid| over every sample of run 1,
+    """Largest |raw rollout - momentid| over every sample of every run,
     relative to the channel's peak: 0 means the baseline computed the same
-    numbers (ideal sensors, one step per sample)."""
+    numbers (ideal sensors)."""
     from . import model as rig
 
-    if scenario.substeps != 1:
-        return None
-    run = experiment.runs[0]
-    sensors = rig_.rollout(1, True)[0]
-    layout = rig.sensor_layout(rig_.models[0])
     worst = 0.0
-    for c, name in enumerate(run.channels):
-        if name not in layout or run.values.shape[0] != sensors.shape[0]:
-            return None
-        col = run.values[:, c]
-        peak = float(np.max(np.abs(col))) or 1.0
-        worst = max(worst, float(np.max(np.abs(sensors[:, layout[name]] - col))) / peak)
+    for model, sensors, run in zip(rig_.models, rig_.rollout(1), experiment.runs):
+        layout = rig.sensor_layout(model)
+        sensors = sensors[::scenario.substeps]
+        for c, name in enumerate(run.channels):
+            if name not in layout or run.values.shape[0] != sensors.shape[0]:
+                return None
+            col = run.values[:, c]
+            peak = float(np.max(np.abs(col))) or 1.0
+            worst = max(worst, float(np.max(np.abs(sensors[:, layout[name]] - col))) / peak)
     return worst
 
 
@@ -247,37 +227,25 @@ def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
             cpu[w] = min(cpu.get(w, np.inf), _cpu_seconds() - c0)
         return fn
 
-    fns = {"momentid": ours(workers), "rollout_cb_1": lambda: raw.rollout(1, True),
-           "rollout_nocb": lambda: raw.rollout(workers, False)}
+    fns = {"momentid": ours(workers), "rollout": lambda: raw.rollout(workers)}
     if workers > 1:
         fns["momentid_1"] = ours(1)
-        fns["rollout_nocb_1"] = lambda: raw.rollout(1, False)
+        fns["rollout_1"] = lambda: raw.rollout(1)
     t = {k: min(v) for k, v in _timed(repeat, **fns).items()}
-    # Threads do not help a Python callback (each stage waits for the GIL): timed once, to show it.
-    if workers > 1:
-        t["rollout_cb_threads"] = min(_timed(1, x=lambda: raw.rollout(workers, True))["x"])
-    cb_best = min(t["rollout_cb_1"], t.get("rollout_cb_threads", np.inf))
     extra = {"steps": steps, "workers": workers,
              "steps_per_s": steps / t["momentid"],
-             "rollout_callback_1_thread_s": t["rollout_cb_1"],
-             "rollout_callback_threads_s": t.get("rollout_cb_threads"),
-             "rollout_no_callback_s": t["rollout_nocb"],
-             "rollout_no_callback_1_thread_s": t.get("rollout_nocb_1", t["rollout_nocb"]),
-             "max_rel_diff_vs_rollout_with_callback": _same_computation(scenario, raw, last[workers])}
+             "rollout_s": t["rollout"], "rollout_1_thread_s": t.get("rollout_1", t["rollout"]),
+             "max_rel_diff_vs_rollout": _same_computation(scenario, raw, last[workers])}
     what = f"simulate(workers={workers}), {len(scenario.runs)} runs"
     rows = [
-        Row("simulate", t["momentid"], cb_best, what,
-            "mujoco.rollout, same models, same exact-drive callback (best of 1 thread / threads)",
-            note="fair comparison: the same computation (base driven exactly at every RK4 stage)",
+        Row("simulate", t["momentid"], t["rollout"], what,
+            f"mujoco.rollout, same models, states and controls, {workers} thread(s)",
+            note="the same computation: the table drive is inside the model (no Python in the step)",
             extra=extra),
-        Row("simulate:floor", t["momentid"], t["rollout_nocb"], what,
-            f"mujoco.rollout, same models, no control callback, {workers} thread(s)",
-            note="MuJoCo's stepping floor: without the callback the table is not driven "
-                 "(a different computation); the gap is the Python callback"),
     ]
     if workers > 1:
-        rows.append(Row("simulate:1core", t["momentid_1"], t["rollout_cb_1"],
-                        "simulate(workers=1)", "mujoco.rollout with the same callback, 1 thread",
+        rows.append(Row("simulate:1core", t["momentid_1"], t["rollout_1"],
+                        "simulate(workers=1)", "mujoco.rollout, same models, 1 thread",
                         note=f"per-core overhead; parallel speed-up {t['momentid_1'] / t['momentid']:.2f}x "
                              f"on {workers} workers, CPU time {cpu[workers]:.2f} s vs {cpu[1]:.2f} s serial",
                         extra={"parallel_speedup": t["momentid_1"] / t["momentid"],
@@ -662,8 +630,8 @@ def format_report(report: dict) -> str:
         if r["note"]:
             lines.append(f"{'':<15} {'':>10} {'':>10} {'':>7}  ({r['note']})")
     lines.append("")
-    lines.append("ratio = momentid / baseline; 'simulate' is the fair simulation comparison (same "
-                 "exact-drive callback), 'simulate:floor' the bare MuJoCo stepping cost.")
+    lines.append("ratio = momentid / baseline; the simulate baseline is the same rollout with "
+                 "nothing of momentid's around it (target 1.5).")
     return "\n".join(lines)
 
 

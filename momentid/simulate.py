@@ -1,15 +1,16 @@
 """Simulate the added-mass runs of a scenario on the MuJoCo rig.
 
-The base follows the prescribed ground motion exactly: MuJoCo's RK4
-integrator calls the control callback at every stage with ``d.time`` set to
-the stage time, and the callback sets the table motor's force to the value
-that makes the base acceleration equal ``z''(t)`` at that instant::
-
-    qacc = M^-1 (qfrc_passive - qfrc_bias + e_0 f)   =>   f = (z'' - [M^-1 r]_0) / [M^-1]_00
-
-(``M`` is constant: every joint is a slide along x).  ``z''`` is precomputed on
-the half-step grid that RK4's stages visit, so the callback is a lookup and
-one dot product.  Each run is a freshly compiled model (``mujoco.MjSpec``).
+The table drive runs inside MuJoCo (see :mod:`momentid.model`): the table
+actuator integrates the commanded jerk, so its activation, the commanded table
+acceleration, is linear between steps and RK4 evaluates it exactly at every
+stage.  A run is then an open-loop ``mujoco.rollout`` of a freshly compiled
+model (``mujoco.MjSpec``) whose control sequence is the jerk
+``(z''(t_(k+1)) - z''(t_k)) / h``: no Python runs inside the step, and the
+table's acceleration equals the prescribed ``z''(t_k)`` at every step (to
+``1 / TABLE_INERTIA_RATIO``) and is linear in between.  Only the nonlinear
+storey forces of hidden physics (friction, cubic stiffness) need a Python
+control callback.  Runs are rolled out in chunks, so memory stays bounded and
+progress is reported as they go.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from typing import Callable, Iterator
 
 import mujoco
 import numpy as np
+from mujoco import rollout as _rollout
 
 from . import model as rig
 from .data import Experiment, RunData
@@ -29,7 +31,9 @@ from .excitation import GroundMotion, ground_motion
 from .scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
 from .sensors import measure
 
-__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of"]
+__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay"]
+
+_CHUNK_STEPS = 50_000   # steps per rollout call: bounded memory, progress between calls
 
 
 @contextlib.contextmanager
@@ -48,34 +52,79 @@ def ground_motion_of(scenario: Scenario) -> GroundMotion:
     return ground_motion(scenario.excitation, scenario.duration)
 
 
-class _TableDrive:
-    """Control callback that makes the base joint follow ``z''(t)`` exactly."""
+class _StoreyForces:
+    """Control callback applying the nonlinear storey forces of ``mechanisms``
+    (those the MJCF cannot express) to the floor joints at every RK4 stage."""
 
-    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, motion: GroundMotion,
-                 n_steps: int, mechanisms=()):
-        h = model.opt.timestep
-        self.nonlinear = tuple(m for m in mechanisms if m.type in ("coulomb_friction", "cubic_stiffness"))
+    def __init__(self, model: mujoco.MjModel, mechanisms):
+        self.mechanisms = tuple(mechanisms)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
         self.floor_dofs = np.array([model.jnt_dofadr[model.joint(f"q{i + 1}").id] for i in range(d)])
-        self.per_half_step = 2.0 / h
-        stage_times = np.arange(2 * n_steps + 3) * (h / 2)
-        self.zdd = np.ascontiguousarray(motion.acceleration(stage_times), dtype=float)
-        full = np.zeros((model.nv, model.nv))
-        mujoco.mj_forward(model, data)
-        mujoco.mj_fullM(model, data, full)
-        inv = np.linalg.inv(full)
-        self.scale = 1.0 / inv[0, 0]
-        self.row = inv[0] * self.scale
 
     def __call__(self, model, data) -> None:
-        k = int(data.time * self.per_half_step + 0.5)
-        if self.nonlinear:   # storey forces the MJCF cannot express, applied to the floor joints
-            q = data.qpos[self.floor_dofs]
-            v = data.qvel[self.floor_dofs]
-            f = rig.storey_forces(self.nonlinear, rig.drifts(q), rig.drifts(v))
-            data.qfrc_applied[self.floor_dofs] = rig.storey_to_floor(f)
-        data.ctrl[0] = self.zdd[k] * self.scale - self.row @ (data.qfrc_passive - data.qfrc_bias
-                                                              + data.qfrc_applied)
+        q = data.qpos[self.floor_dofs]
+        v = data.qvel[self.floor_dofs]
+        f = rig.storey_forces(self.mechanisms, rig.drifts(q), rig.drifts(v))
+        data.qfrc_applied[self.floor_dofs] = rig.storey_to_floor(f)
+
+
+def _initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np.ndarray:
+    """Full physics state at t = 0: floors at rest on the table, table at (z, z', z'')."""
+    data = mujoco.MjData(model)
+    data.qpos[0], data.qvel[0], data.act[0] = z, zd, zdd
+    full = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state = np.empty(mujoco.mj_stateSize(model, full))
+    mujoco.mj_getState(model, data, state, full)
+    return state
+
+
+def _jerk(nodes: np.ndarray, h: float) -> np.ndarray:
+    """Table control sequence: the rate of the acceleration command over each step."""
+    return np.ascontiguousarray(np.diff(nodes) / h)
+
+
+def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int, index: np.ndarray,
+          *, mechanisms=(), progress: Callable[[int], None] | None = None
+          ) -> tuple[np.ndarray, list[tuple[str, int]]]:
+    """Roll ``model`` out from ``state`` under the table jerk sequence.
+
+    Parameters
+    ----------
+    state : ndarray, shape (nstate,)
+        ``mjSTATE_FULLPHYSICS`` state at the start.
+    jerk : ndarray, shape (n_steps,)
+        Control of each step (m/s^3).
+    every : int
+        Keep the sensors of every ``every``-th step (the substeps per sample).
+    index : ndarray of int
+        Columns of ``sensordata`` to keep.
+
+    Returns
+    -------
+    out : ndarray, shape (n_steps // every, len(index))
+        Sensor values of the state at the start of each kept step.
+    warnings : list of (name, count)
+        MuJoCo warnings raised during the rollout.
+    """
+    n_steps = len(jerk)
+    out = np.empty((n_steps // every, len(index)))
+    data = mujoco.MjData(model)
+    chunk = every * max(1, _CHUNK_STEPS // every)
+    callback = _StoreyForces(model, mechanisms) if rig.needs_callback(mechanisms) else None
+    warnings: dict[str, int] = {}
+    with _control_callback(callback):
+        for start in range(0, n_steps, chunk):
+            stop = min(n_steps, start + chunk)
+            states, sensors = _rollout.rollout(model, data, state[None], jerk[None, start:stop, None])
+            out[start // every:stop // every] = sensors[0, ::every][:, index]
+            state = states[0, -1]
+            for i, w in enumerate(data.warning):
+                if w.number > 0:
+                    name = mujoco.mjtWarning(i).name
+                    warnings[name] = warnings.get(name, 0) + int(w.number)
+            if progress is not None:
+                progress((stop - start) // every)
+    return out, sorted(warnings.items())
 
 
 def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = None,
@@ -106,30 +155,16 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
                           name=f"{scenario.name}_{run.name}", mechanisms=scenario.truth)
     model = rig.compile_model(spec)
-    data = mujoco.MjData(model)
-    n, sub = scenario.n_samples, scenario.substeps
-    drive = _TableDrive(model, data, motion, n * sub, scenario.truth)
-    mujoco.mj_resetData(model, data)
-    data.qpos[0] = float(motion.displacement(0.0))
-    data.qvel[0] = float(motion.velocity(0.0))
+    n, sub, h = scenario.n_samples, scenario.substeps, scenario.timestep
+    nodes = np.asarray(motion.acceleration(np.arange(n * sub + 1) * h), float)
+    state = _initial_state(model, float(motion.displacement(0.0)), float(motion.velocity(0.0)), nodes[0])
 
-    d = scenario.structure.storeys
-    channels = Sensors().channels(d)     # every channel, exact; the sensor model picks and degrades
+    channels = Sensors().channels(scenario.structure.storeys)   # every channel, exact; the sensor model degrades
     layout = rig.sensor_layout(model)
     index = np.array([layout[c] for c in channels])
-    out = np.empty((n, len(channels)))
-    report_every = max(1, n // 50)
-    with _control_callback(drive):
-        for k in range(n):
-            mujoco.mj_step(model, data)
-            out[k] = data.sensordata[index]   # the state at t_k (start of the step)
-            for _ in range(sub - 1):
-                mujoco.mj_step(model, data)
-            if progress is not None and (k + 1) % report_every == 0:
-                progress(report_every)
-    if progress is not None:
-        progress(n % report_every)
-    _check_run(model, data, out, scenario, run)
+    out, warnings = _roll(model, state, _jerk(nodes, h), sub, index, mechanisms=scenario.truth,
+                          progress=progress)
+    _check_run(warnings, out, scenario, run)
     if scenario.truth:   # the recording must not reveal the hidden physics: attach the nominal rig
         spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
                               name=f"{scenario.name}_{run.name}")
@@ -179,9 +214,7 @@ def _run_index(scenario: Scenario, run: Run) -> int:
     return len(scenario.runs)
 
 
-def _check_run(model, data, out, scenario: Scenario, run: Run) -> None:
-    warnings = [(mujoco.mjtWarning(i).name, int(w.number)) for i, w in enumerate(data.warning)
-                if w.number > 0]
+def _check_run(warnings, out, scenario: Scenario, run: Run) -> None:
     if warnings:
         raise SimulationError(
             f"{scenario.source}: run {run.name!r}: MuJoCo warnings {warnings}: expected none "
@@ -249,22 +282,34 @@ def _simulate_forked(index: int) -> RunData:
     return simulate_run(scenario, scenario.runs[index], motion)
 
 
-def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int) -> Iterator[RunData]:
-    """Simulate the runs in ``workers`` forked processes; yield them in run order.
+def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int,
+                   progress: Callable[[int], None]) -> Iterator[RunData]:
+    """Simulate the runs ``workers`` at a time; yield them in run order.
 
-    The workers are forked with the scenario and motion as initializer
-    arguments (inherited, not pickled) and run exactly :func:`simulate_run`,
-    so the numbers equal the serial path's bit for bit.
+    A linear rig has no Python inside the step and ``mujoco.rollout`` releases
+    the GIL, so the runs go to threads.  A rig with callback physics is
+    GIL-bound; its runs go to forked processes that inherit the scenario and
+    motion (not pickled).  Either way each run is exactly
+    :func:`simulate_run`, so the numbers equal the serial path's bit for bit.
     """
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                               initializer=_set_forked_job, initargs=(scenario, motion))
-    try:
+    if rig.needs_callback(scenario.truth):
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                                   initializer=_set_forked_job, initargs=(scenario, motion))
         futures = [pool.submit(_simulate_forked, i) for i in range(len(scenario.runs))]
-        for future in futures:
-            yield future.result()
+        done = [lambda: progress(scenario.n_samples)] * len(futures)
+    else:
+        pool = ThreadPoolExecutor(max_workers=workers)
+        futures = [pool.submit(simulate_run, scenario, run, motion, progress=progress)
+                   for run in scenario.runs]
+        done = [lambda: None] * len(futures)
+    try:
+        for future, tick in zip(futures, done):
+            result = future.result()
+            tick()
+            yield result
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
 
@@ -286,8 +331,9 @@ def simulate(scenario: Scenario, *, progress: bool = False,
         Processes simulating runs at once: the runs are independent, so they
         are spread over forked worker processes (at most one per run).
         ``1`` (default) simulates in this process, ``None`` uses one process
-        per available core.  Results are identical to the serial path and
-        come back in run order.
+        per available core (threads for a linear rig, forked processes when
+        hidden physics needs a Python callback).  Results are identical to
+        the serial path and come back in run order.
     """
     _stability_check(scenario)
     motion = ground_motion_of(scenario)
@@ -295,7 +341,7 @@ def simulate(scenario: Scenario, *, progress: bool = False,
     runs = []
     with _progress_bar(scenario.n_samples * len(scenario.runs), progress, scenario.name) as bar:
         if n_workers > 1:
-            results = _parallel_runs(scenario, motion, n_workers)
+            results = _parallel_runs(scenario, motion, n_workers, bar.update)
         else:
             results = (simulate_run(scenario, run, motion, progress=bar.update)
                        for run in scenario.runs)
@@ -303,8 +349,6 @@ def simulate(scenario: Scenario, *, progress: bool = False,
             for run in scenario.runs:
                 bar.set_postfix_str(run.name)
                 result = next(results)
-                if n_workers > 1:
-                    bar.update(scenario.n_samples)
                 if on_run is not None:
                     on_run(result)
                 runs.append(result)
@@ -343,24 +387,11 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False,
     )
 
 
-class _SampledMotion:
-    """A table motion known only by its acceleration samples (linear between them)."""
-
-    def __init__(self, t: np.ndarray, zdd: np.ndarray):
-        self.t, self.zdd = t, zdd
-
-    def acceleration(self, t):
-        return np.interp(t, self.t, self.zdd, right=self.zdd[-1])
-
-    def displacement(self, t):
-        return np.zeros_like(np.asarray(t, float))
-
-    def velocity(self, t):
-        return np.zeros_like(np.asarray(t, float))
-
-
 def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Replay a recorded run's table acceleration through a MuJoCo model.
+
+    The table follows the samples of ``zdd``, linear between them (one step
+    per sample).
 
     Parameters
     ----------
@@ -377,22 +408,26 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     dict
         ``'a'``, ``'q'``, ``'v'``: simulated floor channels, each (n, d); the
         floors start at rest relative to the table.
+
+    Raises
+    ------
+    SimulationError
+        On any MuJoCo warning or a diverging response.
     """
-    zdd = run["zdd"] if zdd is None else zdd
+    zdd = np.asarray(run["zdd"] if zdd is None else zdd, float)
     h = 1.0 / run.sample_rate
     spec = rig.build_spec(structure, run.added_mass, timestep=h, name="replay", mechanisms=mechanisms)
     model = rig.compile_model(spec)
-    data = mujoco.MjData(model)
-    n = run.n_samples
-    drive = _TableDrive(model, data, _SampledMotion(run.time - run.time[0], zdd), n, mechanisms)
-    mujoco.mj_resetData(model, data)
     layout = rig.sensor_layout(model)
     d = structure.storeys
     names = [f"{g}{i + 1}" for g in ("a", "q", "v") for i in range(d)]
     index = np.array([layout[c] for c in names])
-    out = np.empty((n, len(names)))
-    with _control_callback(drive):
-        for k in range(n):
-            mujoco.mj_step(model, data)
-            out[k] = data.sensordata[index]
+    nodes = np.append(zdd, zdd[-1])            # the table holds its last acceleration
+    out, warnings = _roll(model, _initial_state(model, 0.0, 0.0, nodes[0]), _jerk(nodes, h), 1, index,
+                          mechanisms=mechanisms)
+    if warnings or not np.all(np.isfinite(out)):
+        raise SimulationError(
+            f"replay of run {run.name!r}: MuJoCo warnings {warnings} or a diverging response: expected "
+            f"a stable model (check the replayed parameters and mechanisms)"
+        )
     return {g: out[:, i * d:(i + 1) * d] for i, g in enumerate(("a", "q", "v"))}

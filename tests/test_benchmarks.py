@@ -25,12 +25,12 @@ def test_every_data_stage_runs_on_a_tiny_case(tmp_path):
                             workdir=tmp_path)
     json.dumps(report, allow_nan=False)   # JSON-safe as it stands
     stages = [r["stage"] for r in report["rows"]]
-    assert stages[:2] == ["simulate", "simulate:floor"] and {"record", "identify", "view"} <= set(stages)
+    assert stages[:2] == ["simulate", "simulate:1core"] and {"record", "identify", "view"} <= set(stages)
     _check_rows(report["rows"])
     simulate_row = report["rows"][0]
-    # The callback baseline recomputes momentid's run bit for bit; 1e-12 of each channel's peak
+    # The raw rollout recomputes momentid's runs bit for bit; 1e-12 of each channel's peak
     # leaves room only for round-off, should MuJoCo ever sum in another order.
-    assert simulate_row["extra"]["max_rel_diff_vs_rollout_with_callback"] < 1e-12
+    assert simulate_row["extra"]["max_rel_diff_vs_rollout"] < 1e-12
     identify_row = next(r for r in report["rows"] if r["stage"] == "identify")
     # Streamed QR and one dense lstsq solve the same well-conditioned problem (condition ~1e3):
     # they agree to round-off, observed ~1e-12; 1e-8 leaves margin for other BLAS builds.

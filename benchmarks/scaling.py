@@ -5,7 +5,7 @@
 
 For every size it times, best of ``--repeat``: ``simulate`` (all runs,
 one worker per core), raw ``mujoco.rollout`` of the same models, states and
-controls on as many threads, ``record`` (MCAP write + read back),
+controls on as many threads (the faster of two ways), ``record`` (MCAP write + read back),
 ``identify`` and one dense ``numpy.linalg.lstsq`` of the stacked regressor
 (when that matrix fits in ``--max-dense-gb``).
 """
@@ -52,7 +52,7 @@ def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_byt
     """Time every stage on ``scenario``; seconds per stage (None where not run)."""
     t_sim, experiment = _best(repeat, lambda: simulate(scenario, workers=workers))
     rig = _RawRig(scenario)
-    t_floor, _ = _best(repeat, lambda: rig.rollout(workers))
+    t_floor = rig.best_rollout(workers, repeat)
     path = workdir / "scaling.mcap"
     t_rec, _ = _best(repeat, lambda: (write_experiment(path, experiment), read_recording(path)))
     row = {"storeys": scenario.structure.storeys, "runs": len(scenario.runs),

@@ -109,23 +109,13 @@ def _cmd_identify(args) -> int:
     if args.stream:
         from .compare import compare
         from .identify import identify_stream
-        result = identify_stream(args.recording, mass=args.mass)
-        meta = read_recording_meta(args.recording)
+        result, meta = identify_stream(args.recording, mass=args.mass, return_structure=True)
         payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
         print(json.dumps(json_safe(payload), indent=2) if args.json
               else (compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload))))
         return 0
     experiment = read_recording(args.recording)
     return _report(experiment, args)
-
-
-def read_recording_meta(path):
-    """The nominal structure stored in a recording, read without its samples."""
-    from .recording import stream_recording
-    from .scenario import Structure
-    exp, _, _ = stream_recording(path, lambda *a: None)
-    text = exp.get("structure")
-    return Structure.from_dict(json.loads(text)) if text and text != "null" else None
 
 
 def _cmd_import(args) -> int:

@@ -38,6 +38,8 @@ so memory stays flat for long records.  ``kappa`` follows from
 
 from __future__ import annotations
 
+import json
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -620,7 +622,7 @@ def damping_models(result: Identification) -> list[DampingFit]:
     return out
 
 
-def identify_stream(path, *, mass: str = "diagonal") -> Identification:
+def identify_stream(path, *, mass: str = "diagonal", return_structure: bool = False):
     """Equation-form identification straight from a recording, block by block.
 
     Every sensor block is folded into per-run QR factors as it is read, so
@@ -628,6 +630,13 @@ def identify_stream(path, *, mass: str = "diagonal") -> Identification:
     runs the file does not complete are dropped with their factors.  Needs
     the channels ``a``, ``v``, ``q`` of every floor (ideal or reconstructed
     data); for noisy recordings use :func:`identify` (errors-in-variables).
+
+    Returns
+    -------
+    Identification
+        Or, with ``return_structure=True``, ``(Identification, Structure or
+        None)``: the nominal model the recording states, from the same single
+        pass over the file.
     """
     from .recording import stream_recording
 
@@ -654,7 +663,7 @@ def identify_stream(path, *, mass: str = "diagonal") -> Identification:
         acc.add(a, v, q, v * dm, -a * dm)
 
     with threadpool_limits(limits=1, user_api="blas"):
-        _, complete, notes = stream_recording(path, on_block)
+        experiment, complete, notes = stream_recording(path, on_block)
         if len(complete) < 2 or all(not np.any(per_run[n][1]) for n in complete):
             raise IdentificationError(f"{path}: complete runs {complete}: expected at least two, one with "
                                       f"added mass")
@@ -666,5 +675,10 @@ def identify_stream(path, *, mass: str = "diagonal") -> Identification:
         merged.rows = sum(per_run[n][0].rows for n in complete)
         names = tuple(complete)
         theta, rank, condition, rss, cov = _solve(merged, "equation", names)
-    return _result(layout, theta, "equation", merged.rows, rank, condition,
-                   float(np.sqrt(rss / max(merged.rows, 1))), names, cov, notes)
+    result = _result(layout, theta, "equation", merged.rows, rank, condition,
+                     float(np.sqrt(rss / max(merged.rows, 1))), names, cov, notes)
+    if not return_structure:
+        return result
+    from .scenario import Structure
+    text = experiment.get("structure")
+    return result, (Structure.from_dict(json.loads(text)) if text and text != "null" else None)

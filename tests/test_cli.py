@@ -33,6 +33,12 @@ def test_run_default_then_identify_json(tmp_path, capsys, monkeypatch):
     for key in ("mu", "kappa"):
         assert result["analytic"][key] == an[key]
         assert abs(result[key] - an[key]) <= 1e-6 * an[key]
+    # The streamed path reads the file once and reports against the same nominal model.
+    assert main(["identify", "out/default.mcap", "--stream", "--json"]) == 0
+    streamed = json.loads(capsys.readouterr().out)
+    assert streamed["analytic"] == result["analytic"]
+    for key in ("M", "C", "K"):   # the same equations by another summation order: round-off apart
+        assert np.allclose(streamed[key], result[key], rtol=0, atol=1e-9 * np.abs(an[key]).max())
 
 
 def test_run_paper_harmonic_to_folder(tmp_path, capsys):

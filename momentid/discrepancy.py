@@ -36,8 +36,9 @@ import scipy.signal
 
 from . import model as rig
 from .analytic import modal_properties, shear_stiffness
+from .consistency import kinematic_check, noise_sigma
 from .data import Experiment, RunData, json_safe
-from .errors import IdentificationError
+from .errors import IdentificationError, ModelError, SimulationError
 from .identify import damping_models, identify
 from .linear import discretize, outputs, simulate_linear
 from .reconstruct import Prefilter, prepare_run, suggest_band
@@ -51,6 +52,9 @@ MECHANISM_IDS = ("none", "unexplained", "coulomb_friction", "cubic_stiffness", "
 EXCESS = 1.3
 #: A candidate must explain this share of the excess (on held-out blocks) to be named.
 EXPLAINED = 0.5
+#: ... and its augmented model must remove this share of the training runs' replay misfit above the
+#: noise (0.75: the misfit at least halves when noise is negligible).
+ACCEPTED = 0.75
 _BLOCK_S = 1.0
 
 
@@ -82,6 +86,8 @@ class Diagnosis:
     summary: str
     holdout: str
     parameter_pattern: dict = field(default_factory=dict)
+    sensor_check: dict = field(default_factory=dict)   # a_j = zdd + q_j'': excess per floor, best fits
+    selection: dict = field(default_factory=dict)      # training-run NRMSE of each re-simulated candidate
     augmented_xml: str = ""
     curves: dict = field(default_factory=dict, repr=False)
 
@@ -91,25 +97,13 @@ class Diagnosis:
             "std": self.std, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
             "summary": self.summary, "holdout": self.holdout,
             "excess_equation": self.excess_equation, "excess_replay": self.excess_replay,
-            "parameter_pattern": self.parameter_pattern,
+            "parameter_pattern": self.parameter_pattern, "sensor_check": self.sensor_check,
+            "selection": self.selection,
             "candidates": [asdict(c) for c in self.candidates],
         }
 
 
 # ----------------------------------------------------------------------------- helpers
-
-def _noise_sigma(run: RunData) -> dict[str, float]:
-    """White-noise RMS of every channel from the top of its spectrum (Hann window)."""
-    fs = run.sample_rate
-    n = run.n_samples
-    w = np.hanning(n)
-    gain = np.sqrt(np.sum(w ** 2))
-    X = np.fft.rfft(run.values * w[:, None], axis=0) / gain
-    f = np.fft.rfftfreq(n, 1 / fs)
-    band = (f > 0.25 * fs) & (f < 0.45 * fs)
-    level = np.sqrt(np.median(np.abs(X[band]) ** 2, axis=0) / np.log(2))
-    return dict(zip(run.channels, level))
-
 
 def _with_values(run: RunData, values: np.ndarray) -> RunData:
     return replace(run, values=values)
@@ -135,27 +129,38 @@ def _blocks(n: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
 
 def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndarray, train, test,
          noise_rss_test: float):
-    """LS of ``target`` on signature + confound columns on ``train``; score on ``test``."""
+    """LS of ``target`` on signature + confound columns on ``train``; score on ``test``.
+
+    A handful of columns over many samples: solved through the (scaled) normal equations of each
+    half, so every sum of squares below is a quadratic form of small Gram matrices.
+    """
     X = np.column_stack(columns + confounds)
-    scale = np.linalg.norm(X[train], axis=0)
+    Xtr, ytr, Xte, yte = X[train], target[train], X[test], target[test]
+    scale = np.linalg.norm(Xtr, axis=0)
     if np.any(scale == 0):
         return None
-    Xs = X / scale
-    coef, *_ = np.linalg.lstsq(Xs[train], target[train], rcond=None)
-    before = float(np.sum(target[test] ** 2))
-    after = float(np.sum((target[test] - Xs[test] @ coef) ** 2))
-    # Confounds alone: the part of the improvement that needs no mechanism.
-    base_coef, *_ = np.linalg.lstsq(Xs[train][:, len(columns):], target[train], rcond=None) \
-        if confounds else (np.zeros(0),)
-    base = float(np.sum((target[test] - Xs[test][:, len(columns):] @ base_coef) ** 2)) if confounds else before
-    if base <= 1.02 * noise_rss_test:
-        return coef[:len(columns)] / scale[:len(columns)], np.zeros(len(columns)), 0.0   # nothing to explain
-    explained = (base - after) / (base - noise_rss_test)
-    resid = target[train] - Xs[train] @ coef
-    dof = max(int(train.sum()) - X.shape[1], 1)
-    s2 = float(resid @ resid) / dof
-    cov = np.linalg.pinv(Xs[train].T @ Xs[train]) * s2
+    Xtr, Xte = Xtr / scale, Xte / scale
+    G, g, yy = Xtr.T @ Xtr, Xtr.T @ ytr, float(ytr @ ytr)
+    H, h, zz = Xte.T @ Xte, Xte.T @ yte, float(yte @ yte)
     k = len(columns)
+
+    def solve(idx):
+        return np.linalg.lstsq(G[np.ix_(idx, idx)], g[idx], rcond=1e-12)[0]
+
+    def test_rss(idx, c):
+        return max(zz - 2 * float(c @ h[idx]) + float(c @ H[np.ix_(idx, idx)] @ c), 0.0)
+
+    every = np.arange(X.shape[1])
+    coef = solve(every)
+    after = test_rss(every, coef)
+    # Confounds alone: the part of the improvement that needs no mechanism.
+    base = test_rss(every[k:], solve(every[k:])) if confounds else zz
+    if base <= 1.02 * noise_rss_test:
+        return coef[:k] / scale[:k], np.zeros(k), 0.0   # nothing to explain
+    explained = (base - after) / (base - noise_rss_test)
+    rss = max(yy - 2 * float(coef @ g) + float(coef @ G @ coef), 0.0)
+    dof = max(int(train.sum()) - X.shape[1], 1)
+    cov = np.linalg.pinv(G) * (rss / dof)
     return coef[:k] / scale[:k], np.sqrt(np.diag(cov)[:k]) / scale[:k], float(explained)
 
 
@@ -211,7 +216,7 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     for k, run in enumerate(train_runs):
         s = _signals(run, d, band)
         r = _floor_residual(result, s, run.added_mass)
-        sig = _noise_sigma(run)
+        sig = noise_sigma(run)
         rng = np.random.default_rng(k)
         noise = np.column_stack([rng.standard_normal(run.n_samples) * sig[c] for c in run.channels])
         sn = _signals(_with_values(run, noise), d, band)
@@ -239,14 +244,29 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     replay_model = nom if (experiment.structure is not None and not nom_mismatch) else result
     excess_rep, rep_candidates = _screen_replay(replay_model, train_runs, d, band)
     candidates += rep_candidates
-    if experiment.structure is not None:
-        candidates += _screen_flexible(_nominal_result(experiment.structure, result), train_runs, d, band, f_top)
+    # A flexibly attached mass, by replay: of the nominal model when the lab states one (the identified
+    # model has partly absorbed the attachment in the runs that carry it), else of the identified one.
+    candidates += _screen_flexible(nom if experiment.structure is not None else result, train_runs, d, band,
+                                   f_top)
     pattern = _damping_pattern(result, d)
     if pattern:
         candidates.append(pattern[0])
+    candidates = [c for c in candidates if _physical(c)]
+    # ---- the sensors against each other (a_j = zdd + q_j''), whatever the structure does
+    kin = kinematic_check(train_runs, d, f_top)
+    if kin is not None and kin.consistent:
+        # Consistent channels rule out a gain or a time shift on any of them.
+        candidates = [c for c in candidates if c.mechanism not in ("sensor_gain", "sensor_delay")]
     eq_mismatch = max(excess_eq.values()) > EXCESS
     rep_mismatch = max(excess_rep.values(), default=0) > EXCESS
-    if experiment.structure is not None and not nom_mismatch and rep_mismatch:
+    if kin is not None and not kin.consistent:
+        # Channels that contradict each other: a sensor fault, which also disturbs every model-based
+        # residual (so those cannot be trusted to name the physics).
+        fit = kin.best()
+        mech_k, params_k, std_k, explained_k = fit.verdict()
+        candidates.append(Candidate(mech_k, {"channel": fit.channel}, params_k, std_k, explained_k, "sensors"))
+        pool = [candidates[-1]]
+    elif experiment.structure is not None and not nom_mismatch and rep_mismatch:
         # Floors obey the nominal equations, yet replays from the table channel miss: the table channel.
         pool = [c for c in candidates if c.domain == "replay"]
     else:
@@ -259,18 +279,20 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     elif pattern:
         # A linear damper leaves no residual (the identified C absorbs it): the pattern decides.
         chosen = pattern[0]
-    elif eq_mismatch or rep_mismatch:
+    elif eq_mismatch or rep_mismatch or (kin is not None and not kin.consistent):
         chosen = "unexplained"
     else:
         chosen = None
     nominal = experiment.structure
-    ident_structure = _identified_structure(result, nominal)
-    linear_structure = ident_structure
+    linear_structure = _identified_structure(result, nominal)
     if chosen is None:
         mech, loc, params, std = "none", {}, {}, {}
     elif chosen == "unexplained":
         worst = max(excess_eq, key=excess_eq.get)
-        if max(excess_rep.values(), default=0) > max(excess_eq.values()):
+        if kin is not None and not kin.consistent:
+            worst = max(kin.excess, key=kin.excess.get)   # the floor whose sensors disagree most
+            loc = {"floor": int(worst[5:])}
+        elif max(excess_rep.values(), default=0) > max(excess_eq.values()):
             worst = max(excess_rep, key=excess_rep.get)
             loc = {"channel": worst}
         else:
@@ -281,40 +303,59 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     before = after = float("nan")
     curves: dict = {}
     xml = ""
-    if mech in ("coulomb_friction", "cubic_stiffness", "p_delta") and not ideal:
-        refit = _refit(mech, loc, params, train_runs, result, band, f_top)
-        if refit is not None:
-            result, params, std = refit
-            ident_structure = _identified_structure(result, nominal)
-    if mech == "flexible_added_mass" and nominal is not None:
-        # Found by replaying the nominal model (the identified one has absorbed part of the attachment's
-        # dynamics in the runs that carry it): augment the nominal model.
-        ident_structure = nominal
-    if mech == "extra_damper":
-        # Rayleigh part + the storey damper: from the pattern fit of the identified C when there is one,
-        # else the nominal Rayleigh coefficients.
-        if pattern and pattern[0].location == loc:
-            a_, b_, c_ = pattern[1]["coefficients"]
-            params = {"c": float(c_)}
-        elif nominal is not None:
-            a_, b_ = nominal.rayleigh_mu, nominal.rayleigh_kappa
-        else:
-            a_, b_ = ident_structure.rayleigh_mu, ident_structure.rayleigh_kappa
-        ident_structure = replace(ident_structure, rayleigh_mu=max(a_, 0.0), rayleigh_kappa=max(b_, 0.0))
-    if mech in ("sensor_delay", "sensor_gain", "sensor_bias"):
-        fixed = replace(train_exp, runs=tuple(_correct(r, mech, loc, params) for r in train_runs))
-        ident_structure = _identified_structure(identify(fixed), nominal)
-    mechanisms = _as_mechanisms(mech, loc, params)
+    selection: dict = {}
+    aug = _Augmenter(result, nominal, pattern, train_exp, band, f_top, ideal)
+    if isinstance(chosen, Candidate) and chosen.domain != "sensors" and replay:
+        # Screening ranks signatures on residuals; the choice among the plausible ones is made by
+        # re-simulation: each augmented model replays the training runs, and the lowest NRMSE wins.
+        shortlist = _shortlist(pool + ([pattern[0]] if pattern else []), chosen)
+        if len(shortlist) > 1:
+            base = aug.score(linear_structure, "none", {}, {}, ())
+            scored = []
+            for c in shortlist:
+                st, p_, s_, mechs = aug(c.mechanism, c.location, c.parameters, c.std)
+                scored.append((aug.score(st, c.mechanism, c.location, p_, mechs), c))
+            _, best_c = min(scored, key=lambda x: x[0])
+            selection = {"training_nrmse_linear": base,
+                         "training_nrmse": [{"mechanism": c.mechanism, "location": c.location,
+                                             "nrmse": sc_} for sc_, c in scored]}
+            mech, loc, params, std = best_c.mechanism, best_c.location, best_c.parameters, best_c.std
+    ident_structure, params, std, mechanisms = aug(mech, loc, params, std)
+    if replay and mech not in ("none", "unexplained"):
+        # Does the augmented model explain the mismatch?  Re-simulate the training runs: it must remove
+        # at least ACCEPTED of the misfit above the noise, else the best candidate is only partial.
+        lin_nrmse = aug.score(linear_structure, "none", {}, {}, ())
+        aug_nrmse = aug.score(ident_structure, mech, loc, params, mechanisms)
+        noise = aug.noise_nrmse()
+        share = _explained_share(lin_nrmse, aug_nrmse, noise)
+        selection.update({"training_nrmse_linear": lin_nrmse, "training_nrmse_augmented": aug_nrmse,
+                          "training_nrmse_noise": noise, "explained": share, "accepted_above": ACCEPTED})
+        if share < ACCEPTED:
+            selection["partial"] = {"mechanism": mech, "location": loc, "parameters": params}
+            mech, params, std, mechanisms = "unexplained", {}, {}, ()
+            ident_structure = linear_structure
     eval_run = hold if hold is not None else runs[-1]
     if replay:
         before, after, curves, xml = _replay_check(linear_structure, ident_structure, mech, loc, params,
-                                                   mechanisms, eval_run, d, band, f_top)
-    summary = _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, eval_run.name, hold)
+                                                   mechanisms, eval_run, d, band, f_top,
+                                                   static=ident_structure != nominal)
+    sensor_check = {} if kin is None else {
+        "relation": "a_j = zdd + q_j''", "band_hz": list(kin.band), "excess": kin.excess,
+        "consistent": kin.consistent, "fits": [asdict(f) for f in kin.fits[:3]]}
+    summary = _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, eval_run.name, hold,
+                       sensor_check, selection)
     return Diagnosis(mechanism=mech, location=loc, parameters=params, std=std, nrmse_before=before,
                      nrmse_after=after, excess_equation=excess_eq, excess_replay=excess_rep,
                      candidates=tuple(sorted(candidates, key=lambda c: -c.explained)[:8]), summary=summary,
                      holdout=eval_run.name if hold is not None else f"{eval_run.name} (no run held out)",
-                     parameter_pattern=pattern[1] if pattern else {}, augmented_xml=xml, curves=curves)
+                     parameter_pattern=pattern[1] if pattern else {}, sensor_check=sensor_check, selection=selection,
+                     augmented_xml=xml, curves=curves)
+
+
+def _physical(c: Candidate) -> bool:
+    """A passive rig: no negative damper, friction or weight (cubic stiffness may soften)."""
+    key = {"extra_damper": "c", "coulomb_friction": "force", "p_delta": "weight_per_height"}.get(c.mechanism)
+    return key is None or c.parameters.get(key, 0.0) > 0
 
 
 def _screen_equation(result, rows, d, noise_floor, f_top) -> list[Candidate]:
@@ -435,7 +476,7 @@ def _screen_replay(result, runs, d, band):
         sims.append(sim)
         dsims.append(np.gradient(sim, 1 / fs, axis=0))
         steps.append(_lowpass(_replay_outputs(result, run, d, np.ones(run.n_samples))["a"], fs, band))
-        sig = _noise_sigma(run)
+        sig = noise_sigma(run)
         gain = math.sqrt(2 * band.high / fs) if band.high else 1.0
         noise.append(np.array([sig[f"a{j + 1}"] for j in range(d)]) * gain)
     target = np.concatenate(target)
@@ -494,23 +535,65 @@ def _screen_flexible(result, runs, d, band, f_top) -> list[Candidate]:
             continue
         meas = [_lowpass(r.group("a", d), fs, band) for r in loaded]
         rigid = [_lowpass(_replay_outputs(result, r, d)["a"], fs, band) for r in loaded]
-        sig = [_noise_sigma(r) for r in loaded]
+        sig = [noise_sigma(r) for r in loaded]
         gain = math.sqrt(2 * band.high / fs) if band.high else 1.0
         noise = sum(r.n_samples * sum((s[f"a{i + 1}"] * gain) ** 2 for i in range(d)) for r, s in zip(loaded, sig))
         base = sum(float(np.sum((m - y) ** 2)) for m, y in zip(meas, rigid))
         if base <= 1.02 * noise:
             continue
-        best = None
-        for f_a in np.geomspace(1.1 * f_top, min(0.4 * fs, 20 * f_top), 28):
-            rss = sum(float(np.sum((m - _lowpass(_flex_replay(result, r, d, j, f_a), fs, band)) ** 2))
-                      for m, r in zip(meas, loaded))
-            if best is None or rss < best[1]:
-                best = (f_a, rss)
-        f_a, rss = best
-        explained = (base - rss) / (base - noise)
-        out.append(Candidate("flexible_added_mass", {"floor": j + 1},
-                             {"frequency": float(f_a), "damping_ratio": 0.05}, {}, float(explained), "replay"))
-    return out
+        def rss(f_a, zeta, j=j, meas=meas, loaded=loaded):   # bound now: refined after the loop
+            return sum(float(np.sum((m - _lowpass(_flex_replay(result, r, d, j, f_a, zeta), fs, band)) ** 2))
+                       for m, r in zip(meas, loaded))
+
+        grid = [(f_a, rss(f_a, 0.05)) for f_a in np.geomspace(1.1 * f_top, min(0.4 * fs, 20 * f_top), 28)]
+        f_a, best = min(grid, key=lambda x: x[1])
+        n_eff = sum(r.n_samples for r in loaded) * d * min(1.0, 2 * (band.high or fs / 2) / fs)
+        out.append((best, j, f_a, base, noise, rss, n_eff))
+    if not out:
+        return []
+    # The attachment's frequency and damping, refined where the grid fits best.
+    _, j, f_a, base, noise, rss, n_eff = min(out, key=lambda x: x[0])
+    params, std, best = _refine_oscillator(rss, f_a, 0.05, n_eff)
+    explained = (base - best) / (base - noise)
+    cands = [Candidate("flexible_added_mass", {"floor": j + 1}, params, std, float(explained), "replay")]
+    for b, k, f_k, base_k, noise_k, _, _ in out:
+        if k != j:
+            cands.append(Candidate("flexible_added_mass", {"floor": k + 1}, {"frequency": float(f_k),
+                                   "damping_ratio": 0.05}, {}, float((base_k - b) / (base_k - noise_k)), "replay"))
+    return cands
+
+
+def _refine_oscillator(rss, f0: float, zeta0: float, n_eff: float):
+    """Least-squares (frequency, damping ratio) of an attachment from the grid's best point.
+
+    Nelder-Mead on (log f, log zeta); standard errors from the curvature of the misfit,
+    ``cov = 2 s^2 H^-1`` with ``s^2 = rss / n_eff``.  Returns (parameters, std, rss at the optimum).
+    """
+    import scipy.optimize
+
+    def cost(x):
+        return rss(math.exp(x[0]), min(math.exp(x[1]), 2.0))
+
+    x0 = np.array([math.log(f0), math.log(zeta0)])
+    res = scipy.optimize.minimize(cost, x0, method="Nelder-Mead",
+                                  options={"xatol": 1e-3, "fatol": 1e-9 * cost(x0), "maxfev": 80})
+    x = res.x if res.fun < cost(x0) else x0
+    f, zeta = math.exp(x[0]), min(math.exp(x[1]), 2.0)
+    q0 = cost(x)
+    h = np.array([0.002, 0.02])   # steps in log f, log zeta
+    H = np.zeros((2, 2))
+    for a in range(2):
+        for b in range(2):
+            ea, eb = np.eye(2)[a] * h[a], np.eye(2)[b] * h[b]
+            H[a, b] = (cost(x + ea + eb) - cost(x + ea - eb) - cost(x - ea + eb) + cost(x - ea - eb)) / (4 * h[a] * h[b])
+    std = {}
+    try:
+        cov = 2 * (q0 / max(n_eff - 2, 1)) * np.linalg.inv(H)
+        if np.all(np.diag(cov) > 0):
+            std = {"frequency": float(f * math.sqrt(cov[0, 0])), "damping_ratio": float(zeta * math.sqrt(cov[1, 1]))}
+    except np.linalg.LinAlgError:
+        pass
+    return {"frequency": float(f), "damping_ratio": float(zeta)}, std, float(q0)
 
 
 def _damping_pattern(result, d):
@@ -569,19 +652,27 @@ _PARAM = {"coulomb_friction": "force", "cubic_stiffness": "k3", "p_delta": "weig
           "flexible_added_mass": "amplitude"}
 
 
-def _refit(mech, loc, params, runs, result, band, f_top):
-    """Errors-in-variables fit of the linear model together with the mechanism's force."""
+def _refit(mech, loc, params, runs, result, band, f_top, simulated=None):
+    """Errors-in-variables fit of the linear model together with the mechanism's force.
+
+    ``simulated``: per run, the channels of the augmented model replayed from the run's
+    table acceleration; when given, the force's signature is computed from them (noise-free
+    instruments for the nonlinear term) instead of from the measured signals.
+    """
     from .eiv import fit_eiv
     d = result.storeys
     forces = []
-    for run in runs:
-        if not run.has("q1") and mech != "flexible_added_mass":
-            return None
-        # The signature is computed from measured signals: a band just above the modes keeps sensor
-        # noise from flipping the sign of small drift velocities (which would shrink the fitted force).
-        s = _signals(run, d, Prefilter(high=1.5 * f_top) if band.high else band)
-        if s["a"].shape[0] != run.n_samples:
-            return None
+    for i, run in enumerate(runs):
+        if simulated is not None:
+            s = simulated[i]
+        else:
+            if not run.has("q1") and mech != "flexible_added_mass":
+                return None
+            # From measured signals: a band just above the modes keeps sensor noise from flipping
+            # the sign of small drift velocities (which would shrink the fitted force).
+            s = _signals(run, d, Prefilter(high=1.5 * f_top) if band.high else band)
+            if s["a"].shape[0] != run.n_samples:
+                return None
         forces.append(_signature(mech, loc, params, run, s, d))
     lay = result.layout
     theta0 = np.concatenate([result.theta, [params[_PARAM[mech]]]])
@@ -629,39 +720,238 @@ def _as_mechanisms(mech, loc, params) -> tuple[Mechanism, ...]:
     return ()
 
 
-def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, run, d, band, f_top):
-    """NRMSE of the held-out run: linear model vs. augmented model, both in MuJoCo."""
+class _Augmenter:
+    """Builds the augmented model of a candidate and scores it by re-simulating the training runs."""
+
+    def __init__(self, result, nominal, pattern, train_exp, band, f_top, ideal):
+        self.result, self.nominal, self.pattern = result, nominal, pattern
+        self.train_exp, self.band, self.f_top, self.ideal = train_exp, band, f_top, ideal
+        self.d = result.storeys
+        self._replays: dict = {}
+
+    def __call__(self, mech, loc, params, std):
+        """(structure, parameters, std, mechanisms) of the model with ``mech`` added (memoised)."""
+        key = (mech, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True))
+        if key not in self._replays:
+            self._replays[key] = self._build(mech, loc, params, std)
+        return self._replays[key]
+
+    def _build(self, mech, loc, params, std):
+        result, nominal, runs = self.result, self.nominal, self.train_exp.runs
+        structure = _identified_structure(result, nominal)
+        if mech in ("coulomb_friction", "cubic_stiffness", "p_delta") and not self.ideal:
+            refit = _refit(mech, loc, params, runs, result, self.band, self.f_top)
+            if refit is not None:
+                refitted, params, std = refit
+                structure = _identified_structure(refitted, nominal)
+        if mech in ("coulomb_friction", "cubic_stiffness", "p_delta") and not self.ideal:
+            # The force's size by re-simulation, on the refitted linear model and on the nominal one
+            # (a friction that sticks a storey leaves the linear fit poorly determined); the pair that
+            # replays best wins.
+            bases = [structure] + ([nominal] if nominal is not None else [])
+            structure = min(bases, key=lambda b: self._misfit(b, mech, loc, params))
+            params, sim_std = self._resimulate(structure, mech, loc, params)
+            # the search's std is conditional on the linear model; the refit's marginal std carries
+            # the linear model's own uncertainty: report both, in quadrature
+            std = {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
+        if mech == "flexible_added_mass" and nominal is not None:
+            # Found by replaying the nominal model (the identified one has absorbed part of the attachment's
+            # dynamics in the runs that carry it): augment the nominal model.
+            structure = nominal
+        if mech == "extra_damper":
+            # Rayleigh part + the storey damper: from the pattern fit of the identified C when there is one,
+            # else the nominal Rayleigh coefficients.
+            pattern = self.pattern
+            if pattern and pattern[0].location == loc:
+                a_, b_, c_ = pattern[1]["coefficients"]
+                params = {"c": float(c_)}
+            elif nominal is not None:
+                a_, b_ = nominal.rayleigh_mu, nominal.rayleigh_kappa
+            else:
+                a_, b_ = structure.rayleigh_mu, structure.rayleigh_kappa
+            structure = replace(structure, rayleigh_mu=max(a_, 0.0), rayleigh_kappa=max(b_, 0.0))
+        if mech in ("sensor_delay", "sensor_gain", "sensor_bias"):
+            fixed = replace(self.train_exp, runs=tuple(_correct(r, mech, loc, params) for r in runs))
+            structure = _identified_structure(identify(fixed), nominal)
+        return structure, params, std, _as_mechanisms(mech, loc, params)
+
+    def _search_run(self) -> RunData:
+        """The training run with the most added mass (the strongest test of a storey force)."""
+        return max(self.train_exp.runs, key=lambda r: float(np.sum(r.added_mass)))
+
+    def _misfit(self, structure, mech, loc, params) -> float:
+        """Normalised sum of squares of the search run replayed through the augmented model:
+        sum over channels and samples of ((measured - simulated) / RMS(measured))^2."""
+        run = self._search_run()
+        try:
+            sim, measured = _augmented_replay(structure, mech, loc, params, _as_mechanisms(mech, loc, params),
+                                              run, self.d, structure != self.nominal)
+        except (SimulationError, ModelError):   # e.g. a storey made unstable: not a candidate fit
+            return float("inf")
+        fs = run.sample_rate
+        q = 0.0
+        for g in measured:
+            m = _lowpass(measured[g], fs, self.band)
+            q += float(np.sum(((m - _lowpass(sim[g], fs, self.band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
+        return q
+
+    def _resimulate(self, structure, mech, loc, params) -> tuple[dict, dict]:
+        """Output-error refinement of a nonlinear storey force's size by re-simulation.
+
+        The regression estimates it from measured drift velocities and drifts, whose noise
+        pulls it towards zero (a noisy velocity flips sign around its zero crossings); a
+        simulation has no such noise.  A bounded scalar search (within a factor 2 of the
+        regression) of :meth:`_misfit` on one training run.  The standard error comes from the
+        misfit's curvature at the minimum, ``var = 2 s^2 / Q''`` with ``s^2`` the misfit per
+        independent sample (band-limited channels), so it grows with any misfit the model leaves.
+
+        Returns
+        -------
+        params, std : the refined parameters and their standard errors.
+        """
+        import scipy.optimize
+        key = _PARAM[mech]
+        p0 = float(params[key])
+        if not np.isfinite(p0) or p0 == 0:
+            return params, {}
+        seen: dict[float, float] = {}
+
+        def cost(x):
+            x = float(x)
+            if x not in seen:
+                seen[x] = self._misfit(structure, mech, loc, dict(params, **{key: x}))
+            return seen[x]
+
+        lo, hi = sorted((0.5 * p0, 2.0 * p0))
+        res = scipy.optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded",
+                                             options={"xatol": 0.01 * abs(p0), "maxiter": 10})
+        best = float(res.x) if res.fun < cost(p0) else p0
+        step = 0.02 * abs(best)
+        q0, qm, qp = cost(best), cost(best - step), cost(best + step)
+        curvature = (qp - 2 * q0 + qm) / step ** 2
+        if curvature > 0:   # the search stops within its tolerance: finish with the parabola's vertex
+            vertex = best - step * (qp - qm) / (2 * (qp - 2 * q0 + qm))
+            if abs(vertex - best) < step and cost(vertex) < q0:
+                best, q0 = vertex, cost(vertex)
+        run = self._search_run()
+        n_channels = sum(1 for g in ("a", "q") if run.has(f"{g}1")) * self.d
+        band = self.band.high or run.sample_rate / 2
+        n_eff = n_channels * run.n_samples * min(1.0, 2 * band / run.sample_rate)
+        std = float(np.sqrt(2 * (q0 / max(n_eff - 1, 1)) / curvature)) if curvature > 0 else float("inf")
+        return dict(params, **{key: best}), {key: std}
+
+    def score(self, structure, mech, loc, params, mechanisms) -> float:
+        """Mean NRMSE of the training runs replayed through the model (band-limited channels)."""
+        key = ("score", repr(structure), mech, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True))
+        if key not in self._replays:
+            out = []
+            for run in self.train_exp.runs:
+                try:
+                    sim, measured = _augmented_replay(structure, mech, loc, params, mechanisms, run, self.d,
+                                                      structure != self.nominal)
+                except (SimulationError, ModelError):   # an unstable augmented model explains nothing
+                    out.append(float("inf"))
+                    break
+                out.append(_nrmse(sim, measured, run.sample_rate, self.band))
+            self._replays[key] = float(np.mean(out))
+        return self._replays[key]
+
+    def noise_nrmse(self) -> float:
+        """The NRMSE sensor noise alone leaves in :meth:`score` (white levels, band-limited)."""
+        out = []
+        for run in self.train_exp.runs:
+            fs = run.sample_rate
+            gain = math.sqrt(2 * self.band.high / fs) if self.band.high else 1.0
+            sig = noise_sigma(run)
+            for g in ("a", "q"):
+                if not run.has(f"{g}1"):
+                    continue
+                m = _lowpass(run.group(g, self.d), fs, self.band)
+                rms = np.sqrt(np.mean(m ** 2, axis=0))
+                out += [sig[f"{g}{j + 1}"] * gain / rms[j] for j in range(self.d)]
+        return float(np.mean(out))
+
+
+def _explained_share(before: float, after: float, noise: float) -> float:
+    """Share of the misfit power above the noise that a model removes (NRMSEs in, 1 = all)."""
+    excess = before ** 2 - noise ** 2
+    if excess <= 0:
+        return 1.0
+    return float(1.0 - max(after ** 2 - noise ** 2, 0.0) / excess)
+
+
+def _shortlist(pool, chosen, *, size=3, floor=0.25) -> list[Candidate]:
+    """The screened candidates worth re-simulating: the chosen one and the best few other
+    (mechanism, location) pairs that explain at least ``floor`` of the excess."""
+    out, seen = [chosen], {(chosen.mechanism, json.dumps(chosen.location, sort_keys=True))}
+    for c in sorted(pool, key=lambda c: -c.explained):
+        key = (c.mechanism, json.dumps(c.location, sort_keys=True))
+        if key in seen or c.explained < floor or c.mechanism.startswith("sensor_"):
+            continue
+        seen.add(key)
+        out.append(c)
+        if len(out) == size:
+            break
+    return out
+
+
+def _nrmse(sim, meas, fs, band) -> float:
+    """Mean over channels of RMS(measured - simulated) / RMS(measured), band-limited."""
+    errs = []
+    for g in meas:
+        m = _lowpass(meas[g], fs, band)
+        s = _lowpass(sim[g], fs, band)
+        errs.append(np.sqrt(np.mean((m - s) ** 2, axis=0)) / np.sqrt(np.mean(m ** 2, axis=0)))
+    return float(np.mean(np.concatenate(errs)))
+
+
+def _augmented_replay(structure, mech, loc, params, mechanisms, run, d, static=True):
+    """Replay ``run`` through the augmented model: (simulated, measured-and-corrected) channels.
+
+    ``static``: for ``p_delta``, whether ``structure`` already holds the geometric stiffness of
+    the floors' own weight (an identified model does, a nominal one does not).
+    """
     from .simulate import replay
-    fs = run.sample_rate
-    zdd = run["zdd"].copy()
     measured = {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
+    zdd = run["zdd"].copy()
     if mech == "p_delta":
         # The identified K already holds the reference run's geometric stiffness; the MJCF mechanism
         # subtracts g (m_above + dm_above) / h, so add the static part back: net -g dm_above / h.
-        s = loc["storey"] - 1
-        h_eff = 1.0 / params["weight_per_height"] if params["weight_per_height"] > 0 else float("inf")
-        k = list(structure.storey_stiffness)
-        k[s] += rig.GRAVITY * sum(structure.masses[s:]) / h_eff
-        structure = replace(structure, storey_stiffness=tuple(k), storey_heights=tuple(
-            h_eff if i == s else h for i, h in enumerate(structure.storey_heights)))
-    corrected = dict(measured)
+        structure = _pdelta_structure(structure, loc, params, static)
     if mech in ("sensor_delay", "sensor_gain", "sensor_bias"):
         fixed = _correct(run, mech, loc, params)
         zdd = fixed["zdd"]
-        corrected = {g: fixed.group(g, d) for g in measured}
+        measured = {g: fixed.group(g, d) for g in measured}
+    return replay(structure, mechanisms, run, zdd), measured
+
+
+def _pdelta_structure(structure, loc, params, static=True):
+    """The structure whose MJCF ``p_delta`` (factor 1) loses ``weight_per_height x g x weight above``:
+    the storey's height is set to 1 / weight_per_height; with ``static`` the loss of the floors' own
+    weight, which an identified stiffness already holds, is added back."""
+    s = loc["storey"] - 1
+    h_eff = 1.0 / params["weight_per_height"] if params["weight_per_height"] > 0 else float("inf")
+    k = list(structure.storey_stiffness)
+    if static:
+        k[s] += rig.GRAVITY * sum(structure.masses[s:]) / h_eff
+    return replace(structure, storey_stiffness=tuple(k), storey_heights=tuple(
+        h_eff if i == s else h for i, h in enumerate(structure.storey_heights)))
+
+
+def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, run, d, band, f_top, static=True):
+    """NRMSE of the held-out run: linear model vs. augmented model, both in MuJoCo."""
+    from .simulate import replay
+    fs = run.sample_rate
+    measured = {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
     lin = replay(linear_structure, (), run, run["zdd"])
-    aug = replay(structure, mechanisms, run, zdd)
-
-    def nrmse(sim, meas):
-        errs = []
-        for g in meas:
-            m = _lowpass(meas[g], fs, band)
-            s = _lowpass(sim[g], fs, band)
-            errs.append(np.sqrt(np.mean((m - s) ** 2, axis=0)) / np.sqrt(np.mean(m ** 2, axis=0)))
-        return float(np.mean(np.concatenate(errs)))
-
-    before = nrmse(lin, measured)
-    after = nrmse(aug, corrected) if (mechanisms or mech.startswith("sensor")) else before
+    before = _nrmse(lin, measured, fs, band)
+    if mechanisms or mech.startswith("sensor"):
+        aug, corrected = _augmented_replay(structure, mech, loc, params, mechanisms, run, d, static)
+        after = _nrmse(aug, corrected, fs, band)
+    else:
+        aug, after = lin, before
+    if mech == "p_delta":
+        structure = _pdelta_structure(structure, loc, params, static)
     spec = rig.build_spec(structure, run.added_mass, timestep=1 / fs, name="augmented",
                           mechanisms=mechanisms)
     spec.compiler.saveinertial = True
@@ -669,12 +959,25 @@ def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, ru
     return before, after, curves, spec.to_xml()
 
 
-def _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, hold) -> str:
+def _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, hold, sensor_check,
+             selection) -> str:
     worst = max(excess_eq, key=excess_eq.get)
     lines = ["Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
              "Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
+    if sensor_check:
+        verdict = "consistent" if sensor_check["consistent"] else "INCONSISTENT"
+        lines.append("Sensors against each other (a = zdd + q''): " + ", ".join(
+            f"{k} {v:.2f}x" for k, v in sensor_check["excess"].items()) + f" of noise ({verdict}).")
     if mech == "none":
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
+    elif mech == "unexplained" and "partial" in selection:
+        part = selection["partial"]
+        lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "
+                     f"{part['mechanism'].replace('_', ' ')} at {json.dumps(part['location'])}, removes only "
+                     f"{100 * max(selection['explained'], 0):.0f} % of the training runs' misfit above noise "
+                     f"(NRMSE {100 * selection['training_nrmse_linear']:.2f} % -> "
+                     f"{100 * selection['training_nrmse_augmented']:.2f} %, noise alone "
+                     f"{100 * selection['training_nrmse_noise']:.2f} %); the model is left linear.")
     elif mech == "unexplained":
         lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
                      f"explains at least {int(EXPLAINED * 100)} % of it.")

@@ -30,7 +30,7 @@ from .errors import ModelError
 from .scenario import Structure
 
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
-           "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback"]
+           "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -49,12 +49,13 @@ GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
 #: acceleration by about its inverse (1e-10 relative, below RK4's error).
 TABLE_INERTIA_RATIO = 1e10
 
-_CALLBACK_MECHANISMS = ("coulomb_friction", "cubic_stiffness")
+#: Storey forces the MJCF cannot express: the simulator applies them in a control callback.
+CALLBACK_MECHANISMS = ("coulomb_friction", "cubic_stiffness", "stiffness_loss")
 
 
 def needs_callback(mechanisms) -> bool:
     """True when ``mechanisms`` include storey forces the MJCF cannot express."""
-    return any(m.type in _CALLBACK_MECHANISMS for m in mechanisms)
+    return any(m.type in CALLBACK_MECHANISMS for m in mechanisms)
 
 
 def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
@@ -75,7 +76,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         damping), ``p_delta`` (storey tendon stiffness reduced by ``factor`` x
         g x (mass above) / height), ``flexible_added_mass`` (the added mass on
         its own slide joint with a spring and damper).  The nonlinear storey
-        forces (``coulomb_friction``, ``cubic_stiffness``) are applied by the
+        forces (``coulomb_friction``, ``cubic_stiffness``, ``stiffness_loss``) are applied by the
         simulator in a control callback (:func:`storey_forces`,
         :func:`needs_callback`).
 
@@ -184,13 +185,19 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
 FRICTION_SMOOTHING = 5e-4
 
 
-def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray) -> np.ndarray:
-    """Nonlinear storey shear forces (N) of ``coulomb_friction`` and ``cubic_stiffness``.
+def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, time: float = 0.0,
+                  structure: Structure | None = None) -> np.ndarray:
+    """Storey shear forces (N) the MJCF cannot express: ``coulomb_friction``,
+    ``cubic_stiffness`` and ``stiffness_loss``.
 
     Parameters
     ----------
     drift, drift_velocity : ndarray, shape (..., d)
         Storey drifts ``q_i - q_(i-1)`` (m) and their rates (m/s).
+    time : float
+        Time since the run started (s), for ``stiffness_loss``.
+    structure : Structure, optional
+        The storey stiffnesses ``stiffness_loss`` takes its fraction of.
 
     Returns
     -------
@@ -204,6 +211,10 @@ def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray) -> 
             f[..., s] += mech.get("force") * np.tanh(drift_velocity[..., s] / FRICTION_SMOOTHING)
         elif mech.type == "cubic_stiffness":
             f[..., s] += mech.get("k3") * drift[..., s] ** 3
+        elif mech.type == "stiffness_loss" and time >= mech.get("time"):
+            if structure is None:
+                raise ModelError("stiffness_loss needs the structure's storey stiffnesses")
+            f[..., s] -= mech.get("fraction") * structure.storey_stiffness[s] * drift[..., s]
     return f
 
 

@@ -166,6 +166,9 @@ MECHANISMS = {
     "extra_damper": ("storey", ("c",)),                    # N*s/m, a viscous damper across the storey
     "p_delta": ("storey", ("factor",)),                    # 1 = full gravity P-Delta of the weight above
     "flexible_added_mass": ("floor", ("frequency", "damping_ratio")),  # Hz, 1: added mass on a spring
+    # Outside the diagnosis library (to test its "unexplained" verdict): a storey connection that
+    # slips during the strong motion of every run, losing `fraction` of its stiffness from `time` (s).
+    "stiffness_loss": ("storey", ("fraction", "time")),
 }
 
 
@@ -455,6 +458,8 @@ def _parse_truth(tab: Table, storeys: int) -> tuple[Mechanism, ...]:
         params = tuple((n, m.number(n)) for n in names)
         if kind == "flexible_added_mass" and not (params[0][1] > 0 and params[1][1] >= 0):
             raise m.error("frequency", "a positive frequency (Hz) and a damping_ratio >= 0")
+        if kind == "stiffness_loss" and not (0 < params[0][1] <= 1 and params[1][1] >= 0):
+            raise m.error("fraction", "a fraction in (0, 1] of the storey stiffness and a time >= 0 (s)")
         m.finish()
         out.append(Mechanism(kind, loc, params))
     tab.finish()

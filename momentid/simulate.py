@@ -53,19 +53,45 @@ def ground_motion_of(scenario: Scenario) -> GroundMotion:
 
 
 class _StoreyForces:
-    """Control callback applying the nonlinear storey forces of ``mechanisms``
-    (those the MJCF cannot express) to the floor joints at every RK4 stage."""
+    """Control callback applying the storey forces of ``mechanisms`` that the MJCF cannot
+    express (:func:`momentid.model.storey_forces`) to the floor joints at every RK4 stage.
 
-    def __init__(self, model: mujoco.MjModel, mechanisms):
-        self.mechanisms = tuple(mechanisms)
+    Called about 4 times a step, so it works on Python floats: each mechanism's storey is
+    read from two joints and pushes on two, with the laws of ``storey_forces`` (a test holds
+    the two equal)."""
+
+    def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
+        self.mechanisms = tuple(m for m in mechanisms if m.type in rig.CALLBACK_MECHANISMS)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
-        self.floor_dofs = np.array([model.jnt_dofadr[model.joint(f"q{i + 1}").id] for i in range(d)])
+        dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
+        self.floor_dofs = np.array(dofs)
+        self.terms = []
+        for m in self.mechanisms:
+            s = m.location - 1
+            below = dofs[s - 1] if s > 0 else -1
+            k = (structure.storey_stiffness[s] if structure is not None and m.type == "stiffness_loss"
+                 else None)
+            if m.type == "stiffness_loss" and k is None:
+                raise SimulationError("stiffness_loss needs the structure's storey stiffnesses")
+            self.terms.append((m.type, dofs[s], below, dict(m.parameters), k))
 
     def __call__(self, model, data) -> None:
-        q = data.qpos[self.floor_dofs]
-        v = data.qvel[self.floor_dofs]
-        f = rig.storey_forces(self.mechanisms, rig.drifts(q), rig.drifts(v))
-        data.qfrc_applied[self.floor_dofs] = rig.storey_to_floor(f)
+        qpos, qvel, out = data.qpos, data.qvel, data.qfrc_applied
+        out[self.floor_dofs] = 0.0
+        for kind, top, below, p, k in self.terms:
+            x = qpos[top] - (qpos[below] if below >= 0 else 0.0)
+            if kind == "coulomb_friction":
+                v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
+                f = p["force"] * math.tanh(v / rig.FRICTION_SMOOTHING)
+            elif kind == "cubic_stiffness":
+                f = p["k3"] * x * x * x
+            elif data.time >= p["time"]:   # stiffness_loss
+                f = -p["fraction"] * k * x
+            else:
+                continue
+            out[top] -= f               # the storey resists its drift on the floor above it
+            if below >= 0:
+                out[below] += f
 
 
 def _initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np.ndarray:
@@ -84,7 +110,7 @@ def _jerk(nodes: np.ndarray, h: float) -> np.ndarray:
 
 
 def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int, index: np.ndarray,
-          *, mechanisms=(), progress: Callable[[int], None] | None = None
+          *, mechanisms=(), structure=None, progress: Callable[[int], None] | None = None
           ) -> tuple[np.ndarray, list[tuple[str, int]]]:
     """Roll ``model`` out from ``state`` under the table jerk sequence.
 
@@ -110,7 +136,7 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     out = np.empty((n_steps // every, len(index)))
     data = mujoco.MjData(model)
     chunk = every * max(1, _CHUNK_STEPS // every)
-    callback = _StoreyForces(model, mechanisms) if rig.needs_callback(mechanisms) else None
+    callback = _StoreyForces(model, mechanisms, structure) if rig.needs_callback(mechanisms) else None
     warnings: dict[str, int] = {}
     with _control_callback(callback):
         for start in range(0, n_steps, chunk):
@@ -163,7 +189,7 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     layout = rig.sensor_layout(model)
     index = np.array([layout[c] for c in channels])
     out, warnings = _roll(model, state, _jerk(nodes, h), sub, index, mechanisms=scenario.truth,
-                          progress=progress)
+                          structure=scenario.structure, progress=progress)
     _check_run(warnings, out, scenario, run)
     if scenario.truth:   # the recording must not reveal the hidden physics: attach the nominal rig
         spec = rig.build_spec(scenario.structure, run.added_mass, timestep=scenario.timestep,
@@ -424,7 +450,7 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     index = np.array([layout[c] for c in names])
     nodes = np.append(zdd, zdd[-1])            # the table holds its last acceleration
     out, warnings = _roll(model, _initial_state(model, 0.0, 0.0, nodes[0]), _jerk(nodes, h), 1, index,
-                          mechanisms=mechanisms)
+                          mechanisms=mechanisms, structure=structure)
     if warnings or not np.all(np.isfinite(out)):
         raise SimulationError(
             f"replay of run {run.name!r}: MuJoCo warnings {warnings} or a diverging response: expected "

@@ -27,6 +27,7 @@ CASES = {   # rig -> (mechanism, location)
     "bias_a2": ("sensor_bias", {"channel": "a2"}),
     "gain_zdd": ("sensor_gain", {"channel": "zdd"}),
     "flexible_floor3": ("flexible_added_mass", {"floor": 3}),
+    "slip_storey2": ("unexplained", {"storey": 2}),   # physics outside the library
 }
 
 
@@ -45,28 +46,49 @@ def recordings(tmp_path_factory):
     return get
 
 
+@pytest.fixture(scope="module")
+def diagnoses(recordings):
+    cache = {}
+
+    def get(name):
+        if name not in cache:
+            cache[name] = diagnose(mi.read_recording(recordings(name)))
+        return cache[name]
+    return get
+
+
 @pytest.mark.parametrize("name", list(CASES))
-def test_blind_diagnosis(recordings, name):
+def test_blind_diagnosis(recordings, diagnoses, name):
     experiment = mi.read_recording(recordings(name))
     # Nothing in the recording gives the answer away.
     assert "truth" not in experiment.scenario_text and "sensors.channel" not in experiment.scenario_text
     assert all("faults" not in str(experiment.scenario.get("sensors", {})) for _ in [0])
-    diag = diagnose(experiment)
+    diag = diagnoses(name)
     mechanism, location = CASES[name]
     assert (diag.mechanism, diag.location) == (mechanism, location), diag.summary
-    if mechanism == "none":
+    if mechanism in ("none", "unexplained"):   # the model is left linear
         assert diag.nrmse_after == diag.nrmse_before
     else:
         # The target: held-out NRMSE at least 3x lower after augmentation.
         assert diag.nrmse_after * 3 <= diag.nrmse_before, diag.summary
 
 
-def test_fitted_parameters_and_uncertainty(recordings):
-    diag = diagnose(mi.read_recording(recordings("cubic_storey1")))
+def test_fitted_parameters_and_uncertainty(diagnoses):
+    diag = diagnoses("cubic_storey1")
     k3, err = diag.parameters["k3"], diag.std["k3"]
-    # Truth 3.5e7 N/m^3; the EIV refit's own standard error is ~1e4, but signature noise and the
-    # smoothing of the fit leave a few-percent model error: accept 5 %.
-    assert abs(k3 - 3.5e7) < 0.05 * 3.5e7 and 0 < err < 0.05 * 3.5e7
+    # Truth 3.5e7 N/m^3, refined by re-simulation (observed within 0.2 %); its std (~1e4) covers
+    # noise, not the small bias of replaying from a noisy table channel: accept 2 %.
+    assert abs(k3 - 3.5e7) < 0.02 * 3.5e7 and 0 < err < 0.02 * 3.5e7
+    diag = diagnoses("friction_storey2")
+    force, err = diag.parameters["force"], diag.std["force"]
+    # Truth 0.3 N; the regression alone gave 0.25 N (noisy drift velocities), re-simulation
+    # observed 0.29995 +/- 0.002: within 2 % and within 3 std.
+    assert abs(force - 0.3) < 0.02 * 0.3 and abs(force - 0.3) < 3 * err
+    diag = diagnoses("flexible_floor3")
+    # Truth 6 Hz, damping ratio 0.05 (see the scenario); replays from a noisy table channel bias the
+    # damping ratio up by a few percent: 1 % on the frequency, 15 % on the damping ratio.
+    assert abs(diag.parameters["frequency"] - 6.0) < 0.06 and abs(diag.parameters["damping_ratio"] - 0.05) < 0.0075
+    assert set(diag.std) == {"frequency", "damping_ratio"}
 
 
 def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):

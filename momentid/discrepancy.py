@@ -37,6 +37,7 @@ import scipy.signal
 from . import model as rig
 from .analytic import modal_properties, shear_stiffness
 from .consistency import kinematic_check, noise_sigma
+from .locate import locate
 from .data import Experiment, RunData, json_safe
 from .errors import IdentificationError, ModelError, SimulationError
 from .identify import damping_models, identify
@@ -88,6 +89,7 @@ class Diagnosis:
     parameter_pattern: dict = field(default_factory=dict)
     sensor_check: dict = field(default_factory=dict)   # a_j = zdd + q_j'': excess per floor, best fits
     selection: dict = field(default_factory=dict)      # training-run NRMSE of each re-simulated candidate
+    localisation: dict = field(default_factory=dict)   # storey, runs, time windows, amplitude, bands, shape
     augmented_xml: str = ""
     curves: dict = field(default_factory=dict, repr=False)
 
@@ -98,7 +100,7 @@ class Diagnosis:
             "summary": self.summary, "holdout": self.holdout,
             "excess_equation": self.excess_equation, "excess_replay": self.excess_replay,
             "parameter_pattern": self.parameter_pattern, "sensor_check": self.sensor_check,
-            "selection": self.selection,
+            "selection": self.selection, "localisation": self.localisation,
             "candidates": [asdict(c) for c in self.candidates],
         }
 
@@ -238,6 +240,11 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
         nom_mismatch = bool(np.max(nom_rms / noise_floor) > EXCESS)
         for c in _screen_equation(nom, nrows, d, noise_floor, f_top):
             candidates.append(replace(c, domain="equation (nominal model)"))
+    # ---- where and how: the storey shear residual by storey, run, time, amplitude, band and shape
+    # (the nominal model's when it shows the mismatch: nothing absorbed by a fit)
+    freqs = result.modes().frequency
+    f_low = float(np.min(freqs)) if np.all(np.isfinite(freqs)) else 0.5 * f_top
+    where = locate(nrows if experiment.structure is not None and nom_mismatch else rows, d, (f_low, f_top))
     # ---- replay-domain residuals (table accelerometer effects). Eq. (3) does not involve the table
     # accelerometer, so when the nominal model explains the floor equations, it is the fair model
     # to replay (a fit driven by a faulty base channel has partly absorbed the fault).
@@ -249,6 +256,9 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     candidates += _screen_flexible(nom if experiment.structure is not None else result, train_runs, d, band,
                                    f_top)
     pattern = _damping_pattern(result, d)
+    pattern_info = pattern[1] if pattern else {}
+    if pattern and not _physical(pattern[0]):   # a negative damper is no explanation
+        pattern = None
     if pattern:
         candidates.append(pattern[0])
     candidates = [c for c in candidates if _physical(c)]
@@ -259,13 +269,20 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
         candidates = [c for c in candidates if c.mechanism not in ("sensor_gain", "sensor_delay")]
     eq_mismatch = max(excess_eq.values()) > EXCESS
     rep_mismatch = max(excess_rep.values(), default=0) > EXCESS
+    sensor_fault = None
     if kin is not None and not kin.consistent:
-        # Channels that contradict each other: a sensor fault, which also disturbs every model-based
-        # residual (so those cannot be trusted to name the physics).
         fit = kin.best()
         mech_k, params_k, std_k, explained_k = fit.verdict()
-        candidates.append(Candidate(mech_k, {"channel": fit.channel}, params_k, std_k, explained_k, "sensors"))
-        pool = [candidates[-1]]
+        sensor_fault = Candidate(mech_k, {"channel": fit.channel}, params_k, std_k, explained_k, "sensors")
+        candidates.append(sensor_fault)
+        if explained_k < EXPLAINED:
+            # Channels disagree, but no single channel's gain or delay says why (several faults, or
+            # noise that is not white): inconclusive, the model-based screening decides.
+            sensor_fault = None
+    if sensor_fault is not None:
+        # One channel contradicts the others: a sensor fault, which also disturbs every model-based
+        # residual (so those cannot be trusted to name the physics).
+        pool = [sensor_fault]
     elif experiment.structure is not None and not nom_mismatch and rep_mismatch:
         # Floors obey the nominal equations, yet replays from the table channel miss: the table channel.
         pool = [c for c in candidates if c.domain == "replay"]
@@ -279,7 +296,7 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
     elif pattern:
         # A linear damper leaves no residual (the identified C absorbs it): the pattern decides.
         chosen = pattern[0]
-    elif eq_mismatch or rep_mismatch or (kin is not None and not kin.consistent):
+    elif eq_mismatch or rep_mismatch:
         chosen = "unexplained"
     else:
         chosen = None
@@ -289,9 +306,8 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
         mech, loc, params, std = "none", {}, {}, {}
     elif chosen == "unexplained":
         worst = max(excess_eq, key=excess_eq.get)
-        if kin is not None and not kin.consistent:
-            worst = max(kin.excess, key=kin.excess.get)   # the floor whose sensors disagree most
-            loc = {"floor": int(worst[5:])}
+        if where.storeys[f"storey{where.storey}"] > EXCESS and (eq_mismatch or nom_mismatch):
+            loc = {"storey": where.storey}     # the storey whose shear residual stands out
         elif max(excess_rep.values(), default=0) > max(excess_eq.values()):
             worst = max(excess_rep, key=excess_rep.get)
             loc = {"channel": worst}
@@ -334,6 +350,8 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
             selection["partial"] = {"mechanism": mech, "location": loc, "parameters": params}
             mech, params, std, mechanisms = "unexplained", {}, {}, ()
             ident_structure = linear_structure
+            if where.storeys[f"storey{where.storey}"] > EXCESS:   # where the residual says, not the guess
+                loc = {"storey": where.storey}
     eval_run = hold if hold is not None else runs[-1]
     if replay:
         before, after, curves, xml = _replay_check(linear_structure, ident_structure, mech, loc, params,
@@ -343,12 +361,13 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
         "relation": "a_j = zdd + q_j''", "band_hz": list(kin.band), "excess": kin.excess,
         "consistent": kin.consistent, "fits": [asdict(f) for f in kin.fits[:3]]}
     summary = _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, eval_run.name, hold,
-                       sensor_check, selection)
+                       sensor_check, selection, where.words)
     return Diagnosis(mechanism=mech, location=loc, parameters=params, std=std, nrmse_before=before,
                      nrmse_after=after, excess_equation=excess_eq, excess_replay=excess_rep,
                      candidates=tuple(sorted(candidates, key=lambda c: -c.explained)[:8]), summary=summary,
                      holdout=eval_run.name if hold is not None else f"{eval_run.name} (no run held out)",
-                     parameter_pattern=pattern[1] if pattern else {}, sensor_check=sensor_check, selection=selection,
+                     parameter_pattern=pattern_info, sensor_check=sensor_check, selection=selection,
+                     localisation=where.to_dict(),
                      augmented_xml=xml, curves=curves)
 
 
@@ -880,15 +899,15 @@ def _explained_share(before: float, after: float, noise: float) -> float:
     return float(1.0 - max(after ** 2 - noise ** 2, 0.0) / excess)
 
 
-def _shortlist(pool, chosen, *, size=3, floor=0.25) -> list[Candidate]:
-    """The screened candidates worth re-simulating: the chosen one and the best few other
-    (mechanism, location) pairs that explain at least ``floor`` of the excess."""
-    out, seen = [chosen], {(chosen.mechanism, json.dumps(chosen.location, sort_keys=True))}
+def _shortlist(pool, chosen, *, size=4, floor=0.25) -> list[Candidate]:
+    """The screened candidates worth re-simulating: the chosen one and the best candidate of each
+    other kind of physics that explains at least ``floor`` of the excess (up to ``size`` in all;
+    one per kind, so that a kind which screens well at several places cannot crowd the others out)."""
+    out, kinds = [chosen], {chosen.mechanism}
     for c in sorted(pool, key=lambda c: -c.explained):
-        key = (c.mechanism, json.dumps(c.location, sort_keys=True))
-        if key in seen or c.explained < floor or c.mechanism.startswith("sensor_"):
+        if c.mechanism in kinds or c.explained < floor or c.mechanism.startswith("sensor_"):
             continue
-        seen.add(key)
+        kinds.add(c.mechanism)
         out.append(c)
         if len(out) == size:
             break
@@ -960,10 +979,12 @@ def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, ru
 
 
 def _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, hold, sensor_check,
-             selection) -> str:
+             selection, where) -> str:
     worst = max(excess_eq, key=excess_eq.get)
     lines = ["Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
              "Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
+    if max(excess_eq.values()) > EXCESS:
+        lines.append(where)
     if sensor_check:
         verdict = "consistent" if sensor_check["consistent"] else "INCONSISTENT"
         lines.append("Sensors against each other (a = zdd + q''): " + ", ".join(

@@ -56,9 +56,12 @@ MATRIX = [  # (mechanism, truth table or channel fault, expected location), two 
 TIMED = (16, 1, 2)   # clean, strong top-storey friction, cubic stiffness: timed alone
 
 
-def _scenario(mechanism, spec, noise):
+def _scenario(mechanism, spec, noise, excitation=None):
     data = tomllib.loads(BASE.read_text())
-    data["excitation"]["file"] = str((BASE.parent / data["excitation"]["file"]).resolve())
+    if excitation is None:
+        data["excitation"]["file"] = str((BASE.parent / data["excitation"]["file"]).resolve())
+    else:
+        data["excitation"] = dict(excitation)
     data["sensors"]["accelerometer"]["relative_noise"] = noise
     data["sensors"]["displacement"]["relative_noise"] = noise
     if mechanism.startswith("sensor_"):
@@ -73,15 +76,39 @@ def _scenario(mechanism, spec, noise):
 
 
 def _case(job):
-    mechanism, spec, location, noise = job
-    experiment = mi.simulate(_scenario(mechanism, spec, noise))
+    mechanism, spec, location, noise, *excitation = job
+    experiment = mi.simulate(_scenario(mechanism, spec, noise, *excitation))
     start = time.perf_counter()
     d = diagnose(experiment)
     elapsed = time.perf_counter() - start
     right = d.mechanism == mechanism and d.location == location
     return {"truth": mechanism, "spec": spec, "noise": noise, "verdict": d.mechanism, "location": d.location,
             "expected_location": location, "correct": right, "parameters": d.parameters,
-            "nrmse_before": d.nrmse_before, "nrmse_after": d.nrmse_after, "seconds": elapsed}
+            "nrmse_before": d.nrmse_before, "nrmse_after": d.nrmse_after, "seconds": elapsed,
+            "excitation": (excitation[0] or {}).get("type", "record") if excitation else "record"}
+
+
+def run_cases(jobs, workers: int) -> list[dict]:
+    """Diagnose every case, ``workers`` at a time, printing each row as it comes."""
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        rows = []
+        for row in pool.map(_case, jobs):
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    return rows
+
+
+def table(rows, *, spec=False) -> list[str]:
+    """Markdown table of the cases (``spec``: with the hidden parameters and the excitation)."""
+    lines = ["| truth | where | excitation | noise | verdict | right | held-out NRMSE before -> after | time |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        where = json.dumps(r["expected_location"]) if r["expected_location"] else "-"
+        truth = f"{r['truth']} {json.dumps(r['spec'])}" if spec else r["truth"]
+        lines.append(f"| {truth} | {where} | {r['excitation']} | {100 * r['noise']:g} % | {r['verdict']} "
+                     f"{json.dumps(r['location']) if r['location'] else ''} | {'yes' if r['correct'] else 'no'} | "
+                     f"{100 * r['nrmse_before']:.2f} % -> {100 * r['nrmse_after']:.2f} % | {r['seconds']:.0f} s |")
+    return lines
 
 
 def main(argv=None) -> int:
@@ -93,21 +120,11 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     noises = [0.01] if args.quick else [0.01, 0.02]
     jobs = [(m, s, loc, n) for n in noises for m, s, loc in MATRIX]
-    with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        rows = []
-        for row in pool.map(_case, jobs):
-            rows.append(row)
-            print(json.dumps(row), flush=True)
+    rows = run_cases(jobs, args.workers)
     found = [r for r in rows if r["truth"] not in ("none", "unexplained")]
     clean = [r for r in rows if r["truth"] == "none"]
     outside = [r for r in rows if r["truth"] == "unexplained"]
-    lines = ["| truth | where | noise | verdict | right | held-out NRMSE before -> after | time |",
-             "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        where = json.dumps(r["expected_location"]) if r["expected_location"] else "-"
-        lines.append(f"| {r['truth']} | {where} | {100 * r['noise']:g} % | {r['verdict']} "
-                     f"{json.dumps(r['location']) if r['location'] else ''} | {'yes' if r['correct'] else 'no'} | "
-                     f"{100 * r['nrmse_before']:.2f} % -> {100 * r['nrmse_after']:.2f} % | {r['seconds']:.0f} s |")
+    lines = table(rows)
     ratio_ok = [r for r in found if r["correct"] and r["nrmse_after"] * 3 <= r["nrmse_before"]]
     lines += ["", f"Right mechanism and location: {sum(r['correct'] for r in found)} of {len(found)}; "
                   f"of those, held-out NRMSE at least 3x lower: {len(ratio_ok)}; false alarms on clean rigs: "

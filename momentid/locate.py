@@ -27,7 +27,7 @@ import numpy as np
 
 from . import model as rig
 
-__all__ = ["Localisation", "locate"]
+__all__ = ["Localisation", "locate", "plot_localisation"]
 
 #: Ratio to the noise-only level above which a part counts as mismatched.
 MISMATCH = 1.3
@@ -184,3 +184,45 @@ def _words(loc: Localisation, rows) -> str:
     if loc.bands["above_modes"] > 2 * MISMATCH and loc.bands["above_modes"] > 0.5 * loc.bands["modes"]:
         parts.append("with harmonics above the modes")
     return ", ".join(parts) + "."
+
+
+def plot_localisation(where: dict, path, title: str = "") -> None:
+    """``locate.png``: the storey shear residual over noise by storey, run, time and drift amplitude.
+
+    Parameters
+    ----------
+    where : dict
+        :meth:`Localisation.to_dict` (as stored in ``report.json``).
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 4, figsize=(14, 3.2))
+    s = where["storey"]
+    names = list(where["storeys"])
+    ax[0].bar([n.replace("storey", "") for n in names], [where["storeys"][n] for n in names],
+              color=["C3" if n == f"storey{s}" else "C0" for n in names])
+    ax[0].set_xlabel("storey")
+    ax[0].set_title("by storey")
+    runs = list(where["runs"])
+    ax[1].bar(runs, [where["runs"][r] for r in runs], color="C1")
+    ax[1].set_title(f"storey {s}: by run")
+    ax[1].tick_params(axis="x", rotation=30)
+    mid = [(w["t0"] + w["t1"]) / 2 for w in where["windows"]]
+    ax[2].plot(mid, [w["excess"] for w in where["windows"]], "o-", color="C2")
+    ax[2].set_xlabel("time in run (s)")
+    ax[2].set_title(f"storey {s}: by time window")
+    amp = where["amplitude"]
+    ax[3].bar([f"{1e3 * a['drift_min']:.2g}-{1e3 * a['drift_max']:.2g}" for a in amp],
+              [a["excess"] for a in amp], color="C4")
+    ax[3].set_xlabel("|drift| quartile (mm)")
+    ax[3].set_title(f"storey {s}: by drift amplitude")
+    for a in ax:
+        a.axhline(MISMATCH, color="grey", ls=":", lw=1)
+        a.set_ylabel("residual / noise")
+        a.set_yscale("log")
+    fig.suptitle(title or where["words"], fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)

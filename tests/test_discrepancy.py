@@ -107,6 +107,7 @@ def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):
     xml = (tmp_path / "report" / "model_augmented.xml").read_text()
     assert "<mujoco" in xml
     assert (tmp_path / "report" / "replay.png").stat().st_size > 10_000
+    assert (tmp_path / "report" / "locate.png").stat().st_size > 10_000
     import rerun as rr
     store = rr.chunk.RrdReader(str(tmp_path / "report" / "diagnosis.rrd")).store()
     paths = {str(c.entity_path) for c in store.stream().to_chunks()}

@@ -692,6 +692,9 @@ def _signature(mech, loc, params, run, s, d):
     return direction, sig[:, None]
 
 
+#: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
+_UNSTABLE = 1e200
+
 _PARAM = {"coulomb_friction": "force", "cubic_stiffness": "k3", "p_delta": "weight_per_height",
           "flexible_added_mass": "amplitude"}
 
@@ -835,7 +838,7 @@ class _Augmenter:
             sim, measured = _augmented_replay(structure, mech, loc, params, _as_mechanisms(mech, loc, params),
                                               run, self.d, structure != self.nominal)
         except (SimulationError, ModelError):   # e.g. a storey made unstable: not a candidate fit
-            return float("inf")
+            return _UNSTABLE
         fs = run.sample_rate
         q = 0.0
         for g in measured:

@@ -47,6 +47,18 @@ def _control_callback(callback) -> Iterator[None]:
         mujoco.set_mjcb_control(previous)
 
 
+@contextlib.contextmanager
+def _quiet_warnings() -> Iterator[None]:
+    """Keep MuJoCo from printing warnings (they are still counted in ``MjData.warning``, which
+    the caller checks): a replay of a trial model may go unstable, and that is an answer."""
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
+
+
 def ground_motion_of(scenario: Scenario) -> GroundMotion:
     """The table motion of ``scenario`` (shared by all its runs)."""
     return ground_motion(scenario.excitation, scenario.duration)
@@ -449,8 +461,9 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     names = [f"{g}{i + 1}" for g in ("a", "q", "v") for i in range(d)]
     index = np.array([layout[c] for c in names])
     nodes = np.append(zdd, zdd[-1])            # the table holds its last acceleration
-    out, warnings = _roll(model, _initial_state(model, 0.0, 0.0, nodes[0]), _jerk(nodes, h), 1, index,
-                          mechanisms=mechanisms, structure=structure)
+    with _quiet_warnings():
+        out, warnings = _roll(model, _initial_state(model, 0.0, 0.0, nodes[0]), _jerk(nodes, h), 1, index,
+                              mechanisms=mechanisms, structure=structure)
     if warnings or not np.all(np.isfinite(out)):
         raise SimulationError(
             f"replay of run {run.name!r}: MuJoCo warnings {warnings} or a diverging response: expected "

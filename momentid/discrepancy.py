@@ -1042,7 +1042,7 @@ def _summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_n
     if math.isfinite(before):
         which = f"held-out run {run_name}" if hold is not None else f"run {run_name}"
         lines.append(f"{which} NRMSE {100 * before:.2f} % -> {100 * after:.2f} %.")
-    return " ".join(lines)
+    return "\n".join(lines)
 
 
 def write_report(diag: Diagnosis, folder) -> Path:
@@ -1084,7 +1084,7 @@ def _rerun(diag: Diagnosis, path: Path) -> None:
                         static=True)
                 rec.send_columns(entity, indexes=[time], columns=rr.Scalars.columns(scalars=data[g][:, j]))
             views.append(rrb.TimeSeriesView(origin=base, name=f"{g}{j + 1} ({unit})"))
-    rec.log("/report", rr.TextDocument(diag.summary, media_type=rr.MediaType.MARKDOWN), static=True)
+    rec.log("/report", rr.TextDocument(diag.summary.replace("\n", "\n\n"), media_type=rr.MediaType.MARKDOWN), static=True)
     layout = rrb.Horizontal(rrb.Grid(*views), rrb.TextDocumentView(origin="/report", name="diagnosis"),
                             column_shares=[3, 1])
     rec.save(str(path), default_blueprint=rrb.Blueprint(layout))

@@ -214,14 +214,16 @@ def plot_localisation(where: dict, path, title: str = "") -> None:
     ax[2].set_xlabel("time in run (s)")
     ax[2].set_title(f"storey {s}: by time window")
     amp = where["amplitude"]
-    ax[3].bar([f"{1e3 * a['drift_min']:.2g}-{1e3 * a['drift_max']:.2g}" for a in amp],
+    ax[3].bar([f"{1e3 * a['drift_min']:.2g}-\n{1e3 * a['drift_max']:.2g}" for a in amp],
               [a["excess"] for a in amp], color="C4")
+    ax[3].tick_params(axis="x", labelsize=7)
     ax[3].set_xlabel("|drift| quartile (mm)")
     ax[3].set_title(f"storey {s}: by drift amplitude")
     for a in ax:
         a.axhline(MISMATCH, color="grey", ls=":", lw=1)
         a.set_ylabel("residual / noise")
         a.set_yscale("log")
+        a.set_ylim(bottom=0.5)   # 1 = the noise level: keep it in view
     fig.suptitle(title or where["words"], fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=90)

@@ -149,8 +149,9 @@ class _RawRig:
         from .simulate import _initial_state, _jerk, ground_motion_of
 
         if rig.needs_callback(scenario.truth):
-            raise MomentidError(f"{scenario.source}: the simulate benchmark needs a rig without "
-                                f"callback physics ([truth] friction or cubic stiffness)")
+            raise MomentidError(f"{scenario.source}: the simulate benchmark needs a rig without callback "
+                                f"physics, got [truth] {', '.join(m.type for m in scenario.truth if m.type in rig.CALLBACK_MECHANISMS)}: "
+                                f"expected a linear rig")
         motion = ground_motion_of(scenario)
         self.n_steps = scenario.n_samples * scenario.substeps
         nodes = np.asarray(motion.acceleration(np.arange(self.n_steps + 1) * scenario.timestep), float)
@@ -690,6 +691,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_from_args(args) -> int:
     stages = [s.strip() for s in args.stages.split(",") if s.strip()]
+    if args.repeat is not None and args.repeat < 1:
+        print(f"error: --repeat = {args.repeat}: expected at least 1 repetition", file=sys.stderr)
+        return 2
     try:
         report = run_benchmarks(stages=stages, scenario=args.scenario, duration=args.duration,
                                 quick=args.quick, repeat=args.repeat, workers=args.workers,

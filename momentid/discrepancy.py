@@ -699,27 +699,19 @@ _PARAM = {"coulomb_friction": "force", "cubic_stiffness": "k3", "p_delta": "weig
           "flexible_added_mass": "amplitude"}
 
 
-def _refit(mech, loc, params, runs, result, band, f_top, simulated=None):
-    """Errors-in-variables fit of the linear model together with the mechanism's force.
-
-    ``simulated``: per run, the channels of the augmented model replayed from the run's
-    table acceleration; when given, the force's signature is computed from them (noise-free
-    instruments for the nonlinear term) instead of from the measured signals.
-    """
+def _refit(mech, loc, params, runs, result, band, f_top):
+    """Errors-in-variables fit of the linear model together with the mechanism's force."""
     from .eiv import fit_eiv
     d = result.storeys
     forces = []
-    for i, run in enumerate(runs):
-        if simulated is not None:
-            s = simulated[i]
-        else:
-            if not run.has("q1") and mech != "flexible_added_mass":
-                return None
-            # From measured signals: a band just above the modes keeps sensor noise from flipping
-            # the sign of small drift velocities (which would shrink the fitted force).
-            s = _signals(run, d, Prefilter(high=1.5 * f_top) if band.high else band)
-            if s["a"].shape[0] != run.n_samples:
-                return None
+    for run in runs:
+        if not run.has("q1") and mech != "flexible_added_mass":
+            return None
+        # From measured signals: a band just above the modes keeps sensor noise from flipping
+        # the sign of small drift velocities (which would shrink the fitted force).
+        s = _signals(run, d, Prefilter(high=1.5 * f_top) if band.high else band)
+        if s["a"].shape[0] != run.n_samples:
+            return None
         forces.append(_signature(mech, loc, params, run, s, d))
     lay = result.layout
     theta0 = np.concatenate([result.theta, [params[_PARAM[mech]]]])

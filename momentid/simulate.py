@@ -333,20 +333,20 @@ def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int,
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 
-    if rig.needs_callback(scenario.truth):
+    forked = rig.needs_callback(scenario.truth)
+    if forked:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                                    initializer=_set_forked_job, initargs=(scenario, motion))
         futures = [pool.submit(_simulate_forked, i) for i in range(len(scenario.runs))]
-        done = [lambda: progress(scenario.n_samples)] * len(futures)
-    else:
+    else:   # threads report their progress as they go
         pool = ThreadPoolExecutor(max_workers=workers)
         futures = [pool.submit(simulate_run, scenario, run, motion, progress=progress)
                    for run in scenario.runs]
-        done = [lambda: None] * len(futures)
     try:
-        for future, tick in zip(futures, done):
+        for future in futures:
             result = future.result()
-            tick()
+            if forked:
+                progress(scenario.n_samples)
             yield result
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

@@ -1,6 +1,7 @@
-"""momentid's benchmarks: ``python -m benchmarks`` (the same as ``momentid bench``).
+"""momentid's benchmarks, kept out of the installed package.
 
-The stage benchmarks live in :mod:`momentid.bench` so that an installed
-``momentid bench`` runs them too; ``python -m benchmarks.scaling`` draws the
-scaling figures of the README's Performance section.
+``python -m benchmarks`` times every stage against a raw baseline measured in the same run
+(:mod:`benchmarks.bench`); ``python -m benchmarks.scaling``, ``.accuracy``, ``.diagnosis``,
+``.diagnosis_variants``, ``.memory`` and ``.reconstruction`` produce the figures and tables in
+``docs/``.  Every figure is a ratio or an accuracy, never an absolute time asserted in a test.
 """

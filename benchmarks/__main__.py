@@ -1,7 +1,7 @@
-"""``python -m benchmarks``: every stage against its raw baseline (see momentid.bench)."""
+"""``python -m benchmarks``: every stage against its raw baseline (see benchmarks.bench)."""
 
 import sys
 
-from momentid.bench import main
+from benchmarks.bench import main
 
 sys.exit(main())

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 
 import momentid as mi
-from momentid.data import Experiment
-from momentid.design import cramer_rao
-from momentid.scenario import Instrument, Run, Sensors
-from momentid.sensors import measure
+from momentid.core.series import Experiment
+from momentid.estimation.design import cramer_rao
+from momentid.lab.scenario import Instrument, Run, Sensors
+from momentid.lab.sensors import measure
 
 ROOT = Path(__file__).resolve().parents[1]
 SETS = {"accel+disp": ("zdd", "z", "a", "q"), "accel": ("zdd", "a")}

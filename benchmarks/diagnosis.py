@@ -22,8 +22,8 @@ from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import momentid as mi
-from momentid.discrepancy import diagnose
-from momentid.scenario import parse_scenario
+from momentid.diagnosis.pipeline import diagnose
+from momentid.lab.scenario import parse_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "scenarios" / "hidden" / "clean.toml"

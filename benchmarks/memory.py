@@ -3,7 +3,7 @@
     python -m benchmarks.memory [--lengths 60 300 900 3600]
 
 Recordings of the default structure (2 runs, band-limited table noise, 1 kHz, every channel) are
-synthesised with the exact linear model (:mod:`momentid.linear`; MuJoCo would take minutes per hour of
+synthesised with the exact linear model (:mod:`momentid.estimation.linear`; MuJoCo would take minutes per hour of
 record and give the same numbers) and written with the normal recorder.  Then each is identified twice,
 measuring the peak of Python/numpy allocations with ``tracemalloc``:
 
@@ -16,7 +16,6 @@ Writes ``benchmarks/results/memory.json`` and ``docs/images/memory.png``.
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import tempfile
 import time
@@ -26,12 +25,12 @@ from pathlib import Path
 import numpy as np
 
 import momentid as mi
-from momentid.data import RunData
-from momentid.linear import discretize, outputs, simulate_linear
-from momentid.scenario import BandLimitedNoise
+from momentid.core.series import RunData
+from momentid.estimation.linear import discretize, outputs, simulate_linear
+from momentid.lab.scenario import BandLimitedNoise
 
 ROOT = Path(__file__).resolve().parents[1]
-identify_module = importlib.import_module("momentid.identify")
+from momentid.estimation import identification as identify_module
 
 
 def synthesize(path: Path, seconds: float) -> int:

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 import momentid as mi
-from momentid.reconstruct import Prefilter, prepare_run, suggest_band, weak_form
-from momentid.scenario import Instrument, Sensors
-from momentid.sensors import measure
+from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band, weak_form
+from momentid.lab.scenario import Instrument, Sensors
+from momentid.lab.sensors import measure
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -21,12 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from momentid.bench import _RawRig, _machine, bench_scenario, blas_threads, stacked_regressor
+from benchmarks.bench import _RawRig, _machine, bench_scenario, blas_threads, stacked_regressor
 from momentid.errors import IdentificationError
-from momentid.identify import identify
-from momentid.recording import read_recording, write_experiment
-from momentid.scenario import default_scenario_path
-from momentid.simulate import available_cores, simulate
+from momentid.estimation.identification import identify
+from momentid.io.recording import read_recording, write_experiment
+from momentid.lab.scenario import default_scenario_path
+from momentid.lab.simulation import available_cores, simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SERIES = ("simulate", "rollout_floor", "record", "identify", "lstsq")

@@ -18,10 +18,10 @@ motion), ``model`` (MJCF rig), ``simulate``, ``recording`` (MCAP),
 physics), ``importer`` (CSV folders), ``visualize`` (rerun), ``cli``.
 """
 
-from .analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
-from .compare import Comparison, analytic_parameters, compare
-from .data import Experiment, RunData
-from .errors import (
+from momentid.core.analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
+from momentid.estimation.comparison import Comparison, analytic_parameters, compare
+from momentid.core.series import Experiment, RunData
+from momentid.errors import (
     IdentificationError,
     MomentidError,
     ModelError,
@@ -32,15 +32,16 @@ from .errors import (
     TruncatedRecordingError,
     ViewerError,
 )
-from .excitation import GroundMotion, ground_motion, read_at2
-from .identify import Identification, identify
-from .model import build_spec, compile_model
-from .recording import RecordingWriter, read_recording, write_experiment
-from .scenario import Scenario, Structure, default_scenario_path, load_scenario
-from .simulate import run_experiment, simulate, simulate_run
-from .design import cramer_rao, plan
-from .discrepancy import Diagnosis, diagnose
-from .importer import import_folder, import_recording
+from momentid.lab.excitation import GroundMotion, ground_motion, read_at2
+from momentid.estimation.identification import Identification, identify
+from momentid.lab.rig import build_spec, compile_model
+from momentid.io.recording import RecordingWriter, read_recording, write_experiment
+from momentid.core.structure import Structure
+from momentid.lab.scenario import Scenario, default_scenario_path, load_scenario
+from momentid.lab.simulation import run_experiment, simulate, simulate_run
+from momentid.estimation.design import cramer_rao, plan
+from momentid.diagnosis.pipeline import Diagnosis, diagnose
+from momentid.io.importer import import_folder, import_recording
 
 __version__ = "0.1.0"
 

@@ -12,8 +12,8 @@ import math
 import sys
 from pathlib import Path
 
-from .data import json_safe
-from .errors import MomentidError
+from momentid.core.series import json_safe
+from momentid.errors import MomentidError
 
 __all__ = ["main"]
 
@@ -59,8 +59,8 @@ def _output_path(out: str | None, name: str) -> Path:
 
 
 def _report(experiment, args) -> int:
-    from .compare import compare
-    from .identify import identify
+    from momentid.estimation.comparison import compare
+    from momentid.estimation.identification import identify
 
     times = args.time if args.time else None
     runs = args.runs.split(",") if args.runs else None
@@ -83,8 +83,8 @@ def _report(experiment, args) -> int:
 
 
 def _cmd_run(args) -> int:
-    from .scenario import default_scenario_path, load_scenario
-    from .simulate import run_experiment
+    from momentid.lab.scenario import default_scenario_path, load_scenario
+    from momentid.lab.simulation import run_experiment
 
     path = Path(args.scenario) if args.scenario else default_scenario_path()
     scenario = load_scenario(path)
@@ -96,7 +96,7 @@ def _cmd_run(args) -> int:
               f"{scenario.sample_rate:g} Hz -> {out}\n")
     status = _report(experiment, args)
     if args.view:
-        from .visualize import view
+        from momentid.report.viewer import view
 
         view(experiment, identify_options={"estimator": args.estimator, "times": args.time or None,
                                            "runs": args.runs.split(",") if args.runs else None})
@@ -104,11 +104,11 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_identify(args) -> int:
-    from .recording import read_recording
+    from momentid.io.recording import read_recording
 
     if args.stream:
-        from .compare import compare
-        from .identify import identify_stream
+        from momentid.estimation.comparison import compare
+        from momentid.estimation.identification import identify_stream
         result, meta = identify_stream(args.recording, mass=args.mass, return_structure=True)
         payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
         print(json.dumps(json_safe(payload), indent=2) if args.json
@@ -119,7 +119,7 @@ def _cmd_identify(args) -> int:
 
 
 def _cmd_import(args) -> int:
-    from .importer import import_folder, summary, write_import
+    from momentid.io.importer import import_folder, summary, write_import
 
     experiment = import_folder(args.folder)
     out = write_import(experiment, _output_path(args.output, Path(args.folder).resolve().name))
@@ -128,7 +128,7 @@ def _cmd_import(args) -> int:
 
 
 def _cmd_view(args) -> int:
-    from .visualize import view
+    from momentid.report.viewer import view
 
     out = view(args.recording, save=args.save, result=args.result, exaggeration=args.exaggeration,
                run=args.run)
@@ -138,7 +138,7 @@ def _cmd_view(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from .sweep import load_sweep, run_sweep, write_table
+    from momentid.sweep import load_sweep, run_sweep, write_table
 
     sweep = load_sweep(args.spec)
     out = Path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
@@ -167,8 +167,8 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_diagnose(args) -> int:
-    from .discrepancy import diagnose, write_report
-    from .recording import read_recording
+    from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.io.recording import read_recording
 
     experiment = read_recording(args.recording)
     diag = diagnose(experiment)
@@ -187,8 +187,8 @@ def _cmd_diagnose(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from .design import cramer_rao, plan
-    from .scenario import load_scenario
+    from momentid.estimation.design import cramer_rao, plan
+    from momentid.lab.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
     designs, best = plan(scenario, target=args.target, max_runs=args.max_runs)
@@ -226,12 +226,6 @@ def _cmd_plan(args) -> int:
     return 0
 
 
-def _cmd_bench(args) -> int:
-    from .bench import run_from_args
-
-    return run_from_args(args)
-
-
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--estimator", choices=("auto", "equation", "difference", "eiv"), default="auto",
                    help="'auto' (default): 'equation' for noise-free data, else 'eiv'; 'equation': every "
@@ -257,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "(Majcher 2025, input-output method with system momentum change).",
         epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from . import __version__
+    from momentid import __version__
     parser.add_argument("--version", action="version", version=f"momentid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
@@ -357,14 +351,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-q", "--quiet", action="store_true", help="no per-case progress lines")
     p.set_defaults(func=_cmd_sweep)
 
-    from .bench import add_arguments as add_bench_arguments
-    p = sub.add_parser("bench", help="time every stage against raw MuJoCo / MCAP / numpy baselines",
-                       description="Time simulate, record, identify, view and the whole `momentid run` "
-                                   "against raw baselines measured in the same process (mujoco.rollout, "
-                                   "the mcap library, one dense lstsq, rr.send_columns) and print their "
-                                   "ratios; the same as `python -m benchmarks`.")
-    add_bench_arguments(p)
-    p.set_defaults(func=_cmd_bench)
     return parser
 
 

@@ -14,7 +14,7 @@ case::
     runs.1.added_mass = [[2.0, 0.0, 1.5, 0.0, 2.0, 0.0, 1.0, 0.0, 1.5, 1.0], 1.0]   # [[runs]] index from 0
 
 Each case is the base scenario's parsed TOML with its values put in and is
-validated by :func:`momentid.scenario.parse_scenario` as strictly as a
+validated by :func:`momentid.lab.scenario.parse_scenario` as strictly as a
 scenario file: an unknown key or a bad value is a :class:`ScenarioError`
 naming the sweep file, the key and the value before anything runs.
 
@@ -38,9 +38,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from ._toml import Table, load_toml
-from .errors import MomentidError, ScenarioError
-from .scenario import Scenario, default_scenario_path, parse_scenario
+from momentid.io.toml_reader import Table, load_toml
+from momentid.errors import MomentidError, ScenarioError
+from momentid.lab.scenario import Scenario, default_scenario_path, parse_scenario
 
 __all__ = ["Case", "Sweep", "load_sweep", "parse_sweep", "run_case", "run_sweep", "write_table",
            "table_columns"]
@@ -119,7 +119,7 @@ def _variant(base: dict, values: dict, base_path: Path, text: str) -> Scenario:
 
 def parse_sweep(data: dict, *, source="<string>") -> Sweep:
     """Validate an already-parsed sweep file and build every case's scenario."""
-    from .identify import ESTIMATORS
+    from momentid.estimation.identification import ESTIMATORS
 
     source = Path(source)
     top = Table(data, source)
@@ -180,9 +180,9 @@ def run_case(index: int, values: dict, scenario: Scenario, estimator: str) -> di
     cluster can run it.  Errors momentid raises on purpose (a diverging
     simulation, unidentifiable data) become the row's ``error``.
     """
-    from .compare import compare
-    from .identify import identify
-    from .simulate import simulate
+    from momentid.estimation.comparison import compare
+    from momentid.estimation.identification import identify
+    from momentid.lab.simulation import simulate
 
     row: dict = {"case": index, "values": values, "status": "ok", "error": None}
     t0 = time.perf_counter()
@@ -259,7 +259,7 @@ def run_sweep(sweep: Sweep, *, workers: int | None = None, address: str | None =
     on_case : callable, optional
         Called with each row as it completes (in completion order).
     """
-    from .simulate import available_cores
+    from momentid.lab.simulation import available_cores
 
     payloads = [(c.index, c.values, c.scenario, sweep.estimator) for c in sweep.cases]
     done = on_case or (lambda row: None)

@@ -1,4 +1,4 @@
-"""Shared fixtures: paths, the shared reference folder, cached simulations."""
+"""Shared fixtures: paths, the shipped data folder, cached simulations."""
 
 from __future__ import annotations
 
@@ -9,20 +9,19 @@ from pathlib import Path
 import pytest
 
 import momentid as mi
-from momentid.scenario import Sensors
-from momentid.simulate import simulate
+from momentid.lab.scenario import Sensors
+from momentid.lab.simulation import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
-#: The workplace's read-only reference folder, beside the checkout.
-SHARED = ROOT.parent / "shared"
+#: Records and reference tables shipped with the project (see data/README.md).
+DATA = ROOT / "data"
 
 
-def shared_file(*parts: str) -> Path:
-    """A file under ../shared, or skip the test when it is absent."""
-    path = SHARED.joinpath(*parts)
-    if not path.exists():
-        pytest.skip(f"{path} is not available (../shared is absent)")
+def data_file(*parts: str) -> Path:
+    """A file under the project's ``data/`` folder (it must exist: the project ships it)."""
+    path = DATA.joinpath(*parts)
+    assert path.exists(), f"{path} is missing from the repository"
     return path
 
 
@@ -32,12 +31,8 @@ def scenario_files(recursive: bool = False) -> list[Path]:
 
 
 def load(name: str) -> mi.Scenario:
-    """Load scenarios/<name>.toml; skip when it needs ../shared and that is absent."""
-    path = SCENARIOS / f"{name}.toml"
-    text = path.read_text()
-    if "shared/" in text and not SHARED.exists():
-        pytest.skip(f"{path.name} reads a record from ../shared, which is absent")
-    return mi.load_scenario(path)
+    """Load scenarios/<name>.toml."""
+    return mi.load_scenario(SCENARIOS / f"{name}.toml")
 
 
 @functools.lru_cache(maxsize=None)
@@ -53,6 +48,5 @@ def simulated():
     """``simulated(name, ideal=False)``: the (cached) simulation of a shipped scenario;
     ``ideal=True`` records every channel exactly (noise-free virtual data)."""
     def get(name: str, ideal: bool = False):
-        load(name)  # skips cleanly when the scenario needs ../shared
         return _simulated(name, ideal)
     return get

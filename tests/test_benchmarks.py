@@ -7,10 +7,10 @@ import math
 
 import numpy as np
 
-from momentid import cli
-from momentid.bench import STAGES, bench_scenario, run_benchmarks, stacked_regressor
-from momentid.scenario import default_scenario_path
-from momentid.simulate import simulate
+from benchmarks.bench import main as bench_main
+from benchmarks.bench import STAGES, bench_scenario, run_benchmarks, stacked_regressor
+from momentid.lab.scenario import default_scenario_path
+from momentid.lab.simulation import simulate
 
 
 def _check_rows(rows):
@@ -55,9 +55,9 @@ def test_stacked_regressor_is_satisfied_by_the_analytic_model():
 
 def test_cli_bench_quick_writes_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    assert cli.main(["bench", "--quick", "--stages", "identify,run", "--json-out", str(out)]) == 0
+    assert bench_main(["--quick", "--stages", "identify,run", "--json-out", str(out)]) == 0
     report = json.loads(out.read_text())
     assert [r["stage"] for r in report["rows"]] == ["identify", "run"]
     _check_rows(report["rows"])
     assert report["settings"]["quick"] and "ratio" in capsys.readouterr().out
-    assert cli.main(["bench", "--stages", "nope"]) == 2 and set(STAGES) >= {"simulate", "run"}
+    assert bench_main(["--stages", "nope"]) == 2 and set(STAGES) >= {"simulate", "run"}

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from momentid.cli import main
-from momentid.compare import analytic_parameters
-from momentid.scenario import default_scenario_path, load_scenario
+from momentid.estimation.comparison import analytic_parameters
+from momentid.lab.scenario import default_scenario_path, load_scenario
 
 from conftest import SCENARIOS
 
@@ -58,7 +58,7 @@ def test_run_paper_harmonic_to_folder(tmp_path, capsys):
     ],
 )
 def test_user_mistakes_are_one_line_errors(tmp_path, capsys, argv, fragment, simulated):
-    from momentid.recording import write_experiment
+    from momentid.io.recording import write_experiment
     rec = tmp_path / "rec.mcap"
     write_experiment(rec, simulated("default"))
     argv = [a.replace("{rec}", str(rec)) for a in argv]

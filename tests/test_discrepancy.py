@@ -13,7 +13,7 @@ import pytest
 
 import momentid as mi
 from momentid.cli import main
-from momentid.discrepancy import diagnose
+from momentid.diagnosis.pipeline import diagnose
 
 from conftest import load
 

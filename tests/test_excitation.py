@@ -1,4 +1,4 @@
-"""Table motions: harmonics, AT2 records, band-limited noise (momentid.excitation)."""
+"""Table motions: harmonics, AT2 records, band-limited noise (momentid.lab.excitation)."""
 
 from __future__ import annotations
 
@@ -9,16 +9,15 @@ import pytest
 from scipy.integrate import cumulative_simpson
 
 from momentid.errors import ScenarioError
-from momentid.excitation import STANDARD_GRAVITY, GroundMotion, ground_motion, read_at2
-from momentid.scenario import BandLimitedNoise, Harmonics, RecordedMotion
+from momentid.lab.excitation import STANDARD_GRAVITY, GroundMotion, ground_motion, read_at2
+from momentid.lab.scenario import BandLimitedNoise, Harmonics, RecordedMotion
 
-ELCENTRO = Path(__file__).resolve().parents[2] / "shared" / "data" / "elcentro_1940_ns.at2"
+ELCENTRO = Path(__file__).resolve().parents[1] / "data" / "records" / "elcentro_1940_ns.at2"
 
 
 @pytest.fixture(scope="module")
 def elcentro_path() -> Path:
-    if not ELCENTRO.is_file():
-        pytest.skip(f"El Centro record not available at {ELCENTRO}")
+    assert ELCENTRO.is_file(), f"{ELCENTRO} is missing from the repository"
     return ELCENTRO
 
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid.compare import compare
-from momentid.data import Experiment
-from momentid.identify import identify
+from momentid.estimation.comparison import compare
+from momentid.core.series import Experiment
+from momentid.estimation.identification import identify
 
 from conftest import load, scenario_files
 

@@ -20,7 +20,7 @@ import pytest
 import momentid as mi
 from momentid.cli import main
 from momentid.errors import ScenarioError, SensorDataError
-from momentid.importer import import_folder, import_recording, read_csv_run
+from momentid.io.importer import import_folder, import_recording, read_csv_run
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "recording-format.md"
 FULL = ("zdd", "a1", "a2", "a3", "q1", "q2", "q3", "v1", "v2", "v3")

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid import model as rig
-from momentid.scenario import Run, Scenario
-from momentid.simulate import ground_motion_of, simulate_run
+from momentid.lab import rig
+from momentid.lab.scenario import Run, Scenario
+from momentid.lab.simulation import ground_motion_of, simulate_run
 
 from conftest import ROOT, SCENARIOS, load, scenario_files
 
@@ -93,7 +93,7 @@ def test_warnings_and_divergence_are_errors():
 def test_rig_equals_the_exact_discretisation(name):
     """MuJoCo's rollout of the rig = the linear model solved exactly for a table
     acceleration linear between steps (the drive the rig's table actuator makes)."""
-    from momentid.linear import discretize, outputs, simulate_linear
+    from momentid.estimation.linear import discretize, outputs, simulate_linear
 
     sc = load(name)
     short = Scenario(**{**sc.__dict__, "duration": 4.0})
@@ -115,11 +115,10 @@ def test_rig_equals_the_exact_discretisation(name):
 
 def test_callback_applies_the_storey_force_laws():
     """The simulator's fast callback and ``model.storey_forces`` are the same physics."""
-    import importlib
 
-    from momentid.scenario import Mechanism
+    from momentid.core.structure import Mechanism
 
-    sim = importlib.import_module("momentid.simulate")
+    from momentid.lab import simulation as sim
     s = structure(4)
     mechanisms = (Mechanism("coulomb_friction", 2, (("force", 0.7),)),
                   Mechanism("cubic_stiffness", 1, (("k3", 2e7),)),

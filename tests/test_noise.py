@@ -11,11 +11,11 @@ import pytest
 
 import momentid as mi
 from momentid.cli import main
-from momentid.data import Experiment
-from momentid.design import cramer_rao
-from momentid.identify import damping_models
-from momentid.scenario import Instrument, Sensors, parse_scenario
-from momentid.sensors import check_run, measure
+from momentid.core.series import Experiment
+from momentid.estimation.design import cramer_rao
+from momentid.estimation.identification import damping_models
+from momentid.lab.scenario import Instrument, Sensors, parse_scenario
+from momentid.lab.sensors import check_run, measure
 
 from conftest import SCENARIOS, load
 
@@ -57,7 +57,7 @@ def test_quantisation_bias_gain_offset_antialias_and_rate(truth):
     _, ex = truth
     sens = Sensors(groups=("zdd", "a", "q"), set="all", sample_rate=200.0, antialias=50.0,
                    accelerometer=Instrument(resolution=1e-3, bias=0.01),
-                   faults=(("a2", mi.scenario.ChannelFault(gain=1.1, clock_offset=0.004)),))
+                   faults=(("a2", mi.lab.scenario.ChannelFault(gain=1.1, clock_offset=0.004)),))
     run = measure(ex.runs[0], sens, seed=0, run_index=0)
     assert run.sample_rate == pytest.approx(200.0) and run.n_samples == 2001
     steps = np.round(run["a1"] / 1e-3)

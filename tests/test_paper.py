@@ -9,15 +9,15 @@ import tomllib
 import numpy as np
 import pytest
 
-from momentid.identify import identify
+from momentid.estimation.identification import identify
 
-from conftest import load, shared_file
+from conftest import load, data_file
 
 COLUMNS = ["q1", "q2", "q3", "v1", "v2", "v3", "a1", "a2", "a3"]
 
 
 def test_table3_response_at_5s(simulated):
-    rows = list(csv.DictReader(l for l in shared_file("reference", "paper_table3.csv").open()
+    rows = list(csv.DictReader(l for l in data_file("reference", "paper_table3.csv").open()
                                if not l.startswith("#")))
     experiment = simulated("paper_harmonic")
     assert len(rows) == len(experiment.runs) == 7
@@ -60,7 +60,7 @@ def _assert_matches_paper(result, reference):
 
 @pytest.mark.parametrize("name", ["paper_harmonic", "paper_three_harmonics"])
 def test_identified_parameters_match_the_paper(simulated, name):
-    reference = tomllib.loads(shared_file("reference", "paper_model.toml").read_text())
+    reference = tomllib.loads(data_file("reference", "paper_model.toml").read_text())
     experiment = simulated(name)
     _assert_matches_paper(identify(experiment), reference)
     # The paper's own system: difference form (eq. 2) at the single instant t = 5 s, 6 mass changes.
@@ -70,7 +70,7 @@ def test_identified_parameters_match_the_paper(simulated, name):
 
 
 def test_scenario_model_is_the_papers():
-    reference = tomllib.loads(shared_file("reference", "paper_model.toml").read_text())
+    reference = tomllib.loads(data_file("reference", "paper_model.toml").read_text())
     s = load("paper_harmonic").structure
     assert list(s.masses) == reference["model"]["masses"]
     assert list(s.storey_stiffness) == reference["model"]["storey_stiffness"]

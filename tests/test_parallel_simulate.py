@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid._toml import load_toml
+from momentid.io.toml_reader import load_toml
 from momentid.errors import SimulationError
-from momentid.scenario import default_scenario_path, parse_scenario
+from momentid.lab.scenario import default_scenario_path, parse_scenario
 
 
 def _short_default(duration: float = 0.5) -> mi.Scenario:

@@ -18,11 +18,11 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 from mcap_protobuf.decoder import DecoderFactory
 
-from momentid.data import Experiment, RunData
+from momentid.core.series import Experiment, RunData
 from momentid.errors import RecordingError, TruncatedRecordingError
-from momentid.recording import (SCHEMA_DATA, SCHEMA_NAME, SENSOR_BLOCK_PROTO, RecordingWriter,
+from momentid.io.recording import (SCHEMA_DATA, SCHEMA_NAME, SENSOR_BLOCK_PROTO, RecordingWriter,
                                 SensorBlock, _encode_block, read_recording, write_experiment)
-from momentid.scenario import Structure
+from momentid.core.structure import Structure
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "recording-format.md"
 CHANNELS = ("zdd", "a1", "a2", "q1", "q2")

@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import importlib
 
 import momentid as mi
 
-simulation = importlib.import_module("momentid.simulate")
+from momentid.lab import simulation
 
 from conftest import load
 
@@ -69,7 +68,7 @@ def test_truncated_recording_recovers_completed_runs(tmp_path):
 
 def test_streamed_identification_equals_in_memory(tmp_path):
     """identify_stream folds recording blocks into QR factors: same answer, no samples kept."""
-    identify_module = importlib.import_module("momentid.identify")
+    from momentid.estimation import identification as identify_module
     sc = load("default")
     path = tmp_path / "default.mcap"
     mi.run_experiment(sc, path)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid.scenario import Harmonics, parse_scenario
+from momentid.lab.scenario import Harmonics, parse_scenario
 
 from conftest import SCENARIOS, load, scenario_files
 
@@ -64,7 +64,7 @@ def test_damping_ratios_give_rayleigh_coefficients(tmp_path):
     text = BASE.replace("rayleigh_mu = 0.1\nrayleigh_kappa = 0.001", "damping_ratios = [0.02, 0.05]")
     sc = mi.load_scenario(write(tmp_path, text))
     s = sc.structure
-    modes = mi.analytic.modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix())
+    modes = mi.modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix())
     # The two modes' damping ratios are reproduced to round-off of a 2x2 solve and an eigensolve.
     assert np.allclose(modes.damping_ratio, [0.02, 0.05], rtol=1e-9)
 

@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid import visualize
+from momentid.report import viewer
 from momentid.cli import main
 from momentid.errors import ViewerError
-from momentid.identify import equation_residual
-from momentid.recording import write_experiment
-from momentid.scenario import default_scenario_path
+from momentid.estimation.identification import equation_residual
+from momentid.io.recording import write_experiment
+from momentid.lab.scenario import default_scenario_path
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
 
@@ -82,7 +82,7 @@ def test_sensor_series_match_the_recording(rec):
             np.testing.assert_allclose(t, run.time, rtol=0, atol=1e-9)
             np.testing.assert_array_equal(np.ravel(values), run[channel])
             name = static(rec["chunks"], entity, "SeriesLines:names")
-            assert name.startswith(channel) and f"({mi.data.channel_unit(channel)})" in name
+            assert name.startswith(channel) and f"({mi.core.channel_unit(channel)})" in name
 
 
 def test_rig_moves_with_exaggerated_displacements(rec):
@@ -91,7 +91,7 @@ def test_rig_moves_with_exaggerated_displacements(rec):
     level = np.concatenate([[0.0], np.cumsum(h)])
     for run in e.runs:
         root = f"/runs/{run.name}/rig/base"
-        idx = visualize.rig_samples(run)  # 1 kHz recording: every 10th sample, 100 Hz
+        idx = viewer.rig_samples(run)  # 1 kHz recording: every 10th sample, 100 Hz
         assert np.array_equal(idx, np.arange(0, 1001, 10))
         t, base = column(rec["chunks"], root, "Transform3D:translation")
         np.testing.assert_allclose(t, run.time[idx], rtol=0, atol=1e-9)
@@ -151,15 +151,15 @@ def test_result_json_round_trip(rec, tmp_path, capsys):
     assert main(["identify", str(rec["mcap"]), "--json", "--runs", "reference,uniform"]) == 0
     path = tmp_path / "result.json"
     path.write_text(capsys.readouterr().out)
-    result = visualize.load_result(path, rec["experiment"])
+    result = viewer.load_result(path, rec["experiment"])
     assert result.runs == ("reference", "uniform") and result.M.shape == (3, 3)
-    scene = visualize.prepare(rec["experiment"], result=result)
-    assert scene.result is result and "runs reference, uniform" in visualize._parameters_markdown(scene)
+    scene = viewer.prepare(rec["experiment"], result=result)
+    assert scene.result is result and "runs reference, uniform" in viewer._parameters_markdown(scene)
 
 
 def test_auto_exaggeration_is_a_nice_factor(rec):
     e = rec["experiment"]
-    x = visualize.auto_exaggeration(e, e.structure.storey_heights)
+    x = viewer.auto_exaggeration(e, e.structure.storey_heights)
     peak = max(np.abs(r["z"][:, None] + r.group("q")).max() for r in e.runs)
     mantissa = x / 10 ** np.floor(np.log10(x))
     assert np.isclose(mantissa, [1, 2, 5]).any()
@@ -170,13 +170,13 @@ def test_shows_what_it_can_without_identification_or_structure(rec, tmp_path):
     e = rec["experiment"]
     one = dataclasses.replace(e, runs=e.runs[:1])
     entities = {c.entity_path for c in
-                rerun_chunk.RrdReader(visualize.write_rrd(one, tmp_path / "one.rrd")).store().stream().to_chunks()}
+                rerun_chunk.RrdReader(viewer.write_rrd(one, tmp_path / "one.rrd")).store().stream().to_chunks()}
     assert "/runs/reference/sensors/a1" in entities and "/runs/reference/rig/base/floor3" in entities
     assert not {"/identification/modes", "/identification/rel_error", "/runs/reference/residual/r1"} & entities
-    assert "not identified" in visualize._experiment_markdown(visualize.prepare(one))
-    scene = visualize.prepare(dataclasses.replace(e, structure=None))
+    assert "not identified" in viewer._experiment_markdown(viewer.prepare(one))
+    scene = viewer.prepare(dataclasses.replace(e, structure=None))
     assert scene.result is not None and scene.comparison is None and len(scene.residuals) == 3
-    assert "n/a" in visualize._modes_markdown(scene) and "no analytic comparison" in " ".join(scene.notes)
+    assert "n/a" in viewer._modes_markdown(scene) and "no analytic comparison" in " ".join(scene.notes)
 
 
 def _free_port() -> int:
@@ -188,9 +188,9 @@ def _free_port() -> int:
 def test_no_viewer_suggests_save(rec, monkeypatch):
     monkeypatch.delenv("DISPLAY", raising=False)
     monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
-    monkeypatch.setattr(visualize.sys, "platform", "linux")
+    monkeypatch.setattr(viewer.sys, "platform", "linux")
     with pytest.raises(ViewerError, match="--save") as info:
-        visualize.view(rec["experiment"], port=_free_port())
+        viewer.view(rec["experiment"], port=_free_port())
     assert str(rec["mcap"]) in str(info.value)
 
 
@@ -227,7 +227,7 @@ def test_mistakes_are_one_line_errors(rec, tmp_path, capsys, argv, fragment):
 
 def test_run_view_shows_the_new_recording(tmp_path, monkeypatch, capsys):
     shown = []
-    monkeypatch.setattr(visualize, "show", lambda scene, **kw: shown.append(scene))
+    monkeypatch.setattr(viewer, "show", lambda scene, **kw: shown.append(scene))
     scenario = tmp_path / "short.toml"
     scenario.write_text(default_scenario_path().read_text().replace("duration = 10.0", "duration = 0.5"))
     assert main(["run", str(scenario), "-o", str(tmp_path), "-q", "-j", "1", "--view",
@@ -237,6 +237,6 @@ def test_run_view_shows_the_new_recording(tmp_path, monkeypatch, capsys):
 
 
 def test_momentid_does_not_import_rerun():
-    code = "import sys, momentid, momentid.cli, momentid.visualize; print('rerun' in sys.modules)"
+    code = "import sys, momentid, momentid.cli, momentid.report.viewer; print('rerun' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"

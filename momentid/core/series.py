@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import SensorDataError
-from .scenario import Structure
+from momentid.errors import SensorDataError
+from momentid.core.structure import Structure
 
 __all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe"]
 

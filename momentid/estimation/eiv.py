@@ -11,7 +11,7 @@ This module fits ``theta = (M, C, K, mu)`` by the frequency-domain
 errors-in-variables maximum likelihood (Pintelon & Schoukens, *System
 Identification: A Frequency Domain Approach*, ch. 7 and 10):
 
-* each run's discretised model (:mod:`momentid.linear`) relates the DFTs of
+* each run's discretised model (:mod:`momentid.estimation.linear`) relates the DFTs of
   input and outputs exactly, ``Y_k = G_k U_k + T_k beta``, where the
   transient term ``T_k beta`` absorbs the unknown initial and final states
   (and any constant input bias): ``beta`` is eliminated by variable projection;
@@ -40,9 +40,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
-from .data import RunData
-from .errors import IdentificationError
-from .linear import discretize, force_response, frequency_response, output_matrix
+from momentid.core.series import RunData
+from momentid.errors import IdentificationError
+from momentid.estimation.linear import discretize, force_response, frequency_response, output_matrix
 
 __all__ = ["EivFit", "fit_eiv", "Spectra", "spectra", "fisher_information", "output_groups"]
 
@@ -276,7 +276,7 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
 
     Parameters
     ----------
-    layout : momentid.identify.Layout
+    layout : momentid.estimation.identification.Layout
     runs : sequence of RunData
         With ``zdd`` and floor accelerations (and displacements/velocities
         where measured), uniformly sampled.

@@ -46,8 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .data import Experiment, RunData, channel_unit
-from .errors import IdentificationError, SensorDataError, ViewerError
+from momentid.core.series import Experiment, RunData, channel_unit
+from momentid.errors import IdentificationError, SensorDataError, ViewerError
 
 __all__ = ["Scene", "auto_exaggeration", "load_result", "check_result", "prepare", "blueprint",
            "log_scene", "write_rrd", "show", "view", "rig_samples", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
@@ -165,7 +165,7 @@ def load_result(path, experiment: Experiment):
     ViewerError
         The file is missing or not such a JSON object, or belongs to another recording.
     """
-    from .identify import Identification
+    from momentid.estimation.identification import Identification
 
     path = Path(path)
     try:
@@ -232,7 +232,7 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
     run : str, optional
         The run whose tab opens first (default: the first run).
     identify_options : dict, optional
-        Keyword arguments of :func:`momentid.identify` (estimator, runs, times).
+        Keyword arguments of :func:`momentid.estimation.identification` (estimator, runs, times).
 
     Returns
     -------
@@ -243,8 +243,8 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
     ViewerError
         Bad exaggeration, unknown run name, or a result of another recording.
     """
-    from .compare import compare
-    from .identify import equation_residual, identify
+    from momentid.estimation.comparison import compare
+    from momentid.estimation.identification import equation_residual, identify
 
     names = [r.name for r in experiment.runs]
     if run is not None and run not in names:
@@ -600,7 +600,7 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
     ViewerError
         See :func:`load_result`, :func:`prepare`, :func:`write_rrd`, :func:`show`.
     """
-    from .recording import read_recording
+    from momentid.io.recording import read_recording
 
     experiment = recording if isinstance(recording, Experiment) else read_recording(recording)
     if isinstance(result, (str, Path)):

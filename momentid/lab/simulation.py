@@ -1,6 +1,6 @@
 """Simulate the added-mass runs of a scenario on the MuJoCo rig.
 
-The table drive runs inside MuJoCo (see :mod:`momentid.model`): the table
+The table drive runs inside MuJoCo (see :mod:`momentid.lab.rig`): the table
 actuator integrates the commanded jerk, so its activation, the commanded table
 acceleration, is linear between steps and RK4 evaluates it exactly at every
 stage.  A run is then an open-loop ``mujoco.rollout`` of a freshly compiled
@@ -24,12 +24,12 @@ import mujoco
 import numpy as np
 from mujoco import rollout as _rollout
 
-from . import model as rig
-from .data import Experiment, RunData
-from .errors import SimulationError
-from .excitation import GroundMotion, ground_motion
-from .scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
-from .sensors import measure
+from momentid.lab import rig
+from momentid.core.series import Experiment, RunData
+from momentid.errors import SimulationError
+from momentid.lab.excitation import GroundMotion, ground_motion
+from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
+from momentid.lab.sensors import measure
 
 __all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay"]
 
@@ -66,7 +66,7 @@ def ground_motion_of(scenario: Scenario) -> GroundMotion:
 
 class _StoreyForces:
     """Control callback applying the storey forces of ``mechanisms`` that the MJCF cannot
-    express (:func:`momentid.model.storey_forces`) to the floor joints at every RK4 stage.
+    express (:func:`momentid.lab.rig.storey_forces`) to the floor joints at every RK4 stage.
 
     Called about 4 times a step, so it works on Python floats: each mechanism's storey is
     read from two joints and pushes on two, with the laws of ``storey_forces`` (a test holds
@@ -183,7 +183,7 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     -------
     RunData
         The channels of ``scenario.sensors`` as its instruments record them
-        (:func:`momentid.sensors.measure`); with ideal sensors, exactly
+        (:func:`momentid.lab.sensors.measure`); with ideal sensors, exactly
         ``n = scenario.n_samples`` samples at ``t = k / sample_rate``.
         ``meta['model_xml']`` holds the MJCF.
     """
@@ -269,7 +269,7 @@ def _check_run(warnings, out, scenario: Scenario, run: Run) -> None:
 
 def _stability_check(scenario: Scenario) -> None:
     """Refuse steps that RK4 cannot integrate stably for this structure."""
-    from .analytic import modal_properties
+    from momentid.core.analytic import modal_properties
     s = scenario.structure
     f_max = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
     w_h = 2 * math.pi * f_max * scenario.timestep
@@ -409,7 +409,7 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False,
     so a crash keeps every completed run readable.  ``workers`` as in
     :func:`simulate`.
     """
-    from .recording import RecordingWriter
+    from momentid.io.recording import RecordingWriter
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -436,7 +436,7 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     structure : Structure
         The model (e.g. identified) to replay.
     mechanisms : sequence of Mechanism
-        Physics added to the linear model (see :func:`momentid.model.build_spec`).
+        Physics added to the linear model (see :func:`momentid.lab.rig.build_spec`).
     run : RunData
         Supplies the clock, the added masses and (unless ``zdd`` is given) the
         measured base acceleration ``zdd``.

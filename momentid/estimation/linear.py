@@ -20,7 +20,7 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
-from .errors import IdentificationError
+from momentid.errors import IdentificationError
 
 __all__ = ["LinearModel", "discretize", "simulate_linear", "free_response"]
 

@@ -2,9 +2,9 @@
 
 How well can an experiment *as designed* identify ``M, C, K, mu``?  The
 Cramér-Rao lower bound (CRLB) answers before anything is built: simulate the
-designed runs without noise (the linear model, :mod:`momentid.linear`),
+designed runs without noise (the linear model, :mod:`momentid.estimation.linear`),
 evaluate the errors-in-variables Fisher information at the true parameters
-with the scenario's sensor noise (:func:`momentid.eiv.fisher_information`), and
+with the scenario's sensor noise (:func:`momentid.estimation.eiv.fisher_information`), and
 invert it.  No unbiased estimator can do better; momentid's ``eiv`` estimator
 reaches it (see ``benchmarks/accuracy.py``).
 
@@ -20,13 +20,13 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .data import RunData
-from .eiv import fisher_information
-from .errors import IdentificationError, ScenarioError
-from .identify import Layout
-from .linear import discretize, outputs, simulate_linear
-from .scenario import BandLimitedNoise, Run, Scenario, Sensors
-from .simulate import ground_motion_of
+from momentid.core.series import RunData
+from momentid.estimation.eiv import fisher_information
+from momentid.errors import IdentificationError, ScenarioError
+from momentid.estimation.identification import Layout
+from momentid.estimation.linear import discretize, outputs, simulate_linear
+from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors
+from momentid.lab.simulation import ground_motion_of
 
 __all__ = ["Bound", "cramer_rao", "plan", "Design"]
 
@@ -133,7 +133,7 @@ def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache:
     s = scenario.structure
     layout = Layout(s.storeys, mass)
     theta = layout.pack(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix(), s.rayleigh_mu)
-    from .analytic import modal_properties
+    from momentid.core.analytic import modal_properties
     f_top = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
     info = sum(_run_information(scenario, run, layout, theta, 2.0 * f_top, _cache) for run in runs)
     try:
@@ -193,7 +193,7 @@ def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tupl
     relative CRLB std over every parameter, ``mu`` included) with the fewest
     runs, then the least added mass.
     """
-    from .analytic import modal_properties
+    from momentid.core.analytic import modal_properties
     s = scenario.structure
     masses = np.asarray(s.masses)
     f = modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency

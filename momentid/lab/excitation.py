@@ -1,14 +1,14 @@
 """Table motions: the prescribed base displacement ``z(t)`` and its derivatives.
 
-:func:`ground_motion` turns a scenario's :data:`~momentid.scenario.Excitation`
+:func:`ground_motion` turns a scenario's :data:`~momentid.lab.scenario.Excitation`
 into a :class:`GroundMotion` that the simulator evaluates at arbitrary times
 (RK4 stage times, sensor sample times), vectorised over any array of times.
 
-* :class:`~momentid.scenario.Harmonics` give an exact analytic ``z``, ``z'``
+* :class:`~momentid.lab.scenario.Harmonics` give an exact analytic ``z``, ``z'``
   and ``z''``; ``z(0)`` and ``z'(0)`` need not be zero (the simulator starts
   the base with velocity ``z'(0)``).
-* :class:`~momentid.scenario.RecordedMotion` (a PEER AT2 accelerogram, read by
-  :func:`read_at2`) and :class:`~momentid.scenario.BandLimitedNoise` go through
+* :class:`~momentid.lab.scenario.RecordedMotion` (a PEER AT2 accelerogram, read by
+  :func:`read_at2`) and :class:`~momentid.lab.scenario.BandLimitedNoise` go through
   one processing chain, the one a real shake table needs: samples of
   acceleration -> (record only: scale, zero-phase Butterworth high-pass) ->
   cosine tapers at both ends -> baseline correction -> C2 cubic spline.  The
@@ -41,8 +41,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PPoly
 from scipy.signal import butter, sosfiltfilt
 
-from .errors import ScenarioError
-from .scenario import BandLimitedNoise, Excitation, Harmonics, RecordedMotion
+from momentid.errors import ScenarioError
+from momentid.lab.scenario import BandLimitedNoise, Excitation, Harmonics, RecordedMotion
 
 __all__ = ["GroundMotion", "ground_motion", "read_at2", "STANDARD_GRAVITY", "BASELINE_RAMP"]
 

@@ -31,8 +31,8 @@ import scipy.fft
 import scipy.signal
 from scipy.interpolate import CubicSpline
 
-from .data import RunData
-from .errors import SensorDataError
+from momentid.core.series import RunData
+from momentid.errors import SensorDataError
 
 __all__ = ["Prefilter", "prepare_run", "suggest_band"]
 

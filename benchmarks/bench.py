@@ -1,6 +1,6 @@
 """Benchmarks: every stage of momentid against a raw baseline timed in the same process.
 
-``momentid bench`` and ``python -m benchmarks`` run this module.  Each stage
+``python -m benchmarks`` runs this module.  Each stage
 prints momentid's time, the baseline's time and their ratio (momentid /
 baseline), and ``--json-out`` writes the same rows as JSON.  Only ratios are
 meaningful across machines; nothing here asserts an absolute time.
@@ -24,7 +24,7 @@ Stages and their baselines:
     ``identify(experiment)`` against one dense ``numpy.linalg.lstsq`` of the
     stacked eq. (3) regressor matrix of all samples, built here.
 ``view``
-    The ``.rrd`` writer of ``momentid.visualize`` when that module exists,
+    The ``.rrd`` writer of ``momentid.report.viewer`` when that module exists,
     against ``rr.send_columns`` of the same series into an ``.rrd`` file.
 ``run``
     The whole ``momentid run`` of the default scenario in a fresh
@@ -54,7 +54,7 @@ from unittest import mock
 
 import numpy as np
 
-from .errors import MomentidError
+from momentid.errors import MomentidError
 
 __all__ = ["Row", "STAGES", "RUN_TARGET_S", "bench_scenario", "run_benchmarks", "stacked_regressor",
            "add_arguments", "main"]
@@ -113,8 +113,8 @@ def bench_scenario(path=None, *, duration: float | None = None, overrides: dict 
     """A scenario for benchmarking: ``path`` (default: the paper's 7 runs,
     ``scenarios/paper_harmonic.toml`` in a checkout, else the embedded
     default) with its duration and any ``{"table.key": value}`` replaced."""
-    from ._toml import load_toml
-    from .scenario import default_scenario_path, parse_scenario
+    from momentid.io.toml_reader import load_toml
+    from momentid.lab.scenario import default_scenario_path, parse_scenario
 
     path = Path(path) if path is not None else (_checkout_scenario("paper_harmonic")
                                                  or default_scenario_path())
@@ -145,8 +145,8 @@ class _RawRig:
     table control sequences, prepared as :func:`momentid.simulate_run` prepares them."""
 
     def __init__(self, scenario):
-        from . import model as rig
-        from .simulate import _initial_state, _jerk, ground_motion_of
+        from momentid.lab import rig
+        from momentid.lab.simulation import _initial_state, _jerk, ground_motion_of
 
         if rig.needs_callback(scenario.truth):
             raise MomentidError(f"{scenario.source}: the simulate benchmark needs a rig without callback "
@@ -211,7 +211,7 @@ def _same_computation(scenario, rig_, experiment) -> float | None:
     """Largest |raw rollout - momentid| over every sample of every run,
     relative to the channel's peak: 0 means the baseline computed the same
     numbers (ideal sensors)."""
-    from . import model as rig
+    from momentid.lab import rig
 
     worst = 0.0
     for model, sensors, run in zip(rig_.models, rig_.rollout(1), experiment.runs):
@@ -235,7 +235,7 @@ def _cpu_seconds() -> float:
 
 
 def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
-    from .simulate import simulate
+    from momentid.lab.simulation import simulate
 
     raw = _RawRig(scenario)
     steps = raw.n_steps * len(scenario.runs)
@@ -336,7 +336,7 @@ def _raw_read(path: Path) -> int:
 
 
 def bench_record(experiment, workdir: Path, *, repeat: int) -> list[Row]:
-    from .recording import read_recording, write_experiment
+    from momentid.io.recording import read_recording, write_experiment
 
     ours, raw = workdir / "momentid.mcap", workdir / "raw.mcap"
     write_experiment(ours, experiment)
@@ -432,7 +432,7 @@ def blas_threads(n: int | None):
 
 def bench_identify(experiment, *, repeat: int, max_matrix_bytes: float = 2e9,
                    threads: int | None = 1) -> list[Row]:
-    from .identify import identify
+    from momentid.estimation.identification import identify
 
     d = experiment.storeys
     samples = sum(r.n_samples for r in experiment.runs)
@@ -480,10 +480,10 @@ def _raw_rrd(experiment, path: Path) -> None:
 
 
 def _visualize_writer():
-    """The ``.rrd`` writer of ``momentid.visualize``, if that module exists."""
-    if importlib.util.find_spec("momentid.visualize") is None:
+    """The ``.rrd`` writer of ``momentid.report.viewer``, if that module exists."""
+    if importlib.util.find_spec("momentid.report.viewer") is None:
         return None
-    import momentid.visualize as vis
+    import momentid.report.viewer as vis
 
     for name in ("write_rrd", "save_rrd", "to_rrd", "experiment_to_rrd"):
         if callable(getattr(vis, name, None)):
@@ -497,7 +497,7 @@ def bench_view(experiment, workdir: Path, *, repeat: int) -> list[Row]:
     writer, failure = _visualize_writer(), None
     fns = {"raw": lambda: _raw_rrd(experiment, workdir / "raw.rrd")}
     if writer is not None:
-        import momentid.visualize as vis
+        import momentid.report.viewer as vis
 
         # Identification and scene preparation happen once, outside the timing: this stage is
         # the .rrd writing (the identify stage times the identification).
@@ -514,11 +514,11 @@ def bench_view(experiment, workdir: Path, *, repeat: int) -> list[Row]:
         note = (f"momentid's file also holds the animated rig, equation residuals and a blueprint; "
                 f"raw: {values / t['raw'] / 1e6:.1f} M scalars/s")
     elif failure:
-        note = f"momentid.visualize failed ({failure}): only the raw baseline is timed"
+        note = f"momentid.report.viewer failed ({failure}): only the raw baseline is timed"
     else:
-        note = "momentid.visualize has no .rrd writer yet: only the raw baseline is timed"
+        note = "momentid.report.viewer has no .rrd writer yet: only the raw baseline is timed"
     return [Row("view", t.get("momentid"), t["raw"],
-                f"momentid.visualize.{writer.__name__}" if writer is not None else "n/a",
+                f"momentid.report.viewer.{writer.__name__}" if writer is not None else "n/a",
                 "rr.send_columns of every channel of every run into an .rrd file",
                 note=note, extra={"scalars": values})]
 
@@ -527,7 +527,7 @@ def bench_view(experiment, workdir: Path, *, repeat: int) -> list[Row]:
 
 def _quick_scenario_file(workdir: Path, duration: float) -> Path:
     """The default scenario's file with its duration replaced."""
-    from .scenario import default_scenario_path
+    from momentid.lab.scenario import default_scenario_path
 
     text = default_scenario_path().read_text(encoding="utf-8")
     text, n = re.subn(r"(?m)^duration\s*=\s*[0-9.eE+-]+", f"duration = {duration!r}", text)
@@ -563,7 +563,7 @@ def bench_run(workdir: Path, *, repeat: int, duration: float | None = None) -> l
 def _machine() -> dict:
     import mujoco
 
-    from .simulate import available_cores
+    from momentid.lab.simulation import available_cores
 
     return {"cores": available_cores(), "python": platform.python_version(),
             "platform": platform.platform(), "numpy": np.__version__, "mujoco": mujoco.__version__,
@@ -594,7 +594,7 @@ def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = Non
         shared 2-core machine a second BLAS thread mostly waits; ``None``
         or 0 keeps the library's default).
     """
-    from .simulate import available_cores, simulate
+    from momentid.lab.simulation import available_cores, simulate
 
     stages = tuple(stages)
     unknown = [s for s in stages if s not in STAGES]
@@ -671,7 +671,7 @@ def format_markdown(report: dict) -> str:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of ``momentid bench`` / ``python -m benchmarks``."""
+    """The options of ``python -m benchmarks``."""
     p.add_argument("--quick", action="store_true",
                    help=f"CI-sized: {QUICK_DURATION:g} s records, one repetition")
     p.add_argument("--stages", default=",".join(STAGES), metavar="LIST",

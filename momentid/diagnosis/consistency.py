@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .data import RunData
+from momentid.core.series import RunData
 
 __all__ = ["SensorFit", "KinematicCheck", "kinematic_check", "noise_sigma"]
 

@@ -31,9 +31,9 @@ from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
-from .data import UNITS, Experiment, RunData, channel_unit
-from .errors import RecordingError, TruncatedRecordingError
-from .scenario import Structure
+from momentid.core.series import UNITS, Experiment, RunData, channel_unit
+from momentid.errors import RecordingError, TruncatedRecordingError
+from momentid.core.structure import Structure
 
 __all__ = [
     "RecordingWriter",
@@ -208,7 +208,7 @@ class RecordingWriter:
         # Uncompressed chunks: float64 sensor data shrink ~10 % with zstd, which halves read speed.
         self._writer = Writer(self._file, compression=CompressionType.NONE, enable_data_crcs=True)
         try:
-            self._writer.start(profile="", library="momentid.recording format " + FORMAT_VERSION)
+            self._writer.start(profile="", library="momentid.io.recording format " + FORMAT_VERSION)
             self._schema_id = self._writer.register_schema(SCHEMA_NAME, "protobuf", SCHEMA_DATA)
             self._writer.add_metadata(EXPERIMENT_RECORD, meta)
             self._sync()
@@ -691,7 +691,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
                 f"{path}: reading stopped {scan.failure} before the {EXPERIMENT_RECORD!r} record; "
                 "no completed run to recover")
         raise RecordingError(f"{path}: not a momentid recording: no {EXPERIMENT_RECORD!r} metadata "
-                             "record (expected one, as written by momentid.recording)")
+                             "record (expected one, as written by momentid.io.recording)")
     if exp.get("format_version") != FORMAT_VERSION:
         raise RecordingError(f"{path}: {EXPERIMENT_RECORD} format_version = "
                              f"{exp.get('format_version')!r}; expected {FORMAT_VERSION!r}")

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from .errors import ScenarioError
+from momentid.errors import ScenarioError
 
 __all__ = [
     "Modes",

@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ._toml import Table, load_toml
-from .data import Experiment, RunData, channel_unit
-from .errors import ScenarioError, SensorDataError
-from .scenario import Structure
+from momentid.io.toml_reader import Table, load_toml
+from momentid.core.series import Experiment, RunData, channel_unit
+from momentid.errors import ScenarioError, SensorDataError
+from momentid.core.structure import Structure
 
 __all__ = ["import_folder", "import_recording", "write_import", "summary", "read_csv_run",
            "EXPERIMENT_FILE", "TIME_TOLERANCE", "MIN_SAMPLES"]
@@ -371,7 +371,7 @@ def _agree(first: RunData, run: RunData, first_file: Path, file: Path) -> None:
 
 def write_import(experiment: Experiment, out_path) -> Path:
     """Write an imported experiment to the MCAP recording ``out_path`` (folders created)."""
-    from .recording import write_experiment
+    from momentid.io.recording import write_experiment
 
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -385,7 +385,7 @@ def import_recording(folder, out_path) -> Path:
     -------
     Path
         ``out_path``, an MCAP recording that :func:`momentid.read_recording`
-        reads and :func:`momentid.identify` identifies.
+        reads and :func:`momentid.estimation.identification` identifies.
     """
     return write_import(import_folder(folder), out_path)
 

@@ -34,16 +34,16 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from . import model as rig
-from .analytic import modal_properties, shear_stiffness
-from .consistency import kinematic_check, noise_sigma
-from .locate import locate
-from .data import Experiment, RunData, json_safe
-from .errors import IdentificationError, ModelError, SimulationError
-from .identify import damping_models, identify
-from .linear import discretize, outputs, simulate_linear
-from .reconstruct import Prefilter, prepare_run, suggest_band
-from .scenario import Mechanism, Structure
+from momentid.lab import rig
+from momentid.core.analytic import modal_properties, shear_stiffness
+from momentid.diagnosis.consistency import kinematic_check, noise_sigma
+from momentid.diagnosis.locate import locate
+from momentid.core.series import Experiment, RunData, json_safe
+from momentid.errors import IdentificationError, ModelError, SimulationError
+from momentid.estimation.identification import damping_models, identify
+from momentid.estimation.linear import discretize, outputs, simulate_linear
+from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
+from momentid.core.structure import Mechanism, Structure
 
 __all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "MECHANISM_IDS"]
 
@@ -701,7 +701,7 @@ _PARAM = {"coulomb_friction": "force", "cubic_stiffness": "k3", "p_delta": "weig
 
 def _refit(mech, loc, params, runs, result, band, f_top):
     """Errors-in-variables fit of the linear model together with the mechanism's force."""
-    from .eiv import fit_eiv
+    from momentid.estimation.eiv import fit_eiv
     d = result.storeys
     forces = []
     for run in runs:
@@ -955,7 +955,7 @@ def _augmented_replay(structure, mech, loc, params, mechanisms, run, d, static=T
     ``static``: for ``p_delta``, whether ``structure`` already holds the geometric stiffness of
     the floors' own weight (an identified model does, a nominal one does not).
     """
-    from .simulate import replay
+    from momentid.lab.simulation import replay
     measured = {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
     zdd = run["zdd"].copy()
     if mech == "p_delta":
@@ -984,7 +984,7 @@ def _pdelta_structure(structure, loc, params, static=True):
 
 def _replay_check(linear_structure, structure, mech, loc, params, mechanisms, run, d, band, f_top, static=True):
     """NRMSE of the held-out run: linear model vs. augmented model, both in MuJoCo."""
-    from .simulate import replay
+    from momentid.lab.simulation import replay
     fs = run.sample_rate
     measured = {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
     lin = replay(linear_structure, (), run, run["zdd"])
@@ -1050,7 +1050,7 @@ def write_report(diag: Diagnosis, folder) -> Path:
         _plots(diag, folder)
         _rerun(diag, folder / "diagnosis.rrd")
     if diag.localisation:
-        from .locate import plot_localisation
+        from momentid.diagnosis.locate import plot_localisation
         plot_localisation(diag.localisation, folder / "locate.png")
     return folder
 

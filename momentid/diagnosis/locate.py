@@ -16,7 +16,7 @@ and compared with simple shapes: the sign of the drift velocity (a step at every
 reversal: friction), the drift cubed (stiffening/softening), the drift times the
 weight above (P-Delta).  Every number is a ratio to the noise-only level, so 1
 means "nothing there".  This describes the mismatch; naming the physics is
-:mod:`momentid.discrepancy`'s job.
+:mod:`momentid.diagnosis.pipeline`'s job.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import model as rig
+from momentid.lab import rig
 
 __all__ = ["Localisation", "locate", "plot_localisation"]
 

@@ -12,9 +12,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .analytic import Modes, modal_properties
-from .identify import Identification, damping_models
-from .scenario import Structure
+from momentid.core.analytic import Modes, modal_properties
+from momentid.estimation.identification import Identification, damping_models
+from momentid.core.structure import Structure
 
 __all__ = ["Entry", "Comparison", "analytic_parameters", "compare"]
 

@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 import mujoco
 
-from .errors import ModelError
-from .scenario import Structure
+from momentid.errors import ModelError
+from momentid.core.structure import Structure
 
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
            "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS"]

@@ -24,9 +24,9 @@ from dataclasses import replace
 import numpy as np
 import scipy.signal
 
-from .data import RunData
-from .errors import SensorDataError
-from .scenario import Sensors
+from momentid.core.series import RunData
+from momentid.errors import SensorDataError
+from momentid.lab.scenario import Sensors
 
 __all__ = ["measure", "check_run", "MAX_REPAIR_GAP"]
 
@@ -174,5 +174,5 @@ def _check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int) -> 
 
 
 def _unit(name: str) -> str:
-    from .data import channel_unit
+    from momentid.core.series import channel_unit
     return channel_unit(name)

@@ -19,7 +19,7 @@ mu]``; M is diagonal (the shear model) or, with ``mass="full"``, symmetric
 
         M (q_i'' - q_1'') + C (v_i - v_1) + K (q_i - q_1) + mu dM_i v_i = -dM_i a_i
 
-``"eiv"`` (:mod:`momentid.eiv`)
+``"eiv"`` (:mod:`momentid.estimation.eiv`)
     Errors-in-variables maximum likelihood in the frequency domain, started
     from the equation form on low-passed signals: unbiased by noise on every
     channel (table accelerometer included), with standard errors at the
@@ -45,11 +45,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .analytic import Modes, modal_properties
-from .data import Experiment, RunData
-from .errors import IdentificationError, SensorDataError
-from .reconstruct import Prefilter, prepare_run, suggest_band
-from .sensors import check_run
+from momentid.core.analytic import Modes, modal_properties
+from momentid.core.series import Experiment, RunData
+from momentid.errors import IdentificationError, SensorDataError
+from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
+from momentid.lab.sensors import check_run
 
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
            "MAX_CONDITION", "Layout"]
@@ -364,7 +364,7 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     experiment : Experiment
         Runs with floor accelerations ``a1..ad``, the base acceleration
         ``zdd``, and displacements/velocities where measured (missing ones
-        are reconstructed, see :mod:`momentid.reconstruct`).
+        are reconstructed, see :mod:`momentid.estimation.reconstruct`).
     estimator : {"auto", "equation", "difference", "eiv"}
         See the module docstring.
     mass : {"diagonal", "full"}
@@ -435,7 +435,7 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     start = _equation_form(experiment, selected, layout, eq_name, times, band, names, notes)
     if estimator != "eiv":
         return start
-    from .eiv import fit_eiv
+    from momentid.estimation.eiv import fit_eiv
     f_top = float(start.modes().frequency.max())
     f_max = max(band.high or 0.0, 2.0 * f_top)
     fit = fit_eiv(layout, selected, start.theta, f_max=f_max)
@@ -638,7 +638,7 @@ def identify_stream(path, *, mass: str = "diagonal", return_structure: bool = Fa
         None)``: the nominal model the recording states, from the same single
         pass over the file.
     """
-    from .recording import stream_recording
+    from momentid.io.recording import stream_recording
 
     per_run: dict[str, tuple[_Accumulator, np.ndarray]] = {}
     state: dict = {}
@@ -679,6 +679,6 @@ def identify_stream(path, *, mass: str = "diagonal", return_structure: bool = Fa
                      float(np.sqrt(rss / max(merged.rows, 1))), names, cov, notes)
     if not return_structure:
         return result
-    from .scenario import Structure
+    from momentid.core.structure import Structure
     text = experiment.get("structure")
     return result, (Structure.from_dict(json.loads(text)) if text and text != "null" else None)

@@ -12,7 +12,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from .errors import ScenarioError
+from momentid.errors import ScenarioError
 
 _MISSING = object()
 

@@ -1,0 +1,87 @@
+"""Core types of a shear building: its parameters and the extra physics a rig may carry.
+
+This module parses nothing: the scenario parser (:mod:`momentid.lab.scenario`),
+the recording reader and the importers build these records from their files.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from momentid.core import analytic
+
+__all__ = ["Structure", "Mechanism"]
+
+
+@dataclass(frozen=True)
+class Structure:
+    """A shear building; floor 1 is the lowest, storey i joins floor i-1 and i.
+
+    Attributes
+    ----------
+    masses : tuple of float, length d
+        Floor masses (kg).
+    storey_stiffness : tuple of float, length d
+        Storey stiffnesses (N/m).
+    storey_heights : tuple of float, length d
+        Storey heights (m); used for drawing and gravity effects only.
+    rayleigh_mu, rayleigh_kappa : float
+        ``C = mu M + kappa K`` (1/s and s).
+    base_mass : float
+        Mass of the shake-table platen (kg); it does not enter the
+        identification because the base motion is prescribed.
+    """
+
+    masses: tuple[float, ...]
+    storey_stiffness: tuple[float, ...]
+    storey_heights: tuple[float, ...]
+    rayleigh_mu: float
+    rayleigh_kappa: float
+    base_mass: float = 100.0
+
+    @property
+    def storeys(self) -> int:
+        return len(self.masses)
+
+    def mass_matrix(self) -> np.ndarray:
+        """``M``, shape (d, d), kg."""
+        return np.diag(self.masses)
+
+    def stiffness_matrix(self) -> np.ndarray:
+        """``K``, shape (d, d), N/m."""
+        return analytic.shear_stiffness(self.storey_stiffness)
+
+    def damping_matrix(self, added_mass=None) -> np.ndarray:
+        """``C = mu (M + dM) + kappa K``, shape (d, d), N*s/m."""
+        M = self.mass_matrix()
+        if added_mass is not None:
+            M = M + np.diag(added_mass)
+        return self.rayleigh_mu * M + self.rayleigh_kappa * self.stiffness_matrix()
+
+    def to_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "Structure":
+        return cls(
+            masses=tuple(float(x) for x in data["masses"]),
+            storey_stiffness=tuple(float(x) for x in data["storey_stiffness"]),
+            storey_heights=tuple(float(x) for x in data["storey_heights"]),
+            rayleigh_mu=float(data["rayleigh_mu"]),
+            rayleigh_kappa=float(data["rayleigh_kappa"]),
+            base_mass=float(data.get("base_mass", 100.0)),
+        )
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    """One piece of physics beyond the linear model, at a storey or floor (1 = lowest)."""
+
+    type: str
+    location: int
+    parameters: tuple[tuple[str, float], ...]
+
+    def get(self, name: str) -> float:
+        return dict(self.parameters)[name]

@@ -1,0 +1,20 @@
+"""Estimation: M, C, K and the Rayleigh coefficients from recorded runs.
+
+- :mod:`~momentid.estimation.identification`: :func:`identify` (equation (3) by least squares,
+  the paper's eq. (2), or errors-in-variables) and the streamed variant.
+- :mod:`~momentid.estimation.reconstruct`: velocities and displacements from what was measured.
+- :mod:`~momentid.estimation.linear`: exact discretisation and simulation of the linear model.
+- :mod:`~momentid.estimation.eiv`: frequency-domain errors-in-variables maximum likelihood.
+- :mod:`~momentid.estimation.design`: Cramér-Rao bounds and experiment planning.
+- :mod:`~momentid.estimation.comparison`: identified against analytic parameters.
+"""
+
+from momentid.estimation.identification import Identification, identify, identify_stream
+from momentid.estimation.comparison import Comparison, analytic_parameters, compare
+from momentid.estimation.design import cramer_rao, plan
+
+__all__ = [
+    "Identification", "identify", "identify_stream",
+    "Comparison", "analytic_parameters", "compare",
+    "cramer_rao", "plan",
+]

@@ -8,11 +8,11 @@
 """
 
 from momentid.core.analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
-from momentid.core.structure import Mechanism, Structure
+from momentid.core.structure import LabStatement, Mechanism, Structure
 from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
 
 __all__ = [
     "Modes", "modal_properties", "rayleigh_coefficients", "shear_stiffness",
-    "Mechanism", "Structure",
+    "LabStatement", "Mechanism", "Structure",
     "UNITS", "Experiment", "RunData", "channel_unit", "json_safe",
 ]

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from momentid.errors import SensorDataError
-from momentid.core.structure import Structure
+from momentid.core.structure import LabStatement, Structure
 
 __all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe"]
 
@@ -126,6 +126,9 @@ class Experiment:
         False when runs were lost (a truncated recording was recovered).
     notes : tuple of str
         What was repaired or recovered while reading.
+    statement : LabStatement or None
+        What the lab states short of a full nominal model (stated masses, noise
+        levels); None for simulated experiments, which carry ``structure``.
     """
 
     runs: tuple[RunData, ...]
@@ -135,6 +138,7 @@ class Experiment:
     source: str = "<memory>"
     complete: bool = True
     notes: tuple[str, ...] = ()
+    statement: LabStatement | None = None
 
     @property
     def storeys(self) -> int:

@@ -12,7 +12,7 @@ import numpy as np
 
 from momentid.core import analytic
 
-__all__ = ["Structure", "Mechanism"]
+__all__ = ["Structure", "Mechanism", "LabStatement"]
 
 
 @dataclass(frozen=True)
@@ -85,3 +85,30 @@ class Mechanism:
 
     def get(self, name: str) -> float:
         return dict(self.parameters)[name]
+
+
+@dataclass(frozen=True)
+class LabStatement:
+    """What a lab states about its rig and instruments when it has no full nominal model.
+
+    A real lab often knows its floor masses (it weighed the blocks) but not the
+    stiffness or damping it is trying to measure.  Identification uses the stated
+    masses to put K and C in SI units; without them results are mass-normalised.
+
+    Attributes
+    ----------
+    storeys : int
+        Number of storeys d.
+    masses : tuple of float, length d, or None
+        Stated floor masses (kg), floor 1 first; None when the lab states none.
+    storey_heights : tuple of float, length d, or None
+        Storey heights (m), for drawing; None when not stated.
+    noise : tuple of (str, float)
+        Stated noise standard deviation per channel group (``"zdd"``, ``"a"``, ...),
+        in that group's SI unit; empty when the lab states none.
+    """
+
+    storeys: int
+    masses: tuple[float, ...] | None = None
+    storey_heights: tuple[float, ...] | None = None
+    noise: tuple[tuple[str, float], ...] = ()

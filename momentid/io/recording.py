@@ -17,7 +17,6 @@ import json
 import os
 import re
 import struct
-import time as _time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -292,7 +291,7 @@ class RecordingWriter:
             self._writer.add_message(ch_id, int(stamps[i]), data, int(stamps[i]), sequence=k)
         self._writer.flush()
         if model_xml is not None:
-            self._writer.add_attachment(_time.time_ns(), int(stamps[0]), f"models/{run.name}.xml",
+            self._writer.add_attachment(int(stamps[0]), int(stamps[0]), f"models/{run.name}.xml",
                                         "application/xml", model_xml.encode("utf-8"))
         self._sync()
         self._writer.add_metadata(RUN_RECORD, {

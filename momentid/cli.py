@@ -7,8 +7,11 @@ an interrupted run exits 130.  Run ``momentid COMMAND --help`` for details.
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -50,12 +53,61 @@ def _positive_int(text: str) -> int:
 
 
 def _output_path(out: str | None, name: str) -> Path:
+    """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``."""
     if out is None:
         return Path("out") / f"{name}.mcap"
     p = Path(out)
     if p.suffix == ".mcap":
+        if p.is_dir():
+            raise _OutputError(out, "a folder of that name exists; expected a .mcap file path")
         return p
-    return p / f"{name}.mcap"
+    return _output_folder(out) / f"{name}.mcap"
+
+
+class _OutputError(MomentidError):
+    def __init__(self, out: str, expected: str):
+        self.out = out
+        super().__init__(f"-o {out}: {expected}")
+
+
+def _output_folder(out: str) -> Path:
+    """``-o`` as a folder to write into: refused when a file stands there."""
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        raise _OutputError(out, "a file of that name exists; expected a folder (or a new path)")
+    return p
+
+
+@contextlib.contextmanager
+def _only_json_on_stdout(active: bool):
+    """With ``--json``, stdout carries exactly one JSON object: anything native code writes to
+    file descriptor 1 (LAPACK's ``** On entry to ...`` lines, say) goes to stderr instead."""
+    try:
+        fd = sys.stdout.fileno() if active else -1
+    except (AttributeError, OSError, io.UnsupportedOperation):  # captured or replaced stdout
+        fd = -1
+    if fd != 1:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    old = sys.stdout
+    sys.stdout = io.TextIOWrapper(os.fdopen(os.dup(saved), "wb"), encoding="utf-8", line_buffering=True)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        sys.stdout.close()
+        sys.stdout = old
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+def _os_error(exc: OSError) -> str:
+    """One line for an operating-system failure (disk full, no such folder, permission)."""
+    where = exc.filename if exc.filename is not None else "output"
+    return f"cannot write or read {where}: {exc.strerror or exc}"
 
 
 def _report(experiment, args) -> int:
@@ -170,9 +222,9 @@ def _cmd_diagnose(args) -> int:
     from momentid.diagnosis.pipeline import diagnose, write_report
     from momentid.io.recording import read_recording
 
+    out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
     diag = diagnose(experiment)
-    out = Path(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     write_report(diag, out)
     for note in experiment.notes:
         print(f"note: {note}", file=sys.stderr)
@@ -361,9 +413,13 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
-        return args.func(args)
+        with _only_json_on_stdout(getattr(args, "json", False)):
+            return args.func(args)
     except MomentidError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # disk full, an output folder that cannot exist (/proc/x), permissions
+        print(f"error: {_os_error(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)

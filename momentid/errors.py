@@ -17,6 +17,7 @@ __all__ = [
     "IdentificationError",
     "SensorDataError",
     "ViewerError",
+    "ResourceError",
 ]
 
 
@@ -54,3 +55,30 @@ class SensorDataError(MomentidError):
 
 class ViewerError(MomentidError):
     """The rerun viewer could not be started or fed."""
+
+
+class ResourceError(MomentidError):
+    """A job would not fit the machine; estimated before the work starts.
+
+    Attributes
+    ----------
+    what : str
+        The job (``"simulation of scenario 'x'"``).
+    needed, available : float
+        Estimated and available bytes of memory.
+    hint : str
+        What would fit (a shorter record, fewer storeys, ``--stream``).
+    """
+
+    def __init__(self, what: str, needed: float, available: float, hint: str):
+        self.what, self.needed, self.available, self.hint = what, needed, available, hint
+        super().__init__(f"{what} needs about {_size(needed)} of memory, {_size(available)} is available: "
+                         f"refused before starting; {hint}")
+
+
+def _size(nbytes: float) -> str:
+    for unit in ("B", "KB", "MB", "GB", "TB", "PB"):
+        if abs(nbytes) < 1000 or unit == "PB":
+            return f"{nbytes:.3g} {unit}"
+        nbytes /= 1000
+    return f"{nbytes:.3g} PB"

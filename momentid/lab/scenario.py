@@ -9,6 +9,7 @@ README ("Scenario format") and by the shipped files in ``scenarios/``.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import asdict, dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -327,12 +328,25 @@ def load_scenario(path) -> Scenario:
     return parse_scenario(data, source=path, text=text)
 
 
+#: Names that become file names (``out/<name>.mcap``) and recording topics: letters, digits,
+#: ``_``, ``-`` and ``.``, starting with a letter or digit, so no name can leave its folder.
+_SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
+
+
+def _file_safe(tab: Table, key: str, default: str) -> str:
+    value = tab.string(key, default)
+    if not _SAFE_NAME.fullmatch(value):
+        raise ScenarioError(f"{tab.file}: key {tab.key(key)!r} = {value!r}: expected a plain name (letters, "
+                            f"digits, '_', '-', '.'; at most 100 characters, no '/' and no leading '.')")
+    return value
+
+
 def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario:
     """Validate already-parsed TOML ``data`` (see :func:`load_scenario`)."""
     source = Path(source) if not isinstance(source, Path) else source
     top = Table(data, source)
     meta = top.table("scenario")
-    name = meta.string("name", source.stem if source.suffix else "scenario")
+    name = _file_safe(meta, "name", source.stem if source.suffix else "scenario")
     description = meta.string("description", "")
     duration = meta.number("duration", positive=True)
     sample_rate = meta.number("sample_rate", 1000.0, positive=True)
@@ -345,7 +359,7 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
     runs = []
     for i, tab in enumerate(top.tables("runs")):
         added = tab.numbers("added_mass", length=d, nonnegative=True, scalar_ok=True)
-        runs.append(Run(name=tab.string("name", f"run{i + 1}"), added_mass=added))
+        runs.append(Run(name=_file_safe(tab, "name", f"run{i + 1}"), added_mass=added))
         tab.finish()
     names = [r.name for r in runs]
     if len(set(names)) != len(names):

@@ -352,6 +352,27 @@ def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int,
         pool.shutdown(wait=True, cancel_futures=True)
 
 
+#: Float arrays of a run's length held per channel at the peak of a simulation: the recorded
+#: channels, the sensor model's working copies (noise, faults, resampling) and the kept run.
+_ARRAYS_PER_CHANNEL = 4
+#: Float arrays of the finer step grid held for the table motion (position, velocity,
+#: acceleration and jerk nodes) and for the rollout's state and sensor chunks.
+_ARRAYS_PER_STEP = 8
+
+
+def _memory_check(scenario: Scenario) -> None:
+    """Refuse, before any work, a scenario whose arrays cannot fit in memory."""
+    from momentid.core.resources import require_memory
+
+    n = float(scenario.duration) * scenario.sample_rate + 1
+    channels = len(scenario.sensors.channels(scenario.structure.storeys))
+    needed = 8.0 * n * (channels * _ARRAYS_PER_CHANNEL * len(scenario.runs)
+                        + scenario.substeps * _ARRAYS_PER_STEP)
+    require_memory(needed, f"{scenario.source}: simulation of scenario {scenario.name!r} "
+                   f"({len(scenario.runs)} runs x {n:.3g} samples x {channels} channels)",
+                   "lower 'scenario.sample_rate' or 'scenario.duration', or record fewer channels")
+
+
 def simulate(scenario: Scenario, *, progress: bool = False,
              on_run: Callable[[RunData], None] | None = None,
              workers: int | None = 1) -> Experiment:
@@ -373,6 +394,7 @@ def simulate(scenario: Scenario, *, progress: bool = False,
         hidden physics needs a Python callback).  Results are identical to
         the serial path and come back in run order.
     """
+    _memory_check(scenario)
     _stability_check(scenario)
     motion = ground_motion_of(scenario)
     n_workers = _worker_count(workers, len(scenario.runs))

@@ -42,7 +42,6 @@ import importlib.util
 import json
 import os
 import platform
-import re
 import subprocess
 import sys
 import tempfile
@@ -56,7 +55,7 @@ import numpy as np
 
 from momentid.errors import MomentidError
 
-__all__ = ["Row", "STAGES", "RUN_TARGET_S", "bench_scenario", "run_benchmarks", "stacked_regressor",
+__all__ = ["Row", "STAGES", "RUN_TARGET_S", "bench_scenario", "scenario_variant_file", "run_benchmarks", "stacked_regressor",
            "add_arguments", "main"]
 
 STAGES = ("simulate", "record", "identify", "view", "run")
@@ -113,22 +112,14 @@ def bench_scenario(path=None, *, duration: float | None = None, overrides: dict 
     """A scenario for benchmarking: ``path`` (default: the paper's 7 runs,
     ``scenarios/paper_harmonic.toml`` in a checkout, else the embedded
     default) with its duration and any ``{"table.key": value}`` replaced."""
-    from momentid.io.toml_reader import load_toml
-    from momentid.lab.scenario import default_scenario_path, parse_scenario
+    from momentid.lab.scenario import default_scenario_path, load_scenario
 
     path = Path(path) if path is not None else (_checkout_scenario("paper_harmonic")
                                                  or default_scenario_path())
-    data = load_toml(path)
     changes = dict(overrides or {})
     if duration is not None:
         changes["scenario.duration"] = duration
-    for key, value in changes.items():
-        *tables, leaf = key.split(".")
-        node = data
-        for t in tables:
-            node = node.setdefault(t, {})
-        node[leaf] = value
-    return parse_scenario(data, source=path, text=path.read_text(encoding="utf-8"))
+    return load_scenario(path, overrides=changes)
 
 
 def _describe(scenario) -> dict:
@@ -525,23 +516,53 @@ def bench_view(experiment, workdir: Path, *, repeat: int) -> list[Row]:
 
 # ----------------------------------------------------------------------------- run
 
-def _quick_scenario_file(workdir: Path, duration: float) -> Path:
-    """The default scenario's file with its duration replaced."""
-    from momentid.lab.scenario import default_scenario_path
+def _toml_value(value) -> str:
+    """One TOML value: a number, string, boolean or array of them."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)   # a JSON string is a TOML basic string
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)
 
-    text = default_scenario_path().read_text(encoding="utf-8")
-    text, n = re.subn(r"(?m)^duration\s*=\s*[0-9.eE+-]+", f"duration = {duration!r}", text)
-    if n != 1:
-        raise RuntimeError("the default scenario has no single 'duration = ...' line")
-    path = workdir / "default.toml"
-    path.write_text(text, encoding="utf-8")
-    return path
+
+def _toml_text(data: dict, prefix: str = "") -> str:
+    """Parsed scenario TOML written back as text (tables, arrays of tables, values)."""
+    def is_tables(v):
+        return isinstance(v, list) and v and all(isinstance(x, dict) for x in v)
+
+    lines = [f"{k} = {_toml_value(v)}" for k, v in data.items() if not isinstance(v, dict) and not is_tables(v)]
+    for key, value in data.items():
+        if isinstance(value, dict):
+            lines += ["", f"[{prefix}{key}]", _toml_text(value, f"{prefix}{key}.")]
+        elif is_tables(value):
+            for item in value:
+                lines += ["", f"[[{prefix}{key}]]", _toml_text(item, f"{prefix}{key}.")]
+    return "\n".join(lines)
+
+
+def scenario_variant_file(out: Path, overrides: dict, base=None) -> Path:
+    """Write ``base`` (default: the embedded default scenario) with ``overrides``
+    (``{"dotted.key": value}``, :func:`momentid.lab.scenario.set_key`) to the
+    TOML file ``out``, for commands that read a scenario file."""
+    from momentid.io.toml_reader import load_toml
+    from momentid.lab.scenario import default_scenario_path, load_scenario, set_key
+
+    base = Path(base) if base is not None else default_scenario_path()
+    data = load_toml(base)
+    for key, value in overrides.items():
+        set_key(data, key, value)
+    out = Path(out)
+    out.write_text(_toml_text(data) + "\n", encoding="utf-8")
+    load_scenario(out)   # refuse here, naming the file, what the command would refuse later
+    return out
 
 
 def bench_run(workdir: Path, *, repeat: int, duration: float | None = None) -> list[Row]:
     cmd = [sys.executable, "-m", "momentid", "run", "-q", "-o", str(workdir / "out")]
     if duration is not None:
-        cmd.insert(4, str(_quick_scenario_file(workdir, duration)))
+        cmd.insert(4, str(scenario_variant_file(workdir / "default.toml", {"scenario.duration": duration})))
     env = dict(os.environ, PYTHONWARNINGS="ignore")
 
     def run():

@@ -11,20 +11,27 @@ momentum change), with MuJoCo standing in for the rig::
     result = mi.identify(experiment)                            # M, C, K, mu, kappa
     print(mi.compare(result, experiment.structure).table())     # vs. the analytic model
 
-One module per pipeline stage: ``scenario`` (files), ``excitation`` (table
-motion), ``model`` (MJCF rig), ``simulate``, ``recording`` (MCAP),
-``identify`` (with ``reconstruct``, ``linear``, ``eiv``), ``analytic`` and
-``compare``, ``design`` (Cramér-Rao bounds), ``discrepancy`` (missing
-physics), ``importer`` (CSV folders), ``visualize`` (rerun), ``cli``.
+Subpackages, each importable on its own:
+
+- :mod:`momentid.core`: ``Structure``, ``Mechanism``, ``RunData``/``Experiment``, analytic modes;
+- :mod:`momentid.io`: strict TOML, the MCAP recording format, CSV import;
+- :mod:`momentid.lab`: scenarios, excitation, the MuJoCo rig, simulation, sensor models;
+- :mod:`momentid.estimation`: identification, reconstruction, errors-in-variables, design, comparison;
+- :mod:`momentid.diagnosis`: missing physics, where the mismatch is, sensor consistency;
+- :mod:`momentid.report`: the rerun viewer;
+
+plus :mod:`momentid.sweep` (campaigns), :mod:`momentid.cli` and :mod:`momentid.errors`.
+The names below are the ones most scripts need.
 """
 
 from momentid.core.analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
-from momentid.estimation.comparison import Comparison, analytic_parameters, compare
 from momentid.core.series import Experiment, RunData
+from momentid.core.structure import LabStatement, Mechanism, Structure
+from momentid.diagnosis.pipeline import Diagnosis, diagnose
 from momentid.errors import (
     IdentificationError,
-    MomentidError,
     ModelError,
+    MomentidError,
     RecordingError,
     ScenarioError,
     SensorDataError,
@@ -32,26 +39,31 @@ from momentid.errors import (
     TruncatedRecordingError,
     ViewerError,
 )
-from momentid.lab.excitation import GroundMotion, ground_motion, read_at2
+from momentid.estimation.comparison import Comparison, analytic_parameters, compare
+from momentid.estimation.design import cramer_rao, plan
 from momentid.estimation.identification import Identification, identify
-from momentid.lab.rig import build_spec, compile_model
+from momentid.io.importer import import_folder, import_recording
 from momentid.io.recording import RecordingWriter, read_recording, write_experiment
-from momentid.core.structure import Structure
+from momentid.lab.excitation import GroundMotion, ground_motion, read_at2
+from momentid.lab.rig import build_spec, compile_model
 from momentid.lab.scenario import Scenario, default_scenario_path, load_scenario
 from momentid.lab.simulation import run_experiment, simulate, simulate_run
-from momentid.estimation.design import cramer_rao, plan
-from momentid.diagnosis.pipeline import Diagnosis, diagnose
-from momentid.io.importer import import_folder, import_recording
+from momentid.report.viewer import view
 
 __version__ = "0.1.0"
 
 __all__ = [
-    "Comparison", "Experiment", "GroundMotion", "Identification", "Modes", "RunData", "Scenario",
-    "Structure", "RecordingWriter",
-    "analytic_parameters", "build_spec", "compare", "compile_model", "default_scenario_path",
-    "ground_motion", "identify", "load_scenario", "modal_properties", "rayleigh_coefficients",
-    "read_at2", "read_recording", "run_experiment", "shear_stiffness", "simulate", "simulate_run",
-    "write_experiment", "cramer_rao", "plan", "Diagnosis", "diagnose", "import_folder", "import_recording",
+    # types
+    "Comparison", "Diagnosis", "Experiment", "GroundMotion", "Identification", "LabStatement",
+    "Mechanism", "Modes", "RecordingWriter", "RunData", "Scenario", "Structure",
+    # scenario -> simulation -> recording
+    "load_scenario", "default_scenario_path", "ground_motion", "read_at2", "build_spec", "compile_model",
+    "simulate", "simulate_run", "run_experiment", "write_experiment", "read_recording",
+    "import_folder", "import_recording",
+    # identification, design, diagnosis, viewing
+    "identify", "compare", "analytic_parameters", "modal_properties", "rayleigh_coefficients",
+    "shear_stiffness", "cramer_rao", "plan", "diagnose", "view",
+    # errors
     "MomentidError", "ScenarioError", "ModelError", "SimulationError", "RecordingError",
     "TruncatedRecordingError", "IdentificationError", "SensorDataError", "ViewerError",
 ]

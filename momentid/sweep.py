@@ -40,7 +40,7 @@ from typing import Any, Callable
 
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import MomentidError, ScenarioError
-from momentid.lab.scenario import Scenario, default_scenario_path, parse_scenario
+from momentid.lab.scenario import Scenario, default_scenario_path, parse_scenario, set_key
 
 __all__ = ["Case", "Sweep", "load_sweep", "parse_sweep", "run_case", "run_sweep", "write_table",
            "table_columns"]
@@ -88,32 +88,12 @@ def _grid_items(node: Any, prefix: str, source: Path) -> list[tuple[str, list]]:
     return out
 
 
-def _put(data: dict, key: str, value: Any) -> None:
-    """Set the dotted ``key`` of the parsed scenario ``data`` (integers index arrays of tables)."""
-    parts = key.split(".")
-    node: Any = data
-    for depth, part in enumerate(parts):
-        if isinstance(node, list):
-            if not part.isdigit() or int(part) >= len(node):
-                raise ScenarioError(f"'{'.'.join(parts[:depth])}' is an array of {len(node)} tables: "
-                                    f"expected an index 0..{len(node) - 1} after it, got '{part}'")
-            part = int(part)
-        elif not isinstance(node, dict):
-            raise ScenarioError(f"'{'.'.join(parts[:depth])}' = {node!r} is a value, not a table")
-        if depth == len(parts) - 1:
-            node[part] = value
-        else:
-            if isinstance(node, dict) and part not in node:
-                node[part] = {}   # an optional table the base leaves out; parsing refuses unknown ones
-            node = node[part]
-
-
 def _variant(base: dict, values: dict, base_path: Path, text: str) -> Scenario:
     import copy
 
     data = copy.deepcopy(base)
     for key, value in values.items():
-        _put(data, key, value)
+        set_key(data, key, value)
     return parse_scenario(data, source=base_path, text=text)
 
 

@@ -6,16 +6,12 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid.io.toml_reader import load_toml
 from momentid.errors import SimulationError
-from momentid.lab.scenario import default_scenario_path, parse_scenario
+from momentid.lab.scenario import default_scenario_path, load_scenario
 
 
 def _short_default(duration: float = 0.5) -> mi.Scenario:
-    path = default_scenario_path()
-    data = load_toml(path)
-    data["scenario"]["duration"] = duration
-    return parse_scenario(data, source=path, text=path.read_text())
+    return load_scenario(default_scenario_path(), overrides={"scenario.duration": duration})
 
 
 def test_parallel_equals_serial_in_run_order():

@@ -118,3 +118,15 @@ def test_missing_section_and_no_runs(tmp_path):
     text = "runs = []\n" + BASE.split("[[runs]]")[0]
     with pytest.raises(mi.ScenarioError, match=r"'runs'.*\[\[runs\]\]"):
         mi.load_scenario(write(tmp_path, text))
+
+
+def test_overrides_are_validated_like_the_file(tmp_path):
+    path = write(tmp_path, BASE)
+    sc = mi.load_scenario(path, overrides={"scenario.duration": 2.0, "runs.1.added_mass": [0.2, 0.0],
+                                          "sensors.accelerometer.relative_noise": 0.01})
+    assert sc.n_samples == 201 and sc.runs[1].added_mass == (0.2, 0.0)
+    assert sc.sensors.accelerometer.relative_noise == 0.01   # a table the file leaves out is created
+    with pytest.raises(mi.ScenarioError, match=r"s\.toml.*unknown key 'excitation.sed'"):
+        mi.load_scenario(path, overrides={"excitation.sed": 1})
+    with pytest.raises(mi.ScenarioError, match=r"'runs' is an array of 2 tables: expected an index 0..1"):
+        mi.load_scenario(path, overrides={"runs.2.added_mass": 0.0})

@@ -88,10 +88,19 @@ def test_local_pool_equals_serial_and_scores_every_case(spec, tmp_path):
     table = write_table(rows, tmp_path / "out.csv")
     with open(table, newline="") as f:
         read = list(csv.DictReader(f))
-    assert [int(r["case"]) for r in read] == [0, 1, 2, 3] and "err:K[1,1]" in read[0]
-    assert float(read[0]["id:K[1,1]"]) == rows[0]["identified"]["K[1,1]"]
+    assert [int(r["case"]) for r in read] == [0, 1, 2, 3]
+    for r in read:
+        errors = {k[4:]: float(v) for k, v in r.items() if k.startswith("err:")}
+        assert set(errors) == {k[3:] for k in r if k.startswith("id:")} == {k[3:] for k in r if k.startswith("an:")}
+        # The row's score is its worst parameter; both are the same floats, written by repr: exact.
+        assert float(r["max_rel_error"]) == max(errors.values())
+        identified, analytic = float(r["id:K[1,1]"]), float(r["an:K[1,1]"])
+        # Relative error of a non-zero entry, recomputed from the table's own columns (float division: exact).
+        assert errors["K[1,1]"] == abs(identified - analytic) / abs(analytic)
+    # The JSON table holds the same numbers, nested.
     as_json = json.loads(write_table(rows, tmp_path / "out.json").read_text())
-    assert as_json[2]["values"]["scenario.seed"] == 1
+    for r, j in zip(read, as_json):
+        assert {k[4:]: float(v) for k, v in r.items() if k.startswith("err:")} == j["rel_error"]
 
 
 def test_dask_local_cluster_runs_the_same_cases(spec):

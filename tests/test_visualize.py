@@ -19,6 +19,7 @@ from momentid.errors import ViewerError
 from momentid.estimation.identification import equation_residual
 from momentid.io.recording import write_experiment
 from momentid.lab.scenario import default_scenario_path
+from benchmarks.bench import scenario_variant_file
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
 
@@ -29,7 +30,7 @@ X = 20.0  # the exaggeration the CLI is asked for
 def rec(tmp_path_factory):
     """A 1 s default-scenario recording, written by the CLI to a .rrd; both read back."""
     tmp = tmp_path_factory.mktemp("view")
-    scenario = dataclasses.replace(mi.load_scenario(default_scenario_path()), duration=1.0)
+    scenario = mi.load_scenario(default_scenario_path(), overrides={"scenario.duration": 1.0})
     mcap = write_experiment(tmp / "small.mcap", mi.simulate(scenario))
     rrd = tmp / "small.rrd"
     assert main(["view", str(mcap), "--save", str(rrd), "--exaggeration", f"{X:g}", "--run", "ends"]) == 0
@@ -228,8 +229,7 @@ def test_mistakes_are_one_line_errors(rec, tmp_path, capsys, argv, fragment):
 def test_run_view_shows_the_new_recording(tmp_path, monkeypatch, capsys):
     shown = []
     monkeypatch.setattr(viewer, "show", lambda scene, **kw: shown.append(scene))
-    scenario = tmp_path / "short.toml"
-    scenario.write_text(default_scenario_path().read_text().replace("duration = 10.0", "duration = 0.5"))
+    scenario = scenario_variant_file(tmp_path / "short.toml", {"scenario.duration": 0.5})
     assert main(["run", str(scenario), "-o", str(tmp_path), "-q", "-j", "1", "--view",
                  "--runs", "reference,ends"]) == 0
     (scene,) = shown

@@ -71,7 +71,20 @@ class Modes:
 
 
 def modal_properties(M, C, K) -> Modes:
-    """Natural frequencies and damping ratios of a (possibly identified) model."""
+    """Natural frequencies and damping ratios of a (possibly identified) model.
+
+    Parameters
+    ----------
+    M, C, K : array_like, shape (d, d)
+        Mass (kg), damping (N*s/m) and stiffness (N/m) matrices.
+
+    Returns
+    -------
+    Modes
+        Undamped natural frequencies (Hz) in increasing order, damping
+        ratios and damped frequencies (Hz) of the complex modes, and mode
+        shapes, shape (d, d), one column per mode.
+    """
     M = np.asarray(M, float)
     C = np.asarray(C, float)
     K = np.asarray(K, float)
@@ -110,6 +123,29 @@ def rayleigh_coefficients(M, K, damping_ratios, modes=(1, 2), *, file="<scenario
 
     Solves ``zeta_r = mu / (2 w_r) + kappa w_r / 2`` for the two modes
     ``modes`` (1-based, 1 = lowest frequency).
+
+    Parameters
+    ----------
+    M, K : array_like, shape (d, d)
+        Mass (kg) and stiffness (N/m) matrices.
+    damping_ratios : sequence of 2 floats
+        Target damping ratios of the two modes (dimensionless).
+    modes : pair of int
+        The two mode numbers, 1-based.
+    file, key : str
+        Where the request came from, named in the error message.
+
+    Returns
+    -------
+    mu : float
+        Mass-proportional coefficient (1/s).
+    kappa : float
+        Stiffness-proportional coefficient (s).
+
+    Raises
+    ------
+    ScenarioError
+        The mode numbers are not two different modes of the model.
     """
     w = 2 * np.pi * modal_properties(M, np.zeros_like(M), K).frequency
     d = len(w)

@@ -12,7 +12,11 @@ import numpy as np
 
 from momentid.core import analytic
 
-__all__ = ["Structure", "Mechanism", "LabStatement"]
+__all__ = ["Structure", "Mechanism", "LabStatement", "DEFAULT_BASE_MASS"]
+
+#: Mass (kg) of the shake-table platen when a scenario states none: heavy
+#: against the paper's ~40 kg model, as a real table is.
+DEFAULT_BASE_MASS = 100.0
 
 
 @dataclass(frozen=True)
@@ -39,7 +43,7 @@ class Structure:
     storey_heights: tuple[float, ...]
     rayleigh_mu: float
     rayleigh_kappa: float
-    base_mass: float = 100.0
+    base_mass: float = DEFAULT_BASE_MASS
 
     @property
     def storeys(self) -> int:
@@ -71,7 +75,7 @@ class Structure:
             storey_heights=tuple(float(x) for x in data["storey_heights"]),
             rayleigh_mu=float(data["rayleigh_mu"]),
             rayleigh_kappa=float(data["rayleigh_kappa"]),
-            base_mass=float(data.get("base_mass", 100.0)),
+            base_mass=float(data.get("base_mass", DEFAULT_BASE_MASS)),
         )
 
 

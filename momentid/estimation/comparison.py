@@ -20,7 +20,19 @@ __all__ = ["Entry", "Comparison", "analytic_parameters", "compare"]
 
 
 def analytic_parameters(structure: Structure) -> dict:
-    """The analytic model as ``{'M', 'C', 'K', 'mu', 'kappa'}`` (SI units)."""
+    """The analytic model in the keys and units of an identification.
+
+    Parameters
+    ----------
+    structure : Structure
+        The nominal shear building.
+
+    Returns
+    -------
+    dict
+        ``M``, ``C``, ``K`` (ndarray, shape (d, d); kg, N*s/m, N/m), ``mu``
+        (1/s) and ``kappa`` (s), with ``C = mu M + kappa K``.
+    """
     return {
         "M": structure.mass_matrix(),
         "C": structure.damping_matrix(),
@@ -136,7 +148,24 @@ def _matrix_entries(name: str, unit: str, ident: np.ndarray, ref: np.ndarray, st
 
 
 def compare(result: Identification, structure: Structure) -> Comparison:
-    """Compare ``result`` with the analytic model of ``structure``."""
+    """Compare ``result`` with the analytic model of ``structure``.
+
+    Parameters
+    ----------
+    result : Identification
+        What :func:`momentid.identify` returned.
+    structure : Structure
+        The nominal model (``experiment.structure`` of a recording).
+
+    Returns
+    -------
+    Comparison
+        One entry per identified parameter (upper triangles of C and K, the
+        masses, ``mu``, ``kappa``) with its analytic value, relative error
+        (against the entry, or against the matrix's largest entry where the
+        analytic value is 0) and standard error when the estimator gives
+        one; the modes of both models; ``table()`` prints it all.
+    """
     an = analytic_parameters(structure)
     std = result.std() or {}
     entries = (

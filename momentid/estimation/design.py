@@ -15,7 +15,6 @@ deviation.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -25,10 +24,31 @@ from momentid.estimation.eiv import fisher_information
 from momentid.errors import IdentificationError, ScenarioError
 from momentid.estimation.identification import Layout
 from momentid.estimation.linear import discretize, outputs, simulate_linear
-from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors
+from momentid.lab.scenario import BandLimitedNoise, Run, Scenario
+from momentid.lab.sensors import noise_std
 from momentid.lab.simulation import ground_motion_of
 
 __all__ = ["Bound", "cramer_rao", "plan", "Design"]
+
+#: The Fisher information sums frequency bins up to this multiple of the top
+#: natural frequency: above it the structure's response is below the noise.
+INFORMATION_BAND_FACTOR = 2.0
+
+#: The planner's band-limited noise excitation spans the modes with this margin:
+#: from half the first natural frequency ...
+NOISE_BAND_LOW_FACTOR = 0.5
+#: ... (but not below this many Hz, where a table's stroke runs out) ...
+NOISE_BAND_LOW_MIN = 0.05
+#: ... up to 1.5 times the top natural frequency ...
+NOISE_BAND_HIGH_FACTOR = 1.5
+#: ... and below this fraction of the sample rate (clear of the Nyquist frequency).
+NOISE_BAND_HIGH_MAX_FRACTION = 0.4
+
+#: Added mass per run as fractions of each floor's mass for the planner's
+#: "every floor" patterns (a few percent moves the modes measurably without
+#: overloading the rig), and the single fraction of the other two patterns.
+EVERY_FLOOR_FRACTIONS = (0.05, 0.1, 0.2)
+PATTERN_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -77,12 +97,6 @@ def parameter_names(layout: Layout) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _noise_sigma(sensors: Sensors, name: str, x: np.ndarray, fs: float) -> float:
-    inst = sensors.instrument(name)
-    return math.sqrt(inst.noise ** 2 + inst.noise_density ** 2 * fs / 2
-                     + (inst.relative_noise * float(np.sqrt(np.mean(x ** 2)))) ** 2)
-
-
 def _designed_runs(scenario: Scenario, runs) -> tuple[list[RunData], dict]:
     """Noise-free linear-model runs at the sensor rate, and the noise of every channel."""
     s = scenario.structure
@@ -102,7 +116,7 @@ def _designed_runs(scenario: Scenario, runs) -> tuple[list[RunData], dict]:
         rd = RunData(run.name, dm, t, tuple(names), values)
         out.append(rd)
         for j, name in enumerate(names):
-            sig = _noise_sigma(scenario.sensors, name, values[:, j], fs)
+            sig = noise_std(scenario.sensors.instrument(name), values[:, j], fs)
             sigma.setdefault(run.name, {})[name] = sig
     return out, sigma
 
@@ -122,9 +136,32 @@ def _run_information(scenario: Scenario, run: Run, layout: Layout, theta: np.nda
 def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache: dict | None = None) -> Bound:
     """The CRLB of ``scenario``'s experiment (or of ``runs`` under its excitation).
 
-    The sensor noise comes from the scenario's ``[sensors]``; a scenario with
-    ideal sensors has no finite bound and is refused.  Runs are independent,
-    so their Fisher informations add.
+    The sensor noise comes from the scenario's ``[sensors]``
+    (:func:`momentid.lab.sensors.noise_std`); a scenario with ideal sensors
+    has no finite bound and is refused.  Runs are independent, so their
+    Fisher informations add.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Structure, excitation, sensors and (unless ``runs`` is given) runs.
+    runs : sequence of Run, optional
+        Added-mass runs to evaluate instead of ``scenario.runs``.
+    mass : {"diagonal", "full"}
+        Unknowns of the mass matrix, as in :func:`momentid.identify`.
+
+    Returns
+    -------
+    Bound
+        Parameter names, true values, CRLB standard deviations (SI units of
+        each parameter), relative ones and the covariance, shape (p, p).
+
+    Raises
+    ------
+    ScenarioError
+        The scenario's sensors are ideal (no noise, no finite bound).
+    IdentificationError
+        The runs do not identify every unknown (singular information).
     """
     runs = tuple(runs) if runs is not None else scenario.runs
     if scenario.sensors.ideal:
@@ -135,7 +172,8 @@ def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache:
     theta = layout.pack(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix(), s.rayleigh_mu)
     from momentid.core.analytic import modal_properties
     f_top = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
-    info = sum(_run_information(scenario, run, layout, theta, 2.0 * f_top, _cache) for run in runs)
+    f_max = INFORMATION_BAND_FACTOR * f_top
+    info = sum(_run_information(scenario, run, layout, theta, f_max, _cache) for run in runs)
     try:
         cov = np.linalg.inv(info)
     except np.linalg.LinAlgError:
@@ -173,13 +211,14 @@ class Design:
 def _patterns(masses: np.ndarray) -> dict[str, np.ndarray]:
     d = masses.size
     out = {}
-    for f in (0.05, 0.1, 0.2):
-        out[f"{int(f * 100)} % of every floor"] = f * masses
+    for f in EVERY_FLOOR_FRACTIONS:
+        out[f"{f * 100:g} % of every floor"] = f * masses
+    percent = f"{PATTERN_FRACTION * 100:g} %"
     top = np.zeros(d)
-    top[-1] = 0.1 * masses[-1]
-    out["10 % on the top floor"] = top
-    alt = np.where(np.arange(d) % 2 == 0, 0.1 * masses, 0.0)
-    out["10 % on floors 1, 3, ..."] = alt
+    top[-1] = PATTERN_FRACTION * masses[-1]
+    out[f"{percent} on the top floor"] = top
+    alt = np.where(np.arange(d) % 2 == 0, PATTERN_FRACTION * masses, 0.0)
+    out[f"{percent} on floors 1, 3, ..."] = alt
     return out
 
 
@@ -192,6 +231,22 @@ def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tupl
     for repeated runs).  Recommended: the design meeting ``target`` (worst
     relative CRLB std over every parameter, ``mu`` included) with the fewest
     runs, then the least added mass.
+
+    Parameters
+    ----------
+    scenario : Scenario
+        Structure, excitation and sensor noise of the rig (its runs are ignored).
+    target : float
+        Largest acceptable relative standard deviation of every parameter.
+    max_runs : int
+        Most runs a candidate design may have, the reference run included.
+
+    Returns
+    -------
+    designs : list of Design
+        Every candidate with its :class:`Bound`.
+    recommended : Design or None
+        The cheapest design meeting ``target``; None when none does.
     """
     from momentid.core.analytic import modal_properties
     s = scenario.structure
@@ -200,8 +255,9 @@ def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tupl
     fs = scenario.sample_rate
     t = np.arange(scenario.n_samples) / fs
     rms = float(np.sqrt(np.mean(ground_motion_of(scenario).acceleration(t) ** 2)))
-    noise = BandLimitedNoise(rms=rms, band=(max(0.5 * f.min(), 0.05), min(1.5 * f.max(), 0.4 * fs)),
-                             seed=scenario.seed)
+    band = (max(NOISE_BAND_LOW_FACTOR * f.min(), NOISE_BAND_LOW_MIN),
+            min(NOISE_BAND_HIGH_FACTOR * f.max(), NOISE_BAND_HIGH_MAX_FRACTION * fs))
+    noise = BandLimitedNoise(rms=rms, band=band, seed=scenario.seed)
     excitations = {"scenario": scenario,
                    f"noise {noise.band[0]:.2g}-{noise.band[1]:.2g} Hz": replace(scenario, excitation=noise)}
     designs = []

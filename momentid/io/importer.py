@@ -381,11 +381,18 @@ def write_import(experiment: Experiment, out_path) -> Path:
 def import_recording(folder, out_path) -> Path:
     """Import a lab folder (see :func:`import_folder`) and write it to ``out_path``.
 
+    Parameters
+    ----------
+    folder : str or Path
+        The lab's folder: ``experiment.toml`` and the files it names.
+    out_path : str or Path
+        The MCAP recording to write.
+
     Returns
     -------
     Path
         ``out_path``, an MCAP recording that :func:`momentid.read_recording`
-        reads and :func:`momentid.estimation.identification` identifies.
+        reads and :func:`momentid.identify` identifies.
     """
     return write_import(import_folder(folder), out_path)
 

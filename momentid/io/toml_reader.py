@@ -14,6 +14,8 @@ from typing import Any
 
 from momentid.errors import ScenarioError
 
+__all__ = ["Table", "load_toml"]
+
 _MISSING = object()
 
 

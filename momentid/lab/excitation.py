@@ -61,6 +61,20 @@ NOISE_POINTS_PER_PERIOD = 20
 #: ramps need less acceleration but let the drift grow a little further.
 BASELINE_RAMP = 2.0
 
+#: Grid points per shortest period when searching a harmonic motion's peak;
+#: every local maximum found is then polished by :data:`_PEAK_NEWTON_STEPS`
+#: Newton steps on f' = 0, which converge to round-off from a cell this fine.
+_PEAK_POINTS_PER_PERIOD = 32
+_PEAK_NEWTON_STEPS = 6
+
+#: Zero padding of the two-way high-pass, in corner periods: the Butterworth's
+#: transient has decayed well below the record's round-off after three.
+_HIGHPASS_PAD_PERIODS = 3.0
+
+#: Slack when deciding which FFT bins k / duration fall inside the noise band,
+#: so that a band edge at exactly k / duration (up to round-off) counts as inside.
+_BAND_EDGE_SLACK = 1e-9
+
 #: The NPTS/DT line must appear within this many lines of the top of an AT2 file.
 _MAX_HEADER_LINES = 12
 
@@ -198,18 +212,18 @@ class GroundMotion:
         return self._harmonic_peak(k)
 
     def _harmonic_peak(self, k: int) -> float:
-        # Sample 32 points per shortest period, then polish every local maximum
+        # Sample the shortest period finely, then polish every local maximum
         # of |f| with Newton steps on f' = 0 kept inside its grid cell.
         lo, hi = self.support
         period = 2.0 * np.pi / float(np.max(self.angular_frequencies))
-        n = max(int(math.ceil((hi - lo) * 32.0 / period)), 2)
+        n = max(int(math.ceil((hi - lo) * _PEAK_POINTS_PER_PERIOD / period)), 2)
         t = np.linspace(lo, hi, n + 1)
         h = (hi - lo) / n
         a = np.abs(self._harmonic(k, t))
         i = np.flatnonzero((a[1:-1] >= a[:-2]) & (a[1:-1] >= a[2:])) + 1
         tt = t[i]
         left, right = np.maximum(tt - h, lo), np.minimum(tt + h, hi)
-        for _ in range(6):
+        for _ in range(_PEAK_NEWTON_STEPS):
             d1 = self._harmonic(k + 1, tt)
             d2 = self._harmonic(k + 2, tt)
             step = np.divide(d1, d2, out=np.zeros_like(d1), where=d2 != 0.0)
@@ -318,7 +332,8 @@ def _noise_motion(exc: BandLimitedNoise, duration: float) -> GroundMotion:
     # A grid of n intervals over one period T = duration; FFT bins are k / T.
     n = 2 * int(math.ceil(0.5 * NOISE_POINTS_PER_PERIOD * f_hi * duration))
     dt = duration / n
-    k_lo, k_hi = int(math.ceil(f_lo * duration - 1e-9)), int(math.floor(f_hi * duration + 1e-9))
+    k_lo = int(math.ceil(f_lo * duration - _BAND_EDGE_SLACK))
+    k_hi = int(math.floor(f_hi * duration + _BAND_EDGE_SLACK))
     if k_hi < max(k_lo, 1):
         raise ScenarioError(
             f"key 'excitation.band' = {exc.band!r}: expected a band holding at least one frequency "
@@ -347,7 +362,7 @@ def _highpass(acc: np.ndarray, dt: float, corner: float) -> np.ndarray:
     back to the record's own samples (the taper then brings the ends to rest).
     """
     sos = butter(HIGHPASS_ORDER, corner, btype="highpass", fs=1.0 / dt, output="sos")
-    pad = min(int(math.ceil(3.0 / (corner * dt))), 10 * acc.size + 100)
+    pad = min(int(math.ceil(_HIGHPASS_PAD_PERIODS / (corner * dt))), 10 * acc.size + 100)
     padded = np.concatenate([np.zeros(pad), acc, np.zeros(pad)])
     return sosfiltfilt(sos, padded, padtype=None)[pad : pad + acc.size]
 

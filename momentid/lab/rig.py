@@ -70,6 +70,8 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         Masses bolted to floors 1..d in this run (kg); zeros by default.
     timestep : float
         Integrator step (s); the integrator is RK4.
+    name : str
+        The MJCF model name.
     mechanisms : sequence of Mechanism
         Physics beyond the linear model (a scenario's ``[truth]``).  The linear
         ones are built into the MJCF: ``extra_damper`` (storey tendon
@@ -233,7 +235,22 @@ def drifts(q: np.ndarray) -> np.ndarray:
 
 
 def compile_model(spec: mujoco.MjSpec) -> mujoco.MjModel:
-    """Compile ``spec``; compiler errors become :class:`ModelError`."""
+    """Compile ``spec``; compiler errors become :class:`ModelError`.
+
+    Parameters
+    ----------
+    spec : mujoco.MjSpec
+        A rig built by :func:`build_spec` (or edited from one).
+
+    Returns
+    -------
+    mujoco.MjModel
+
+    Raises
+    ------
+    ModelError
+        MuJoCo's compiler refused the spec; its message is kept.
+    """
     try:
         return spec.compile()
     except Exception as exc:  # mujoco raises ValueError with the compiler's text

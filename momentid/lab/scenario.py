@@ -34,6 +34,7 @@ __all__ = [
     "SENSOR_SETS",
     "Scenario",
     "load_scenario",
+    "set_key",
     "parse_scenario",
     "default_scenario_path",
     "SENSOR_GROUPS",
@@ -304,18 +305,32 @@ class Scenario:
 
 
 def default_scenario_path() -> Path:
-    """Path of the embedded default scenario (``momentid run`` with no file)."""
+    """Path of the embedded default scenario (``momentid run`` with no file).
+
+    Returns
+    -------
+    Path
+        ``default_scenario.toml`` inside the installed package.
+    """
     return Path(str(resources.files("momentid.lab") / "default_scenario.toml"))
 
 
-def load_scenario(path) -> Scenario:
-    """Read and validate a scenario file.
+def load_scenario(path, *, overrides: dict | None = None) -> Scenario:
+    """Read and validate a scenario file, optionally with some keys replaced.
 
     Parameters
     ----------
     path : str or Path
         The TOML file.  Relative record paths inside it are resolved against
         the file's folder.
+    overrides : dict, optional
+        ``{"dotted.key": value}`` put into the parsed TOML before validation
+        (see :func:`set_key`), e.g. ``{"scenario.duration": 2.0}``; the
+        variant is validated as strictly as the file itself.
+
+    Returns
+    -------
+    Scenario
 
     Raises
     ------
@@ -324,6 +339,8 @@ def load_scenario(path) -> Scenario:
     """
     path = Path(path)
     data = load_toml(path)
+    for key, value in (overrides or {}).items():
+        set_key(data, key, value)
     text = path.read_text(encoding="utf-8")
     return parse_scenario(data, source=path, text=text)
 
@@ -339,6 +356,45 @@ def _file_safe(tab: Table, key: str, default: str) -> str:
         raise ScenarioError(f"{tab.file}: key {tab.key(key)!r} = {value!r}: expected a plain name (letters, "
                             f"digits, '_', '-', '.'; at most 100 characters, no '/' and no leading '.')")
     return value
+
+
+def set_key(data: dict, key: str, value) -> None:
+    """Set the dotted ``key`` of parsed scenario TOML ``data`` in place.
+
+    The one way momentid varies a scenario (sweeps, benchmarks, tests).
+    Integer parts index arrays of tables (``runs.1.added_mass``, from 0); a
+    table the data leave out is created (parsing then refuses unknown ones).
+
+    Parameters
+    ----------
+    data : dict
+        Parsed TOML, as :func:`momentid.io.toml_reader.load_toml` returns it.
+    key : str
+        Dotted key, e.g. ``"sensors.accelerometer.relative_noise"``.
+    value
+        Any TOML value (number, string, array, table as a dict).
+
+    Raises
+    ------
+    ScenarioError
+        When a part of ``key`` indexes past an array or into a plain value.
+    """
+    parts = key.split(".")
+    node = data
+    for depth, part in enumerate(parts):
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise ScenarioError(f"'{'.'.join(parts[:depth])}' is an array of {len(node)} tables: "
+                                    f"expected an index 0..{len(node) - 1} after it, got '{part}'")
+            part = int(part)
+        elif not isinstance(node, dict):
+            raise ScenarioError(f"'{'.'.join(parts[:depth])}' = {node!r} is a value, not a table")
+        if depth == len(parts) - 1:
+            node[part] = value
+        else:
+            if isinstance(node, dict) and part not in node:
+                node[part] = {}
+            node = node[part]
 
 
 def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario:

@@ -26,12 +26,56 @@ import scipy.signal
 
 from momentid.core.series import RunData
 from momentid.errors import SensorDataError
-from momentid.lab.scenario import Sensors
+from momentid.lab.scenario import Instrument, Sensors
 
-__all__ = ["measure", "check_run", "MAX_REPAIR_GAP"]
+__all__ = ["measure", "noise_std", "check_run", "MAX_REPAIR_GAP", "ANTIALIAS_ORDER"]
 
 #: Longest run of missing (NaN) samples that :func:`check_run` interpolates over.
 MAX_REPAIR_GAP = 5
+
+#: Order of the causal Butterworth anti-alias filter (``[sensors] antialias``):
+#: 24 dB/octave, the usual analogue front end of a data logger.
+ANTIALIAS_ORDER = 4
+
+#: Largest deviation of one sample interval from the median, as a fraction of
+#: it, that :func:`check_run` still calls even sampling (logger clock jitter).
+_TIME_STEP_TOLERANCE = 1e-3
+
+#: A flat run at a channel's peak entered or left by a step larger than this
+#: many quantisation steps is clipping; a quantised smooth peak is entered by one.
+_CLIP_STEP_QUANTA = 2.5
+
+#: Relative tolerance for "at the peak value" (floating-point round-off only).
+_PEAK_TOLERANCE = 1e-12
+
+
+def noise_std(instrument: Instrument, x: np.ndarray, sample_rate: float) -> float:
+    """RMS of the white noise ``instrument`` adds to the channel ``x``.
+
+    The three noise terms of :class:`~momentid.lab.scenario.Instrument` add in
+    quadrature: the absolute ``noise``, the ``noise_density`` integrated over
+    the sampled band (0 to the Nyquist frequency ``sample_rate / 2``), and
+    ``relative_noise`` times the channel's own RMS.  :func:`measure` draws
+    this noise; the Cramér-Rao bound (:mod:`momentid.estimation.design`)
+    assumes it.
+
+    Parameters
+    ----------
+    instrument : Instrument
+        The transducer kind of the channel.
+    x : ndarray, shape (n_samples,)
+        The channel as sampled, before noise (its SI unit).
+    sample_rate : float
+        Sensor sample rate (Hz).
+
+    Returns
+    -------
+    float
+        Noise standard deviation, in the channel's unit.
+    """
+    nyquist = sample_rate / 2
+    return float(np.sqrt(instrument.noise ** 2 + instrument.noise_density ** 2 * nyquist
+                         + (instrument.relative_noise * np.sqrt(np.mean(x ** 2))) ** 2))
 
 
 def _shift(t: np.ndarray, x: np.ndarray, offset: float) -> np.ndarray:
@@ -70,7 +114,7 @@ def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> Run
     rate = run.sample_rate
     step = 1 if sensors.sample_rate is None else int(round(rate / sensors.sample_rate))
     fs = rate / step
-    sos = (scipy.signal.butter(4, sensors.antialias, fs=rate, output="sos")
+    sos = (scipy.signal.butter(ANTIALIAS_ORDER, sensors.antialias, fs=rate, output="sos")
            if sensors.antialias else None)
     out = np.empty((len(run.time[::step]), len(names)))
     for j, name in enumerate(names):
@@ -80,8 +124,7 @@ def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> Run
         if sos is not None:
             x = scipy.signal.sosfilt(sos, x)
         x = fault.gain * x[::step] + inst.bias + fault.bias
-        sigma = np.sqrt(inst.noise ** 2 + inst.noise_density ** 2 * fs / 2
-                        + (inst.relative_noise * np.sqrt(np.mean(x ** 2))) ** 2)
+        sigma = noise_std(inst, x, fs)
         if sigma > 0:
             rng = np.random.default_rng(np.random.SeedSequence([seed, run_index, everything.index(name)]))
             x = x + sigma * rng.standard_normal(x.shape)
@@ -122,7 +165,7 @@ def check_run(run: RunData, source: str = "<memory>", *, clip_samples: int = 3) 
         raise SensorDataError(f"{where}: {t.size} samples: expected at least 3")
     dt = np.diff(t)
     h = float(np.median(dt))
-    bad = np.flatnonzero(np.abs(dt - h) > 1e-3 * h)
+    bad = np.flatnonzero(np.abs(dt - h) > _TIME_STEP_TOLERANCE * h)
     if bad.size:
         k = int(bad[0])
         raise SensorDataError(
@@ -159,13 +202,13 @@ def _check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int) -> 
         return
     levels = np.unique(x)
     quantum = float(np.min(np.diff(levels))) if levels.size > 1 else peak
-    at_peak = np.abs(np.abs(x) - peak) <= 1e-12 * peak
+    at_peak = np.abs(np.abs(x) - peak) <= _PEAK_TOLERANCE * peak
     for a, b in _runs_of(at_peak):
         if b - a < clip_samples:
             continue
         steps = [abs(x[a] - x[a - 1])] if a > 0 else []
         steps += [abs(x[b] - x[b - 1])] if b < x.size else []
-        if steps and max(steps) > 2.5 * quantum:
+        if steps and max(steps) > _CLIP_STEP_QUANTA * quantum:
             raise SensorDataError(
                 f"{where}: channel {name} is clipped: {b - a} consecutive samples at {x[a]:.6g} "
                 f"{_unit(name)} from t-index {a}; expected a transducer range above the signal (drop "

@@ -428,8 +428,22 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False,
     """Simulate every run and record it to the MCAP file ``path``.
 
     Each run is written and flushed as soon as it completes (in run order),
-    so a crash keeps every completed run readable.  ``workers`` as in
-    :func:`simulate`.
+    so a crash keeps every completed run readable.
+
+    Parameters
+    ----------
+    scenario : Scenario
+    path : str or Path
+        The MCAP file to write (parent folders are created).
+    progress : bool
+        Show a progress bar on stderr.
+    workers : int, optional
+        As in :func:`simulate`.
+
+    Returns
+    -------
+    Experiment
+        The recorded runs, time-first ``(n_samples, n_channels)``, SI units.
     """
     from momentid.io.recording import RecordingWriter
 

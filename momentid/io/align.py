@@ -138,8 +138,8 @@ class SensorReport:
         """One line for the import report."""
         sign = "+" if self.sign > 0 else "-"
         how = {Alignment.REFERENCE: "the reference (time and direction)",
-               Alignment.CLOCK: f"shared clock (the data put it {self.clock_error * 1e3:+.1f} ms off it, "
-                                f"r = {self.correlation:+.2f})",
+               Alignment.CLOCK: f"shared clock, confirmed by the data to {self.clock_error * 1e3:+.1f} ms "
+                                f"(r = {self.correlation:+.2f})",
                Alignment.DATA: f"aligned from the data (r = {self.correlation:+.2f})"}[self.alignment]
         text = (f"{self.channel:>3}: axis {sign}{self.axis}, gravity {self.gravity:+.2f} m/s^2 on "
                 f"{self.gravity_axis}, offset {self.offset:+.3f} m/s^2 removed, starts at "

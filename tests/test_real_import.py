@@ -7,7 +7,9 @@ made on a doctored copy of one synchronised trial, and its import compared with 
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
+from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +23,11 @@ from momentid.io.align import ALIGN_BAND, Alignment, MIN_ALIGN_CORRELATION
 from momentid.io.formats.xsens_dot import read_xsens_dot
 from momentid.io.importer import import_folder
 from momentid.io.recording import read_recording, write_experiment
+from momentid.report import viewer
 
 from conftest import data_file
+
+rerun_chunk = pytest.importorskip("rerun.chunk")
 
 FOLDER = data_file("mini_shake_table", "flexible_3storey")
 SENSORS = ("Ground Floor", "1st Floor", "2nd Floor", "3rd Floor (Top floor)")
@@ -339,3 +344,43 @@ def test_the_shipped_files_are_compressed_and_small():
     assert len(files) == 4 * 5 + 1  # 4 sensors x 5 trials, plus experiment.toml
     assert all(p.suffix == ".gz" for p in files if p.name != "experiment.toml")
     assert all(p.stat().st_size < 2_000_000 for p in files)  # the project's limit per file
+
+
+# ----------------------------------------------------------------------------- viewing real data
+
+def test_displacements_from_accelerations_are_drift_free():
+    dt, T, f = 1 / 120.0, 20.0, 2.0
+    t = np.arange(int(T / dt)) * dt
+    x = 0.01 * np.sin(np.pi * t / T) ** 2 * np.sin(2 * np.pi * f * t)  # 1 cm, at rest at both ends
+    freq = np.fft.rfftfreq(t.size, dt)
+    a = np.fft.irfft(-(2 * np.pi * freq) ** 2 * np.fft.rfft(x), n=t.size)  # exact second derivative
+    bias = 0.05 + 0.002 * t  # an IMU offset that wanders: doubly integrated it would drift by metres
+    got = viewer.displacements_from_accelerations(a + bias, dt)
+    # The detrend removes the bias and its drift, the 0.3 Hz high-pass passes the window's band
+    # around 2 Hz to ~3e-7 relative: ~2e-7 m off.  1e-5 m (0.1 % of the amplitude) leaves room; plain
+    # double integration of the bias alone would be off by 0.05 * 20^2 / 2 = 10 m.
+    assert np.max(np.abs(got - x)) < 1e-5
+
+
+def test_view_draws_the_real_building_from_its_accelerations(shipped, tmp_path):
+    one = dataclasses.replace(shipped, runs=(shipped.run("bonus_event"),))
+    scene = viewer.prepare(one, exaggeration=2.0)
+    z, q = scene.drawn(one.runs[0])
+    assert z.shape == (one.runs[0].n_samples,) and q.shape == (one.runs[0].n_samples, 3)
+    assert any("records accelerations only" in n for n in scene.notes)
+    assert np.allclose(scene.heights, 0.1524)  # the lab's stated storey height
+    rrd = viewer.write_rrd(scene, tmp_path / "bonus.rrd")
+    chunks = defaultdict(list)
+    for chunk in rerun_chunk.RrdReader(rrd).store().stream().to_chunks():
+        chunks[chunk.entity_path].append(chunk.to_record_batch())
+    root = "/runs/bonus_event"
+    assert {f"{root}/sensors/{c}" for c in CHANNELS} <= set(chunks)
+    assert {f"{root}/reconstructed/{c}" for c in ("z", "q1", "q2", "q3")} <= set(chunks)
+    idx = viewer.rig_samples(one.runs[0])
+    translations = []
+    for batch in chunks[f"{root}/rig/base/floor3"]:
+        if "Transform3D:translation" in batch.schema.names and "time" in batch.schema.names:
+            translations += batch.column("Transform3D:translation").to_pylist()
+    drawn = np.array(translations, float).reshape(-1, 3)[:, 0]
+    # The top floor moves by the exaggerated reconstruction (float32 in the file: 1e-7 relative).
+    assert np.allclose(np.sort(drawn), np.sort(2.0 * q[idx, 2]), rtol=1e-6, atol=1e-9)

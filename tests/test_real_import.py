@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import gzip
+import shutil
 from collections import defaultdict
 from pathlib import Path
 
@@ -384,3 +385,12 @@ def test_view_draws_the_real_building_from_its_accelerations(shipped, tmp_path):
     drawn = np.array(translations, float).reshape(-1, 3)[:, 0]
     # The top floor moves by the exaggerated reconstruction (float32 in the file: 1e-7 relative).
     assert np.allclose(np.sort(drawn), np.sort(2.0 * q[idx, 2]), rtol=1e-6, atol=1e-9)
+
+
+def test_names_of_the_uncompressed_exports_find_the_shipped_gzip_files(tmp_path, shipped):
+    folder = tmp_path / "flexible_3storey"
+    shutil.copytree(FOLDER, folder)
+    toml = folder / "experiment.toml"
+    toml.write_text(toml.read_text().replace(".csv.gz", ".csv"))
+    again = import_folder(folder)
+    assert all(np.array_equal(a.values, b.values) for a, b in zip(again.runs, shipped.runs))

@@ -214,7 +214,7 @@ def _check_distinct(records: list[SensorRecord]) -> None:
                                       f"per sensor (the same export named twice?)")
 
 
-def _axes(rec: SensorRecord, channel: str, step: float) -> tuple[int, int, np.ndarray]:
+def _axes(rec: SensorRecord, step: float) -> tuple[int, int, np.ndarray]:
     """(gravity axis, shaking axis, band-limited shaking signal) of one sensor."""
     if np.all(np.isnan(rec.acc)):
         raise SensorDataError(f"{rec.path}: every sample is missing (nan); expected accelerations")
@@ -254,7 +254,7 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
             raise SensorDataError(f"{rec.path}: sample interval {rec.step:.6g} s differs from "
                                   f"{step:.6g} s of {records[0].path}; expected sensors at one rate")
     _check_distinct(records)
-    axes = [_axes(rec, ch, step) for rec, ch in zip(records, channels)]
+    axes = [_axes(rec, step) for rec in records]
     table_rms = float(np.sqrt(np.mean(axes[0][2] ** 2)))
     if table_rms < STILL_RMS:
         raise SensorDataError(f"{records[0].path}: the table does not move ({table_rms:.3g} m/s^2 RMS in "

@@ -12,7 +12,8 @@ and ``docs/real-data.md``):
   ``[[runs]]`` table per run: ``name``, optional ``added_mass`` (kg per floor,
   default none) and the run's files, relative to the folder: ``file`` (one
   CSV per run, format ``csv``) or ``table`` and ``floors`` (one file per
-  sensor, e.g. ``xsens-dot``).  Files may be gzip-compressed.
+  sensor, e.g. ``xsens-dot``).  Files may be gzip-compressed (read by
+  content); a named file that exists only as ``<name>.gz`` is read from there.
 * a one-file-per-run format is taken as it is; one file per sensor goes
   through :func:`momentid.io.align.align_sensors` (clocks, shaking axis,
   sign, gravity and offset), whose per-sensor reports go into ``run.meta``.
@@ -49,6 +50,8 @@ __all__ = ["import_folder", "import_recording", "write_import", "summary", "repo
 EXPERIMENT_FILE = "experiment.toml"
 #: Largest relative difference between the sample rates of two runs.
 RATE_TOLERANCE = 1e-3
+#: A data file named ``x.csv`` that exists only compressed, as ``x.csv`` + this suffix, is read from there.
+GZIP_SUFFIX = ".gz"
 #: Format of a folder whose ``experiment.toml`` names none (the original contract).
 DEFAULT_FORMAT = "csv"
 
@@ -82,10 +85,15 @@ def _noise(tab: Table | None) -> tuple[tuple[str, float], ...]:
 
 
 def _file(tab: Table, key: str, folder: Path, name: str) -> Path:
+    """``folder/name``, or its compressed copy ``folder/name.gz`` when only that exists."""
     path = folder / name
-    if not path.is_file():
-        raise tab.error(key, f"a CSV file (plain or gzip-compressed), relative to {folder} (looked for {path})")
-    return path
+    if path.is_file():
+        return path
+    packed = path.with_name(path.name + GZIP_SUFFIX)
+    if packed.is_file():
+        return packed
+    raise tab.error(key, f"a CSV file (plain or gzip-compressed), relative to {folder} (looked for {path} "
+                         f"and {packed.name})")
 
 
 def _run_files(tab: Table, fmt: ExportFormat, folder: Path, storeys: int) -> tuple[Path, ...]:

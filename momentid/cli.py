@@ -171,10 +171,12 @@ def _cmd_identify(args) -> int:
 
 
 def _cmd_import(args) -> int:
-    from momentid.io.importer import import_folder, summary, write_import
+    from momentid.io.importer import import_folder, report, summary, write_import
 
     experiment = import_folder(args.folder)
     out = write_import(experiment, _output_path(args.output, Path(args.folder).resolve().name))
+    for line in report(experiment):
+        print(line)
     print(summary(experiment, out))
     return 0
 
@@ -334,11 +336,16 @@ def build_parser() -> argparse.ArgumentParser:
                         "(needs a, v, q of every floor)")
     p.set_defaults(func=_cmd_identify)
 
-    p = sub.add_parser("import", help="turn a lab's folder of CSV files into a recording",
-                       description="Write DIR (experiment.toml: the nominal [structure] and [[runs]] "
-                                   "with file and added_mass; one CSV per run: t, zdd, a1..ad, optional "
-                                   "q1..qd, v1..vd, SI units; see docs/recording-format.md) as a recording.")
-    p.add_argument("folder", metavar="DIR", help="folder with experiment.toml and the runs' CSV files")
+    p = sub.add_parser("import", help="turn a lab's raw exports (CSV files) into a recording",
+                       description="Write DIR (experiment.toml: [structure] as the lab states it, "
+                                   "[sensors] format, [[runs]] with their files and optional added_mass) "
+                                   "as a recording.  format = \"csv\" (default): one CSV per run with t, "
+                                   "zdd, a1..ad, optional q1..qd, v1..vd in SI units; format = "
+                                   "\"xsens-dot\": one Xsens DOT export per sensor (table, floors), aligned "
+                                   "on their clocks or from the data, shaking axis, sign, gravity and "
+                                   "offset found per sensor and reported.  Files may be gzip-compressed.  "
+                                   "See docs/recording-format.md and docs/real-data.md.")
+    p.add_argument("folder", metavar="DIR", help="folder with experiment.toml and the runs' data files")
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<folder name>.mcap) or a .mcap file "
                         "(default: out/)")

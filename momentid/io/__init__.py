@@ -2,7 +2,11 @@
 
 - :mod:`~momentid.io.toml_reader`: TOML with one-line errors naming file, key and value.
 - :mod:`~momentid.io.recording`: the MCAP recording format (write, read, stream, recover).
-- :mod:`~momentid.io.importer`: a folder of lab CSV files plus ``experiment.toml`` to a recording.
+- :mod:`~momentid.io.importer`: a lab folder (``experiment.toml`` plus its data files) to a recording.
+- :mod:`~momentid.io.formats`: the export formats the importer reads (one module each, a registry).
+- :mod:`~momentid.io.align`: one file per sensor -> one run (clocks, shaking axis, sign, gravity).
+- :mod:`~momentid.io.rate`: is the sample rate high enough for the modes?
+- :mod:`~momentid.io.structure_table`: the one parser of ``[structure]`` (scenarios and imports).
 """
 
 from momentid.io.recording import RecordingWriter, read_recording, write_experiment

@@ -1,243 +1,59 @@
-"""Import of external recordings: a lab's folder of CSV files -> an MCAP recording.
+"""Import of a lab's raw exports: a folder with ``experiment.toml`` -> an experiment / MCAP recording.
 
-The folder contract (``docs/recording-format.md``, "Importing CSV recordings"):
+The folder contract (``docs/recording-format.md``, "Importing lab recordings",
+and ``docs/real-data.md``):
 
-* ``experiment.toml``: the nominal model the lab believes (``[structure]``:
-  ``masses``, ``storey_stiffness``, ``rayleigh_mu``, ``rayleigh_kappa``,
-  ``storey_height``, optional ``storeys`` and ``base_mass``), then one
-  ``[[runs]]`` table per run with ``file`` (relative to the folder) and
-  ``added_mass`` (kg per floor); optional ``[experiment]`` ``name`` and
-  ``description``.
-* one CSV per run: a header naming the columns ``t``, ``zdd``, ``a1..ad``
-  (required), ``q1..qd``, ``v1..vd`` (optional, each group all or none) and
-  ``z``, ``zd`` (optional), in any order, then one row per sample in SI units.
+* ``experiment.toml``: optional ``[experiment]`` ``name`` and ``description``;
+  ``[structure]`` what the lab states (``storeys`` and/or ``masses``, optional
+  ``storey_height``; with ``storey_stiffness`` and damping a full nominal
+  model, :mod:`momentid.io.structure_table`); optional ``[sensors]`` with
+  ``format`` (a name in :data:`momentid.io.formats.FORMATS`, default
+  ``"csv"``) and ``noise`` (m/s^2 std per channel group); then one
+  ``[[runs]]`` table per run: ``name``, optional ``added_mass`` (kg per floor,
+  default none) and the run's files, relative to the folder: ``file`` (one
+  CSV per run, format ``csv``) or ``table`` and ``floors`` (one file per
+  sensor, e.g. ``xsens-dot``).  Files may be gzip-compressed (read by
+  content); a named file that exists only as ``<name>.gz`` is read from there.
+* a one-file-per-run format is taken as it is; one file per sensor goes
+  through :func:`momentid.io.align.align_sensors` (clocks, shaking axis,
+  sign, gravity and offset), whose per-sensor reports go into ``run.meta``.
 
 Who is to blame decides the error class: a mistake in ``experiment.toml``
 (key, type, value, a run file that does not exist) is a
-:class:`~momentid.errors.ScenarioError` naming file, key and value, like a
-scenario file; a mistake inside a CSV file (header, cell, time column) is a
-:class:`~momentid.errors.SensorDataError` naming the file, the row (the
-1-based line number in the file, the header is row 1) and the column.
-
-Parsing takes the fast path (``np.loadtxt``, ~0.15 s for 20 s x 1 kHz x 10
-columns); only when it fails is the file scanned line by line to name the
-first bad row and column.
+:class:`~momentid.errors.ScenarioError` naming file, key and value; a mistake
+inside a data file is a :class:`~momentid.errors.SensorDataError` naming the
+file (and the row and column where there is one).
 """
 
 from __future__ import annotations
 
-import io
-import warnings
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from momentid.io.toml_reader import Table, load_toml
-from momentid.core.series import Experiment, RunData, channel_unit
+from momentid.core.series import UNITS, Experiment, RunData
+from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError, SensorDataError
-from momentid.core.structure import Structure
+from momentid.io.align import SensorReport, align_sensors
+from momentid.io.formats import ExportFormat, Layout, get_format
+from momentid.io.formats.csv_run import csv_error, read_csv_run
+from momentid.io.rate import check_model_rate, resonances_near_nyquist
+from momentid.io.structure_table import parse_structure
+from momentid.io.toml_reader import Table, load_toml
 
-__all__ = ["import_folder", "import_recording", "write_import", "summary", "read_csv_run",
-           "EXPERIMENT_FILE", "TIME_TOLERANCE", "MIN_SAMPLES"]
+__all__ = ["import_folder", "import_recording", "write_import", "summary", "report", "read_csv_run",
+           "EXPERIMENT_FILE", "RATE_TOLERANCE"]
 
 #: The experiment description every import folder holds.
 EXPERIMENT_FILE = "experiment.toml"
-#: Largest departure of a time stamp's step (and of the stamp itself) from
-#: the uniform clock, as a fraction of the sample interval.  1 % accepts
-#: time stamps printed with 6 decimals at 1 kHz (a rounding error of at most
-#: 0.1 % of the interval per step) and refuses a dropped sample (100 %) or
-#: real clock jitter.
-TIME_TOLERANCE = 0.01
-#: Fewest samples a run may have (identification's ``check_run`` needs 3).
-MIN_SAMPLES = 3
 #: Largest relative difference between the sample rates of two runs.
 RATE_TOLERANCE = 1e-3
-
-
-def _header_help(d: int) -> str:
-    return (f"t, zdd, a1..a{d} and optionally q1..q{d}, v1..v{d} (each group all or none), z, zd "
-            f"(d = {d} storeys from {EXPERIMENT_FILE})")
-
-
-def _unit(name: str) -> str:
-    return "s" if name == "t" else channel_unit(name)
-
-
-def _csv_error(path: Path, row: int, column: str, message: str) -> SensorDataError:
-    """A one-line error about ``column`` (a quoted name or a description) of line ``row``."""
-    return SensorDataError(f"{path}: row {row}, column {column}: {message}")
-
-
-# ----------------------------------------------------------------------------- CSV files
-
-def _read_text(path: Path) -> str:
-    try:
-        raw = path.read_bytes()
-    except IsADirectoryError:
-        raise SensorDataError(f"{path}: is a directory; expected a CSV file") from None
-    except OSError as e:
-        raise SensorDataError(f"{path}: cannot read the file ({e.strerror}); "
-                              f"expected a readable CSV file") from None
-    try:
-        text = raw.decode("utf-8-sig")  # spreadsheet exports often start with a byte-order mark
-    except UnicodeDecodeError as e:
-        row = raw.count(b"\n", 0, e.start) + 1
-        raise SensorDataError(f"{path}: row {row}, byte {e.start}: not UTF-8 text ({e.reason}); "
-                              f"expected a plain-text CSV file") from None
-    return text.replace("\r\n", "\n")
-
-
-def _columns(path: Path, header: str, d: int) -> tuple[str, ...]:
-    """Validate the header line (row 1) against the vocabulary for ``d`` storeys."""
-    groups = {g: tuple(f"{g}{i + 1}" for i in range(d)) for g in ("a", "q", "v")}
-    known = {"t", "zdd", "z", "zd", *groups["a"], *groups["q"], *groups["v"]}
-    names = tuple(c.strip() for c in header.split(","))
-    seen: set[str] = set()
-    for j, name in enumerate(names):
-        if name not in known:
-            what = f"'{name}'" if name else f"{j + 1} (no name)"
-            raise _csv_error(path, 1, what, f"unknown column; expected only the columns {_header_help(d)}")
-        if name in seen:
-            raise _csv_error(path, 1, f"'{name}'", "appears twice in the header; expected each column once")
-        seen.add(name)
-    for name in ("t", "zdd", *groups["a"]):
-        if name not in seen:
-            raise _csv_error(path, 1, f"'{name}'", f"missing from the header {header.strip()!r}; expected "
-                                                   f"the columns {_header_help(d)}")
-    for g in ("q", "v"):
-        present = [c for c in groups[g] if c in seen]
-        if present and len(present) < d:
-            missing = next(c for c in groups[g] if c not in seen)
-            raise _csv_error(path, 1, f"'{missing}'", f"missing while {', '.join(present)} are present; "
-                                                      f"expected all of {g}1..{g}{d} or none")
-    return names
-
-
-def _parse_slowly(path: Path, rows: list[str], names: tuple[str, ...]) -> np.ndarray:
-    """Parse ``rows`` (lines 2.. of the file) cell by cell; raise at the first bad one."""
-    out = np.empty((len(rows), len(names)))
-    for i, line in enumerate(rows):
-        row = i + 2
-        if not line.strip():
-            raise _csv_error(path, row, f"'{names[0]}'", "empty line; expected one sample per line, "
-                                                         "without blank lines between samples")
-        fields = line.split(",")
-        if len(fields) < len(names):
-            raise _csv_error(path, row, f"'{names[len(fields)]}'",
-                             f"missing: the row has {len(fields)} fields, expected {len(names)} "
-                             f"({','.join(names)})")
-        if len(fields) > len(names):
-            raise _csv_error(path, row, f"{len(names) + 1} (after '{names[-1]}')",
-                             f"extra field {fields[len(names)].strip()!r}: the row has {len(fields)} fields, "
-                             f"expected {len(names)} ({','.join(names)})")
-        for j, (cell, name) in enumerate(zip(fields, names)):
-            text = cell.strip()
-            if not text:
-                raise _csv_error(path, row, f"'{name}'", f"empty cell; expected a number ({_unit(name)})")
-            try:
-                out[i, j] = float(text)
-            except ValueError:
-                raise _csv_error(path, row, f"'{name}'", f"{text!r} is not a number; expected a decimal "
-                                                         f"number ({_unit(name)})") from None
-    return out
-
-
-def _parse(path: Path, body: str, names: tuple[str, ...]) -> np.ndarray:
-    """``(n, c)`` floats of the data rows (``body``: lines 2.. of the file, no trailing newline):
-    numpy's C reader, or the slow scan that names the first bad row and column."""
-    n = body.count("\n") + 1
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # "input contained no data": the shape check below catches it
-            data = np.loadtxt(io.StringIO(body), delimiter=",", comments=None, quotechar=None,
-                              dtype=float, ndmin=2)
-    except ValueError:
-        data = None
-    if data is None or data.shape != (n, len(names)):  # loadtxt skips blank lines
-        data = _parse_slowly(path, body.split("\n"), names)
-    return data
-
-
-def _uniform_time(path: Path, t: np.ndarray) -> np.ndarray:
-    """Check the time column (rows are ``index + 2``) and return it as an exact uniform grid."""
-    bad = np.flatnonzero(~np.isfinite(t))
-    if bad.size:
-        i = int(bad[0])
-        raise _csv_error(path, i + 2, "'t'", f"{float(t[i])!r}; expected a finite time (s)")
-    step = np.diff(t)
-    back = np.flatnonzero(step <= 0)
-    if back.size:
-        i = int(back[0]) + 1
-        raise _csv_error(path, i + 2, "'t'", f"{float(t[i])!r} s does not increase on row {i + 1} "
-                                             f"({float(t[i - 1])!r} s); expected strictly increasing times")
-    h = float(np.median(step))
-    off = np.flatnonzero(np.abs(step - h) > TIME_TOLERANCE * h)
-    if off.size:
-        i = int(off[0]) + 1
-        raise _csv_error(path, i + 2, "'t'",
-                         f"{float(t[i])!r} s is {step[i - 1]:.6g} s after row {i + 1}; expected uniform "
-                         f"sampling every {h:.6g} s (within {TIME_TOLERANCE:.0%}): a gap or clock jitter "
-                         f"cannot be identified across")
-    n = t.size
-    grid = t[0] + np.arange(n) * ((t[-1] - t[0]) / (n - 1))
-    drift = np.flatnonzero(np.abs(t - grid) > TIME_TOLERANCE * h)
-    if drift.size:
-        i = int(drift[0])
-        raise _csv_error(path, i + 2, "'t'",
-                         f"{float(t[i])!r} s is {t[i] - grid[i]:.3g} s off the uniform clock from "
-                         f"{float(t[0])!r} s to {float(t[-1])!r} s; expected a steady sample rate")
-    return grid
-
-
-def read_csv_run(path, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
-    """Read and check one run's CSV file.
-
-    Parameters
-    ----------
-    path : str or Path
-        The CSV file (header row, then one row per sample, SI units).
-    storeys : int
-        ``d``: the file must hold ``a1..ad`` (and ``q``, ``v`` all or none).
-
-    Returns
-    -------
-    time : ndarray, shape (n,)
-        Sample times (s) on the exact uniform grid from the first to the last
-        stamp (the stamps are checked to lie within :data:`TIME_TOLERANCE` of
-        a sample interval from it; this removes the rounding of printed times).
-    channels : tuple of str, length c
-        The header's columns in file order, without ``t``.
-    values : ndarray, shape (n, c)
-        The samples; ``nan`` cells (explicit missing samples) are kept for
-        identification to repair or refuse.
-
-    Raises
-    ------
-    SensorDataError
-        Naming the file, the row (1-based line number) and the column.
-    """
-    path = Path(path)
-    text = _read_text(path).rstrip()  # trailing newlines (and spaces) end no row
-    if not text:
-        raise _csv_error(path, 1, "'t'", f"the file is empty; expected a header row with the columns "
-                                         f"{_header_help(storeys)}, then one row per sample")
-    header, _, body = text.partition("\n")
-    names = _columns(path, header, storeys)
-    rows = body.count("\n") + 1 if body else 0
-    if rows < MIN_SAMPLES:
-        raise _csv_error(path, rows + 2, "'t'", f"{rows} data rows; expected at least {MIN_SAMPLES} samples")
-    data = _parse(path, body, names)
-    k = names.index("t")
-    time = _uniform_time(path, data[:, k])
-    inf = np.argwhere(np.isinf(data))
-    if inf.size:
-        i, j = (int(x) for x in inf[0])
-        raise _csv_error(path, i + 2, f"'{names[j]}'", f"{float(data[i, j])!r}; expected a finite number "
-                                                       f"(or nan for a missing sample)")
-    channels = names[:k] + names[k + 1:]
-    values = np.ascontiguousarray(np.delete(data, k, axis=1))
-    return time, channels, values
+#: A data file named ``x.csv`` that exists only compressed, as ``x.csv`` + this suffix, is read from there.
+GZIP_SUFFIX = ".gz"
+#: Format of a folder whose ``experiment.toml`` names none (the original contract).
+DEFAULT_FORMAT = "csv"
 
 
 # ----------------------------------------------------------------------------- experiment.toml
@@ -245,37 +61,61 @@ def read_csv_run(path, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.nd
 @dataclass(frozen=True)
 class _RunSpec:
     name: str
-    file: Path
+    files: tuple[Path, ...]  # one per run, or the table's then floor 1..d's
     added_mass: tuple[float, ...]
 
 
-def _structure(tab: Table) -> Structure:
-    """The ``[structure]`` table: masses, stiffness, Rayleigh coefficients, heights."""
-    masses = tab.numbers("masses", positive=True)
-    d = len(masses)
-    if tab.integer("storeys", d, minimum=1) != d:
-        raise tab.error("storeys", f"the number of entries in 'masses' ({d})")
-    out = Structure(
-        masses=masses,
-        storey_stiffness=tab.numbers("storey_stiffness", length=d, positive=True, scalar_ok=True),
-        storey_heights=tab.numbers("storey_height", (0.3,) * d, length=d, positive=True, scalar_ok=True),
-        rayleigh_mu=tab.number("rayleigh_mu", nonnegative=True),
-        rayleigh_kappa=tab.number("rayleigh_kappa", nonnegative=True),
-        base_mass=tab.number("base_mass", 100.0, positive=True),
-    )
+@dataclass(frozen=True)
+class _Description:
+    meta: dict
+    model: Structure | LabStatement
+    statement: LabStatement
+    fmt: ExportFormat
+    runs: list[_RunSpec]
+    text: str
+
+
+def _noise(tab: Table | None) -> tuple[tuple[str, float], ...]:
+    """``[sensors] noise = {a = 0.01, zdd = 0.01}``: stated noise std per channel group."""
+    if tab is None:
+        return ()
+    out = tuple((group, tab.number(group, positive=True)) for group in UNITS if tab.has(group))
     tab.finish()
     return out
 
 
-def _description(folder: Path) -> tuple[dict, Structure, list[_RunSpec], str]:
-    """Read ``folder/experiment.toml``: (meta, structure, runs, text)."""
+def _file(tab: Table, key: str, folder: Path, name: str) -> Path:
+    """``folder/name``, or its compressed copy ``folder/name.gz`` when only that exists."""
+    path = folder / name
+    if path.is_file():
+        return path
+    packed = path.with_name(path.name + GZIP_SUFFIX)
+    if packed.is_file():
+        return packed
+    raise tab.error(key, f"a CSV file (plain or gzip-compressed), relative to {folder} (looked for {path} "
+                         f"and {packed.name})")
+
+
+def _run_files(tab: Table, fmt: ExportFormat, folder: Path, storeys: int) -> tuple[Path, ...]:
+    if fmt.layout is Layout.RUN_FILE:
+        return (_file(tab, "file", folder, tab.string("file")),)
+    floors = tab.strings("floors")
+    if len(floors) != storeys:
+        raise tab.error("floors", f"{storeys} files, one per floor (floor 1 first), as [structure] states "
+                                  f"{storeys} storeys")
+    table = _file(tab, "table", folder, tab.string("table"))
+    return (table, *(_file(tab, "floors", folder, f) for f in floors))
+
+
+def _description(folder: Path) -> _Description:
+    """Read and check ``folder/experiment.toml``."""
     if not folder.is_dir():
         raise ScenarioError(f"{folder}: not a folder; expected a folder holding {EXPERIMENT_FILE} and "
-                            f"one CSV file per run")
+                            f"the runs' data files")
     path = folder / EXPERIMENT_FILE
     if not path.is_file():
         raise ScenarioError(f"{path}: file not found; expected {EXPERIMENT_FILE} describing the structure "
-                            f"and the runs (docs/recording-format.md, 'Importing CSV recordings')")
+                            f"and the runs (docs/recording-format.md, 'Importing lab recordings')")
     data = load_toml(path)
     text = path.read_text(encoding="utf-8")
     top = Table(data, path)
@@ -283,30 +123,58 @@ def _description(folder: Path) -> tuple[dict, Structure, list[_RunSpec], str]:
     meta = {"name": meta_tab.string("name", folder.resolve().name),
             "description": meta_tab.string("description", "")}
     meta_tab.finish()
-    structure = _structure(top.table("structure"))
-    runs = []
+    model = parse_structure(top.table("structure"), require_model=False)
+    d = model.storeys
+    sensors = top.table("sensors", {})
+    fmt = get_format(sensors.string("format", DEFAULT_FORMAT), path)
+    noise = _noise(sensors.table("noise", None))
+    sensors.finish()
+    statement = model if isinstance(model, LabStatement) else LabStatement(
+        storeys=d, masses=model.masses, storey_heights=model.storey_heights)
+    statement = dataclasses.replace(statement, noise=noise)
+    runs: list[_RunSpec] = []
     for tab in top.tables("runs"):
-        file = tab.string("file")
-        added = tab.numbers("added_mass", length=structure.storeys, nonnegative=True, scalar_ok=True)
-        name = tab.string("name", Path(file).stem)
+        files = _run_files(tab, fmt, folder, d)
+        added = tab.numbers("added_mass", (0.0,) * d, length=d, nonnegative=True, scalar_ok=True)
+        name = tab.string("name", files[0].name.split(".")[0])
         if not name:
             raise tab.error("name", "a non-empty run name")
         tab.finish()
-        csv = folder / file
-        if not csv.is_file():
-            raise tab.error("file", f"a CSV file, relative to {folder} (looked for {csv})")
         if name in (r.name for r in runs):
             raise tab.error("name" if tab.has("name") else "file",
                             f"a unique run name; {name!r} is already used (default name: the file's stem)")
-        runs.append(_RunSpec(name, csv, added))
+        runs.append(_RunSpec(name, files, added))
     top.finish()
-    return meta, structure, runs, text
+    return _Description(meta, model, statement, fmt, runs, text)
 
 
 # ----------------------------------------------------------------------------- the import
 
+def _read_run(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
+    """One run: a run file as it is, or the sensor files aligned (:func:`align_sensors`)."""
+    added = np.array(spec.added_mass)
+    if fmt.layout is Layout.RUN_FILE:
+        time, channels, values = fmt.read_run(spec.files[0], storeys)
+        return RunData(name=spec.name, added_mass=added, time=time, channels=channels, values=values,
+                       meta={"source_file": str(spec.files[0])})
+    channels = ("zdd", *(f"a{i + 1}" for i in range(storeys)))
+    records = [fmt.read_sensor(f) for f in spec.files]
+    aligned = align_sensors(records, channels)
+    notes = list(aligned.notes)
+    rate = 1.0 / (aligned.time[1] - aligned.time[0])
+    near = resonances_near_nyquist(aligned.values, rate)
+    if near:
+        notes.append(f"the floors resonate at {', '.join(f'{f:.1f}' for f in near)} Hz, near the Nyquist "
+                     f"frequency {rate / 2:.4g} Hz: the sample rate is likely too low for the modes "
+                     f"(a mode beyond it folds back)")
+    meta = {"format": fmt.name, "source_files": [str(f) for f in spec.files],
+            "sensors": [r.to_dict() for r in aligned.reports], "notes": notes}
+    return RunData(name=spec.name, added_mass=added, time=aligned.time, channels=channels,
+                   values=aligned.values, meta=meta)
+
+
 def import_folder(path) -> Experiment:
-    """Read a lab folder (``experiment.toml`` + one CSV per run) into an experiment.
+    """Read a lab folder (``experiment.toml`` + the runs' data files) into an experiment.
 
     Parameters
     ----------
@@ -316,44 +184,53 @@ def import_folder(path) -> Experiment:
     Returns
     -------
     Experiment
-        Runs in ``[[runs]]`` order with channels in each CSV's column order
-        (without ``t``); ``structure`` the nominal model of ``[structure]``;
-        ``scenario`` a summary with ``name``, ``description``, ``source`` (the
-        folder), ``sample_rate`` (Hz), ``duration`` (s, the longest run) and
-        ``sensors = {"ideal": False, "set": "imported", "groups": [...]}`` so
-        identification treats the data as real measurements;
-        ``scenario_text`` the text of ``experiment.toml``.
+        Runs in ``[[runs]]`` order.  A run-file format keeps each file's
+        column order (without ``t``); a sensor-file format gives channels
+        ``("zdd", "a1", ..., "ad")`` (m/s^2 along the shaking direction,
+        sign-corrected, gravity and offset removed, one time base from 0) and
+        ``run.meta["sensors"]`` (per-sensor :class:`SensorReport` dicts) and
+        ``run.meta["notes"]``.  ``structure`` is the nominal model when
+        ``[structure]`` states one, else None; ``statement`` what the lab
+        states (storeys, masses, heights, noise).  ``scenario`` a summary with
+        ``name``, ``description``, ``source``, ``format``, ``sample_rate``
+        (Hz), ``duration`` (s, the longest run) and ``sensors = {"ideal":
+        False, "set": "imported", "groups": [...]}`` so identification treats
+        the data as real measurements; ``scenario_text`` the text of
+        ``experiment.toml``.
 
     Raises
     ------
     ScenarioError
         ``experiment.toml`` is missing or invalid (file, key, value).
     SensorDataError
-        A CSV file is malformed (file, row, column), or the runs disagree
-        on their channels or sample rate.
+        A data file is malformed or unusable (a one-line reason naming the
+        file), or the runs disagree on their channels or sample rate.
     """
     folder = Path(path)
-    meta, structure, specs, text = _description(folder)
+    desc = _description(folder)
+    d = desc.model.storeys
+    structure = desc.model if isinstance(desc.model, Structure) else None
     runs: list[RunData] = []
-    for spec in specs:
-        time, channels, values = read_csv_run(spec.file, structure.storeys)
-        run = RunData(name=spec.name, added_mass=np.array(spec.added_mass), time=time, channels=channels,
-                      values=values, meta={"source_file": str(spec.file)})
+    for spec in desc.runs:
+        run = _read_run(spec, desc.fmt, d)
         if runs:
-            _agree(runs[0], run, specs[0].file, spec.file)
+            _agree(runs[0], run, desc.runs[0].files[0], spec.files[0])
+        elif structure is not None:
+            check_model_rate(structure, run.sample_rate, str(spec.files[0]))
         runs.append(run)
     groups = [g for g in ("zdd", "z", "zd", "a", "q", "v")
               if any(c.rstrip("0123456789") == g for c in runs[0].channels)]
     scenario = {
-        "name": meta["name"],
-        "description": meta["description"],
+        "name": desc.meta["name"],
+        "description": desc.meta["description"],
         "source": str(folder.resolve()),
+        "format": desc.fmt.name,
         "sample_rate": float(runs[0].sample_rate),
         "duration": float(max(r.time[-1] - r.time[0] for r in runs)),
         "sensors": {"ideal": False, "set": "imported", "groups": groups},
     }
-    return Experiment(runs=tuple(runs), structure=structure, scenario=scenario, scenario_text=text,
-                      source=str(folder))
+    return Experiment(runs=tuple(runs), structure=structure, scenario=scenario, scenario_text=desc.text,
+                      source=str(folder), statement=desc.statement)
 
 
 def _agree(first: RunData, run: RunData, first_file: Path, file: Path) -> None:
@@ -361,12 +238,14 @@ def _agree(first: RunData, run: RunData, first_file: Path, file: Path) -> None:
     if set(run.channels) != set(first.channels):
         odd = sorted(set(run.channels) ^ set(first.channels))[0]
         where = "has" if odd in run.channels else "lacks"
-        raise _csv_error(file, 1, f"'{odd}'", f"this run {where} it but {first_file.name} does not; expected "
-                                              f"every run to record the same channels")
+        raise csv_error(file, 1, f"'{odd}'", f"this run {where} it but {first_file.name} does not; expected "
+                                             f"every run to record the same channels")
     if abs(run.sample_rate / first.sample_rate - 1) > RATE_TOLERANCE:
-        raise _csv_error(file, 3, "'t'", f"sample rate {run.sample_rate:.6g} Hz differs from "
-                                         f"{first.sample_rate:.6g} Hz in {first_file.name}; expected every "
-                                         f"run sampled at the same rate")
+        message = (f"sample rate {run.sample_rate:.6g} Hz differs from {first.sample_rate:.6g} Hz in "
+                   f"{first_file.name}; expected every run sampled at the same rate")
+        if "sensors" in run.meta:  # aligned sensor files: no single row to blame
+            raise SensorDataError(f"{file}: {message}")
+        raise csv_error(file, 3, "'t'", message)
 
 
 def write_import(experiment: Experiment, out_path) -> Path:
@@ -395,6 +274,19 @@ def import_recording(folder, out_path) -> Path:
         reads and :func:`momentid.identify` identifies.
     """
     return write_import(import_folder(folder), out_path)
+
+
+def report(experiment: Experiment) -> list[str]:
+    """Per run, what the import did with each sensor and any note (empty for run-file formats)."""
+    lines = []
+    for run in experiment.runs:
+        sensors = run.meta.get("sensors")
+        if not sensors:
+            continue
+        lines.append(f"run {run.name!r}: {run.n_samples} samples, {run.time[-1]:.2f} s")
+        lines += [f"  {SensorReport.from_dict(s).line()}" for s in sensors]
+        lines += [f"  note: {n}" for n in run.meta.get("notes", ())]
+    return lines
 
 
 def summary(experiment: Experiment, out_path) -> str:

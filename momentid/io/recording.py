@@ -30,9 +30,9 @@ from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
-from momentid.core.series import UNITS, Experiment, RunData, channel_unit
+from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
 from momentid.errors import RecordingError, TruncatedRecordingError
-from momentid.core.structure import Structure
+from momentid.core.structure import LabStatement, Structure
 
 __all__ = [
     "RecordingWriter",
@@ -46,8 +46,13 @@ __all__ = [
     "run_topic",
 ]
 
-#: Value of the ``format_version`` key this module writes and reads.
-FORMAT_VERSION = "1"
+#: Value of the ``format_version`` key this module writes.  Version 2 added the
+#: experiment's ``statement`` and a run channel's ``import`` metadata.
+FORMAT_VERSION = "2"
+#: Versions this module reads (version 1 files have neither key).
+READABLE_VERSIONS = ("1", "2")
+#: ``run.meta`` keys of an imported run stored as the channel's ``import`` JSON.
+IMPORT_META_KEYS = ("format", "source_file", "source_files", "sensors", "notes")
 #: Full protobuf name of the sensor block message (the MCAP schema name).
 SCHEMA_NAME = "momentid.SensorBlock"
 EXPERIMENT_RECORD = "momentid.experiment"
@@ -174,12 +179,16 @@ class RecordingWriter:
         The scenario file's text.
     extra_metadata : dict of str to str, optional
         More keys for the ``momentid.experiment`` record (not read back).
+    statement : LabStatement, optional
+        What a real lab states short of a nominal model (stored as JSON).
     """
 
     def __init__(self, path, *, structure: Structure | None, scenario: dict,
-                 scenario_text: str = "", extra_metadata: dict[str, str] | None = None):
+                 scenario_text: str = "", extra_metadata: dict[str, str] | None = None,
+                 statement: LabStatement | None = None):
         self.path = Path(path)
-        self._storeys = structure.storeys if structure is not None else None
+        self._storeys = (structure.storeys if structure is not None
+                         else statement.storeys if statement is not None else None)
         self._runs: list[str] = []  # names of the runs started, in index order
         self._completed = 0
         self._closed = True
@@ -189,6 +198,7 @@ class RecordingWriter:
             "scenario_text": scenario_text,
             "structure": _json(structure.to_dict() if structure is not None else None,
                                "structure", self.path),
+            "statement": _json(_statement_dict(statement), "statement", self.path),
             "units": json.dumps(UNITS),
             "storeys": "" if self._storeys is None else str(self._storeys),
         }
@@ -279,10 +289,14 @@ class RecordingWriter:
                                  "finite masses (kg), one per floor")
         added_json = json.dumps(added)
         index = str(len(self._runs))
-        ch_id = self._writer.register_channel(run_topic(run.name), "protobuf", self._schema_id, {
+        channel_meta = {
             "run": run.name, "index": index, "channels": ",".join(channels),
             "units": ",".join(channel_unit(c) for c in channels), "added_mass": added_json,
-        })
+        }
+        imported = {k: run.meta[k] for k in IMPORT_META_KEYS if k in run.meta}
+        if imported:
+            channel_meta["import"] = _json(json_safe(imported), "run.meta", where)
+        ch_id = self._writer.register_channel(run_topic(run.name), "protobuf", self._schema_id, channel_meta)
         self._runs.append(run.name)  # its topic is taken even if this run fails
         stamps = np.maximum(np.round(t * 1e9), 0)  # log_time: first sample's time in ns
         for k, i in enumerate(range(0, n, block_size)):
@@ -323,7 +337,8 @@ def write_experiment(path, experiment: Experiment, *, model_xml: dict[str, str] 
     path : str or Path
         The ``.mcap`` file to create (overwritten).
     experiment : Experiment
-        Runs, structure, scenario summary and text; ``complete`` and
+        Runs (with an imported run's ``meta`` keys :data:`IMPORT_META_KEYS`),
+        structure, statement, scenario summary and text; ``complete`` and
         ``notes`` are not stored.
     model_xml : dict of str to str, optional
         MuJoCo XML per run name; a run not in it keeps ``run.meta["model_xml"]``
@@ -341,7 +356,7 @@ def write_experiment(path, experiment: Experiment, *, model_xml: dict[str, str] 
         raise RecordingError(f"{path}: model_xml names run {unknown[0]!r}; expected one of "
                              f"{', '.join(sorted(names))}")
     with RecordingWriter(path, structure=experiment.structure, scenario=experiment.scenario,
-                         scenario_text=experiment.scenario_text) as writer:
+                         scenario_text=experiment.scenario_text, statement=experiment.statement) as writer:
         for run in experiment.runs:
             writer.write_run(run, model_xml=models.get(run.name, run.meta.get("model_xml")))
     return Path(path)
@@ -679,6 +694,13 @@ def _finish_run(path: Path, run: _Run, storeys: int | None, model_xml: str | Non
     meta = {"index": index}
     if model_xml is not None:
         meta["model_xml"] = model_xml
+    imported = (run.channel_meta or {}).get("import")
+    if imported is not None:
+        got = _loads(imported, where, "import")
+        if not isinstance(got, dict) or set(got) - set(IMPORT_META_KEYS):
+            raise RecordingError(f"{where}: channel import = {imported[:80]!r}; expected a JSON object with "
+                                 f"keys among {', '.join(IMPORT_META_KEYS)}")
+        meta.update(got)
     return index, RunData(run.name, added, time, channels, values, meta=meta)
 
 
@@ -691,9 +713,10 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
                 "no completed run to recover")
         raise RecordingError(f"{path}: not a momentid recording: no {EXPERIMENT_RECORD!r} metadata "
                              "record (expected one, as written by momentid.io.recording)")
-    if exp.get("format_version") != FORMAT_VERSION:
+    if exp.get("format_version") not in READABLE_VERSIONS:
         raise RecordingError(f"{path}: {EXPERIMENT_RECORD} format_version = "
-                             f"{exp.get('format_version')!r}; expected {FORMAT_VERSION!r}")
+                             f"{exp.get('format_version')!r}; expected one of "
+                             f"{', '.join(repr(v) for v in READABLE_VERSIONS)}")
     where = f"{path}: {EXPERIMENT_RECORD}"
     structure_dict = _loads(exp.get("structure", "null"), where, "structure")
     try:
@@ -705,6 +728,9 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     if structure is not None and storeys not in (None, structure.storeys):
         raise RecordingError(f"{where}: storeys = {storeys}; expected {structure.storeys} as in the structure")
     storeys = structure.storeys if structure is not None else storeys
+    statement = _statement(_loads(exp.get("statement", "null"), where, "statement"), where, exp)
+    if statement is not None and storeys not in (None, statement.storeys):
+        raise RecordingError(f"{where}: storeys = {storeys}; expected {statement.storeys} as in the statement")
     scenario = _loads(exp.get("scenario", "{}"), where, "scenario")
     if not isinstance(scenario, dict):
         raise RecordingError(f"{where}: scenario = {exp['scenario']}; expected a JSON object")
@@ -746,4 +772,29 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
         warnings.warn(note, stacklevel=3)
     return Experiment(runs=runs, structure=structure, scenario=scenario,
                       scenario_text=exp.get("scenario_text", ""), source=str(path),
-                      complete=complete, notes=tuple(notes))
+                      complete=complete, notes=tuple(notes), statement=statement)
+
+
+def _statement_dict(statement: LabStatement | None) -> dict | None:
+    if statement is None:
+        return None
+    return {"storeys": statement.storeys,
+            "masses": None if statement.masses is None else list(statement.masses),
+            "storey_heights": None if statement.storey_heights is None else list(statement.storey_heights),
+            "noise": [[group, value] for group, value in statement.noise]}
+
+
+def _statement(data, where: str, exp: dict) -> LabStatement | None:
+    """The ``statement`` JSON back as a :class:`LabStatement` (None when absent or null)."""
+    if data is None:
+        return None
+    try:
+        return LabStatement(
+            storeys=int(data["storeys"]),
+            masses=None if data["masses"] is None else tuple(float(x) for x in data["masses"]),
+            storey_heights=(None if data["storey_heights"] is None
+                            else tuple(float(x) for x in data["storey_heights"])),
+            noise=tuple((str(g), float(v)) for g, v in data["noise"]))
+    except (KeyError, TypeError, ValueError) as e:
+        raise RecordingError(f"{where}: statement = {exp['statement']}: {e!r}; expected a JSON object with "
+                             f"storeys, masses, storey_heights and noise") from None

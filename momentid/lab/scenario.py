@@ -17,8 +17,8 @@ from typing import Union
 
 import numpy as np
 
-from momentid.core import analytic
 from momentid.core.structure import Mechanism, Structure
+from momentid.io.structure_table import parse_structure
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import ScenarioError
 
@@ -533,42 +533,8 @@ def _parse_sensors(sens: Table, storeys: int, sample_rate: float) -> Sensors:
 
 
 def _parse_structure(tab: Table) -> Structure:
-    masses = tab.numbers("masses", positive=True)
-    d = len(masses)
-    if tab.has("storeys"):
-        storeys = tab.integer("storeys", minimum=1)
-        if storeys != d:
-            raise tab.error("storeys", f"the number of entries in 'masses' ({d})")
-    stiffness = tab.numbers("storey_stiffness", length=d, positive=True, scalar_ok=True)
-    heights = tab.numbers("storey_height", 0.3, length=d, positive=True, scalar_ok=True)
-    if isinstance(heights, float):
-        heights = (heights,) * d
-    base_mass = tab.number("base_mass", 100.0, positive=True)
-    damp = tab.table("damping")
-    M = np.diag(masses)
-    K = analytic.shear_stiffness(stiffness)
-    if damp.has("damping_ratios"):
-        if damp.has("rayleigh_mu") or damp.has("rayleigh_kappa"):
-            raise damp.error("damping_ratios", "either damping_ratios or rayleigh_mu/rayleigh_kappa, not both")
-        if d < 2:
-            raise damp.error("damping_ratios", "rayleigh_mu/rayleigh_kappa (one storey has only one mode)")
-        ratios = damp.numbers("damping_ratios", length=2, nonnegative=True)
-        modes = damp._get("modes", [1, 2])
-        if (not isinstance(modes, list) or len(modes) != 2
-                or not all(isinstance(m, int) and not isinstance(m, bool) for m in modes)):
-            raise damp.error("modes", "two mode numbers, e.g. [1, 2]")
-        mu, kappa = analytic.rayleigh_coefficients(M, K, ratios, tuple(modes), file=tab.file,
-                                                   key=damp.prefix)
-        if mu < 0 or kappa < 0:
-            raise damp.error("damping_ratios",
-                             f"ratios that give non-negative Rayleigh coefficients (got mu={mu:.4g}, kappa={kappa:.4g})")
-    else:
-        mu = damp.number("rayleigh_mu", nonnegative=True)
-        kappa = damp.number("rayleigh_kappa", nonnegative=True)
-    damp.finish()
-    tab.finish()
-    return Structure(masses=masses, storey_stiffness=stiffness, storey_heights=heights,
-                     rayleigh_mu=mu, rayleigh_kappa=kappa, base_mass=base_mass)
+    """The scenario's ``[structure]``: a full nominal model (:func:`momentid.io.structure_table.parse_structure`)."""
+    return parse_structure(tab, require_model=True)
 
 
 def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, Tracking | None]:

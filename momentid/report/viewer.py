@@ -4,7 +4,10 @@ One rerun recording per experiment, with a blueprint made in code so it
 opens ready to read:
 
 - one tab per run (``/runs/<run>/...``): a 3D view of the shake table and the
-  floors as boxes moving with the recorded displacements, drawn exaggerated
+  floors as boxes moving with the recorded displacements (or, for a real
+  rig that records accelerations only, displacements reconstructed from
+  them by band-limited double integration: :func:`displacements_from_accelerations`),
+  drawn exaggerated
   by a factor stated in the view's title, on its scale bar and in the
   experiment notes; beside it the time series of that run (base
   acceleration, floor accelerations, displacements, velocities) and the
@@ -27,6 +30,7 @@ Entity paths::
     /runs/<run>/rig/base/storey<i>    columns of storey i, sheared by the storey drift
     /runs/<run>/rig/scale             arrow: a true displacement and its drawn length
     /runs/<run>/sensors/<channel>     Scalars, one per recorded channel (zdd, z, a1, q1, ...)
+    /runs/<run>/reconstructed/<c>     Scalars, z and q1..qd reconstructed from accelerations (m)
     /runs/<run>/residual/r<i>         Scalars, equation residual of floor i (N)
     /identification/parameters        markdown table of the parameters
     /identification/modes             markdown table of frequencies and damping ratios
@@ -45,11 +49,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import scipy.signal
 
 from momentid.core.series import Experiment, RunData, channel_unit
 from momentid.errors import IdentificationError, SensorDataError, ViewerError
 
-__all__ = ["Scene", "auto_exaggeration", "load_result", "check_result", "prepare", "blueprint",
+__all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
            "log_scene", "write_rrd", "show", "view", "rig_samples", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
 
 #: The timeline of every run: seconds of experiment time.
@@ -60,6 +65,13 @@ APPLICATION_ID = "momentid"
 RIG_RATE = 100.0
 _PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
             (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207), (127, 127, 127)]
+#: High-pass corner (Hz) of displacements reconstructed from accelerations.  Double
+#: integration multiplies a sensor's slowly wandering bias by 1/(2 pi f)^2: below this
+#: corner that drift swamps the motion.  0.3 Hz keeps a 1 Hz table sine (the slowest shipped
+#: trial) and every mode of a bench-top rig, and is the lower edge of the import's alignment band.
+DISPLACEMENT_HIGHPASS = 0.3
+#: Order of the zero-phase high-pass (the magnitude of a Butterworth of this order, squared).
+DISPLACEMENT_ORDER = 4
 _BASE_COLOR = (110, 110, 110)
 _TABLE_COLOR = (120, 120, 130)
 #: Time-series views of a run tab: (title, base channel, floor prefix).
@@ -98,14 +110,73 @@ class Scene:
     comparison: object = None
     residuals: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
+    reconstructed: dict = field(default_factory=dict)
 
     @property
     def heights(self) -> np.ndarray:
-        """Storey heights (m): the structure's, else 0.3 m each."""
-        s = self.experiment.structure
-        if s is not None and len(s.storey_heights) == self.experiment.storeys:
-            return np.asarray(s.storey_heights, float)
-        return np.full(self.experiment.storeys, 0.3)
+        """Storey heights (m): the structure's, else the lab statement's, else 0.3 m each."""
+        d = self.experiment.storeys
+        s, stated = self.experiment.structure, self.experiment.statement
+        for heights in (s.storey_heights if s is not None else None,
+                        stated.storey_heights if stated is not None else None):
+            if heights is not None and len(heights) == d:
+                return np.asarray(heights, float)
+        return np.full(d, 0.3)
+
+    def drawn(self, run: RunData) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Table displacement z (n,) and floor displacements q (n, d) relative to it (m) as drawn:
+        recorded, else reconstructed from the accelerations, else None."""
+        d = self.experiment.storeys
+        z_rec, q_rec = self.reconstructed.get(run.name, (None, None))
+        z = run["z"] if run.has("z") else z_rec
+        q = _floor_group(run, "q", d)
+        return z, (q if q is not None else q_rec)
+
+
+def displacements_from_accelerations(acc: np.ndarray, dt: float,
+                                     highpass: float = DISPLACEMENT_HIGHPASS) -> np.ndarray:
+    """Displacements from accelerations by band-limited double integration, without drift.
+
+    In the frequency domain ``X(f) = -A(f) / (2 pi f)^2 H(f)`` with ``H`` the
+    zero-phase high-pass ``1 / (1 + (highpass / f)^(2 n))`` (the squared
+    magnitude of an order-``n`` Butterworth, :data:`DISPLACEMENT_ORDER`), so a
+    constant or slowly drifting bias gives no ramp.  The record is zero-padded
+    to twice its length against wrap-around after removing the least-squares
+    line (a sensor's bias and its linear drift); ``nan`` samples count as 0 m/s^2.
+
+    Parameters
+    ----------
+    acc : ndarray, shape (n,) or (n, k)
+        Accelerations (m/s^2), time-first.
+    dt : float
+        Sample interval (s).
+    highpass : float
+        Corner (Hz) below which motion is dropped.
+
+    Returns
+    -------
+    ndarray, same shape as ``acc``
+        Displacements (m).
+    """
+    a = scipy.signal.detrend(np.nan_to_num(np.asarray(acc, float)), axis=0)  # bias and its linear drift
+    n = a.shape[0]
+    f = np.fft.rfftfreq(2 * n, dt)
+    gain = np.zeros_like(f)
+    f_pos = f[1:]
+    gain[1:] = -1.0 / ((2 * np.pi * f_pos) ** 2 * (1.0 + (highpass / f_pos) ** (2 * DISPLACEMENT_ORDER)))
+    spectrum = np.fft.rfft(a, n=2 * n, axis=0)
+    shape = (-1,) + (1,) * (a.ndim - 1)
+    return np.fft.irfft(spectrum * gain.reshape(shape), n=2 * n, axis=0)[:n]
+
+
+def _reconstruct(run: RunData, d: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(z, q)`` of a run that records ``zdd`` and ``a1..ad`` but no ``q``: from the accelerations."""
+    a = _floor_group(run, "a", d)
+    if a is None or not run.has("zdd") or _floor_group(run, "q", d) is not None or run.n_samples < 4:
+        return None
+    dt = float(run.time[1] - run.time[0])
+    x = displacements_from_accelerations(np.column_stack([run["zdd"], a]), dt)
+    return x[:, 0], x[:, 1:] - x[:, :1]
 
 
 def _floor_group(run: RunData, prefix: str, d: int) -> np.ndarray | None:
@@ -119,7 +190,7 @@ def _nice(x: float) -> float:
     return next(m * decade for m in (5, 2, 1) if m * decade <= x)
 
 
-def auto_exaggeration(experiment: Experiment, heights=None) -> float:
+def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict | None = None) -> float:
     """A 1-2-5 factor that draws the largest recorded displacement at about a
     fifth of the building height (never below 1).
 
@@ -128,6 +199,8 @@ def auto_exaggeration(experiment: Experiment, heights=None) -> float:
     experiment : Experiment
     heights : array_like, optional
         Storey heights (m); default 0.3 m each.
+    reconstructed : dict, optional
+        ``{run name: (z, q)}`` displacements drawn for runs that record none.
 
     Returns
     -------
@@ -137,8 +210,10 @@ def auto_exaggeration(experiment: Experiment, heights=None) -> float:
     height = float(np.sum(heights)) if heights is not None else 0.3 * d
     peak = 0.0
     for run in experiment.runs:
+        z_rec, q_rec = (reconstructed or {}).get(run.name, (None, None))
         q = _floor_group(run, "q", d)
-        z = run["z"] if run.has("z") else np.zeros(run.n_samples)
+        q = q if q is not None else q_rec
+        z = run["z"] if run.has("z") else z_rec if z_rec is not None else np.zeros(run.n_samples)
         absolute = z[:, None] + (q if q is not None else 0.0)
         peak = max(peak, float(np.max(np.abs(z), initial=0.0)), float(np.max(np.abs(absolute), initial=0.0)))
     if not math.isfinite(peak) or peak <= 0.0:
@@ -252,7 +327,12 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
     if exaggeration is not None and not (math.isfinite(exaggeration) and exaggeration > 0):
         raise ViewerError(f"exaggeration must be a positive number, got {exaggeration!r}")
     scene = Scene(experiment, exaggeration=1.0, active_run=names.index(run) if run else 0)
-    scene.exaggeration = exaggeration if exaggeration is not None else auto_exaggeration(experiment, scene.heights)
+    for r in experiment.runs:
+        got = _reconstruct(r, experiment.storeys)
+        if got is not None:
+            scene.reconstructed[r.name] = got
+    scene.exaggeration = (exaggeration if exaggeration is not None
+                          else auto_exaggeration(experiment, scene.heights, scene.reconstructed))
     if result is not None:
         check_result(result, experiment)
     else:
@@ -273,10 +353,17 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
                 scene.notes.append(f"no residual for run {r.name!r}: {exc}")
     d = experiment.storeys
     for r in experiment.runs:
+        if r.name in scene.reconstructed:
+            scene.notes.append(f"run {r.name!r} records accelerations only: the 3D view draws displacements "
+                               f"reconstructed from them (double integration above {DISPLACEMENT_HIGHPASS:g} Hz, "
+                               f"drift-free; slower motion is not drawn)")
+            continue
         if _floor_group(r, "q", d) is None:
             scene.notes.append(f"run {r.name!r} has no q1..q{d}: its floors are drawn at rest on the table")
         if not r.has("z"):
             scene.notes.append(f"run {r.name!r} has no z: its table is drawn at rest")
+    for r in experiment.runs:
+        scene.notes += [f"run {r.name!r}: {n}" for n in r.meta.get("notes", ())]
     return scene
 
 
@@ -315,6 +402,10 @@ def blueprint(scene: Scene):
                                     contents=paths, plot_legend=legend(len(paths) > 1))
                  for title, base, prefix in _SERIES_VIEWS
                  if (paths := _series_paths(scene, run, base, prefix))]
+        if run.name in scene.reconstructed:
+            views.append(rrb.TimeSeriesView(
+                name=f"{run.name}: displacements reconstructed from accelerations: table z, floors q (m)",
+                origin=f"{root}/reconstructed", plot_legend=legend(True)))
         if run.name in scene.residuals:
             views.append(rrb.TimeSeriesView(name=f"{run.name}: equation residual of the identified model (N)",
                                             origin=f"{root}/residual", plot_legend=legend(True)))
@@ -359,8 +450,8 @@ def _log_rig(rec, scene: Scene, run: RunData) -> None:
     n = idx.size
     time = rr.TimeColumn(TIMELINE, duration=run.time[idx])
     zero = np.zeros(n)
-    z = run["z"][idx] if run.has("z") else zero
-    q = _floor_group(run, "q", d)
+    z, q = scene.drawn(run)
+    z = zero if z is None else z[idx]
     q = np.zeros((n, d)) if q is None else q[idx]
     rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
     rec.log(f"{root}/base", rr.Boxes3D(centers=[[0, 0, -0.04 * w]], half_sizes=[[0.9 * w, 0.6 * w, 0.04 * w]],
@@ -483,6 +574,12 @@ def log_scene(rec, scene: Scene) -> None:
         for channel in run.channels:
             name, color = _channel_label(channel)
             _log_series(rec, f"{root}/sensors/{channel}", time, run[channel], name, color)
+        if run.name in scene.reconstructed:
+            z, q = scene.reconstructed[run.name]
+            _log_series(rec, f"{root}/reconstructed/z", time, z, "z: table (m)", _BASE_COLOR)
+            for i, column in enumerate(q.T):
+                _log_series(rec, f"{root}/reconstructed/q{i + 1}", time, column, f"q{i + 1}: floor {i + 1} (m)",
+                            _PALETTE[i % len(_PALETTE)])
         for i, column in enumerate(scene.residuals.get(run.name, np.empty((0, 0))).T):
             _log_series(rec, f"{root}/residual/r{i + 1}", time, column, f"floor {i + 1} (N)",
                         _PALETTE[i % len(_PALETTE)])

@@ -1,0 +1,333 @@
+"""Sensor files of one run -> one run on one time base: clocks, shaking axis, sign, gravity.
+
+Each sensor (an IMU on the table or on a floor) writes its own file with its
+own clock, three axes in its own frame and gravity included.  For one run
+:func:`align_sensors`
+
+1. checks the sensors share a sample interval and that no two files hold
+   the same data (the same export named twice);
+2. per sensor, finds the gravity axis (largest mean) and the shaking axis:
+   of the other two, the one with the most motion in :data:`ALIGN_BAND`,
+   below the first mode of a bench-top model, where every floor follows the
+   table (torsion and rocking live at the higher modes);
+3. aligns every floor to the table: on the shared device clock when the
+   clocks overlap and the data agree with them to :data:`CLOCK_AGREEMENT`
+   samples, otherwise from the data (the lag of the largest band-limited
+   cross-correlation with the table) and says so, with the shift; it refuses
+   when neither clock nor data can align a sensor;
+4. takes the sign of each floor from that correlation (below the first
+   mode a floor moves with the table; the table sensor's own axis is the
+   reference direction), keeps the span every sensor covers and removes
+   each series' mean over it: gravity leaking into a tilted axis plus the
+   sensor's static offset (a record that starts and ends at rest has zero
+   mean acceleration).
+
+What was done per sensor is a :class:`SensorReport`.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from scipy import signal
+
+from momentid.errors import SensorDataError
+from momentid.io.formats import SensorRecord
+
+__all__ = ["Alignment", "SensorReport", "AlignedRun", "align_sensors", "ALIGN_BAND", "CLOCK_AGREEMENT",
+           "MIN_ALIGN_CORRELATION", "STILL_RMS", "STILL_FRACTION"]
+
+#: Band (Hz) used to pick the shaking axis, estimate clock offsets and signs:
+#: above the slow drift of an IMU's offset, below the first mode of a
+#: bench-top shear model (3.7 Hz for the shipped flexible model), where each
+#: floor moves in phase with the table (within 0.3 samples at 120 Hz there).
+ALIGN_BAND = (0.3, 2.0)
+#: Order of the Butterworth band-pass (applied forward and backward: zero phase).
+FILTER_ORDER = 4
+#: Largest difference (samples) between the clock's and the data's offset of
+#: a sensor for the clock to be trusted: the floors' own phase lag in
+#: :data:`ALIGN_BAND` is a fraction of a sample, a wrong clock is off by more.
+CLOCK_AGREEMENT = 1.0
+#: Smallest |correlation| with the table, in :data:`ALIGN_BAND` at the chosen
+#: lag, for the data to align or sign a sensor: 0.96 on the shipped
+#: unsynchronised trial, 0.99 on the synchronised ones; 0.8 leaves room for a
+#: noisier rig while refusing a sensor that does not follow the table.
+MIN_ALIGN_CORRELATION = 0.8
+#: Smallest band-limited RMS (m/s^2) of the table's shaking axis for a run to
+#: count as shaken: an idle Xsens DOT shows ~0.002 m/s^2 in ALIGN_BAND, the
+#: gentlest shipped trial 0.12.
+STILL_RMS = 0.01
+#: Smallest band-limited RMS of a floor's shaking axis as a fraction of the
+#: table's: below the first mode a floor moves at least as much as the table
+#: (1.0-2.8 times on the shipped data), a loose or dead sensor far less.
+STILL_FRACTION = 0.2
+#: Largest relative difference between two sensors' sample intervals.
+STEP_TOLERANCE = 1e-3
+
+
+class Alignment(enum.Enum):
+    """How a sensor was put on the table's time base."""
+
+    REFERENCE = "reference"   # the table sensor itself
+    CLOCK = "clock"           # the shared device clock, confirmed by the data
+    DATA = "data"             # the data's cross-correlation with the table
+
+
+@dataclass(frozen=True)
+class SensorReport:
+    """What the import did with one sensor's file.
+
+    Attributes
+    ----------
+    channel : str
+        The channel it became (``"zdd"``, ``"a1"``, ...).
+    file : str
+        The file read.
+    axis : str
+        The sensor axis along the shaking direction.
+    sign : int
+        +1, or -1 for a sensor mounted reversed (relative to the table's).
+    gravity_axis : str
+        The axis carrying gravity; ``gravity`` its mean (m/s^2).
+    gravity : float
+    offset : float
+        Mean of the shaking axis (m/s^2, sensor sign) removed: tilt and bias.
+    start : float
+        Time (s) of the sensor's first sample on the table's time base.
+    alignment : Alignment
+    clock_error : float
+        Data-minus-clock offset (s) when the clocks overlap; nan otherwise.
+    correlation : float
+        Correlation with the table in :data:`ALIGN_BAND` at the chosen lag
+        (1 for the table).
+    missing : int
+        Samples missing (``nan``) in the kept span.
+    notes : tuple of str
+        Anything unusual, one sentence each.
+    """
+
+    channel: str
+    file: str
+    axis: str
+    sign: int
+    gravity_axis: str
+    gravity: float
+    offset: float
+    start: float
+    alignment: Alignment
+    clock_error: float
+    correlation: float
+    missing: int
+    notes: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict:
+        out = asdict(self)
+        out["alignment"] = self.alignment.value
+        out["notes"] = list(self.notes)
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "SensorReport":
+        fields = dict(data, alignment=Alignment(data["alignment"]), notes=tuple(data.get("notes", ())))
+        fields["clock_error"] = float("nan") if fields["clock_error"] is None else fields["clock_error"]
+        return cls(**fields)
+
+    def line(self) -> str:
+        """One line for the import report."""
+        sign = "+" if self.sign > 0 else "-"
+        how = {Alignment.REFERENCE: "the reference (time and direction)",
+               Alignment.CLOCK: f"shared clock, confirmed by the data to {self.clock_error * 1e3:+.1f} ms "
+                                f"(r = {self.correlation:+.2f})",
+               Alignment.DATA: f"aligned from the data (r = {self.correlation:+.2f})"}[self.alignment]
+        text = (f"{self.channel:>3}: axis {sign}{self.axis}, gravity {self.gravity:+.2f} m/s^2 on "
+                f"{self.gravity_axis}, offset {self.offset:+.3f} m/s^2 removed, starts at "
+                f"{self.start:+.4f} s, {how}")
+        return "; ".join([text, *self.notes])
+
+
+@dataclass(frozen=True)
+class AlignedRun:
+    """Sensors of one run on one time base.
+
+    Attributes
+    ----------
+    time : ndarray, shape (n,)
+        s, from 0 at the sensors' sample interval.
+    values : ndarray, shape (n, c)
+        Shaking-direction accelerations (m/s^2), sign-corrected, mean removed.
+    reports : tuple of SensorReport, length c
+    notes : tuple of str
+        Run-level notes (span trimmed to the common part, ...).
+    """
+
+    time: np.ndarray
+    values: np.ndarray
+    reports: tuple[SensorReport, ...]
+    notes: tuple[str, ...]
+
+
+def _filled(x: np.ndarray) -> np.ndarray:
+    """``x`` with nan samples linearly interpolated (for filtering only)."""
+    bad = np.isnan(x)
+    if not bad.any():
+        return x
+    good = np.flatnonzero(~bad)
+    if good.size < 2:
+        return np.zeros_like(x)
+    out = x.copy()
+    out[bad] = np.interp(np.flatnonzero(bad), good, x[good])
+    return out
+
+
+def _band(x: np.ndarray, step: float) -> np.ndarray:
+    """``x`` (n,) or (n, k), mean removed, band-passed to :data:`ALIGN_BAND` with zero phase."""
+    nyquist = 0.5 / step
+    if not ALIGN_BAND[1] < nyquist:
+        raise SensorDataError(f"sample rate {1 / step:.4g} Hz: expected above {2 * ALIGN_BAND[1]:g} Hz to "
+                              f"align and sign sensors in the {ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz band")
+    sos = signal.butter(FILTER_ORDER, ALIGN_BAND, btype="band", fs=1 / step, output="sos")
+    x = np.apply_along_axis(_filled, 0, x)
+    return signal.sosfiltfilt(sos, x - np.mean(x, axis=0), axis=0)
+
+
+def _lag(table: np.ndarray, floor: np.ndarray) -> tuple[float, float]:
+    """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there."""
+    xc = signal.correlate(floor, table, mode="full", method="fft")
+    lags = signal.correlation_lags(floor.size, table.size, mode="full")
+    i = int(np.argmax(np.abs(xc)))
+    frac = 0.0
+    if 0 < i < xc.size - 1:  # parabola through the peak and its neighbours
+        y0, y1, y2 = np.abs(xc[i - 1:i + 2])
+        curvature = y0 - 2 * y1 + y2
+        frac = 0.5 * (y0 - y2) / curvature if curvature < 0 else 0.0
+    norm = np.sqrt(np.sum(table ** 2) * np.sum(floor ** 2))
+    return lags[i] + frac, float(xc[i] / norm) if norm > 0 else 0.0
+
+
+def _check_distinct(records: list[SensorRecord]) -> None:
+    for i, a in enumerate(records):
+        for b in records[i + 1:]:
+            if a.acc.shape == b.acc.shape and np.array_equal(a.acc, b.acc, equal_nan=True):
+                raise SensorDataError(f"{b.path}: the same accelerations as {a.path}; expected one file "
+                                      f"per sensor (the same export named twice?)")
+
+
+def _axes(rec: SensorRecord, step: float) -> tuple[int, int, np.ndarray]:
+    """(gravity axis, shaking axis, band-limited shaking signal) of one sensor."""
+    if np.all(np.isnan(rec.acc)):
+        raise SensorDataError(f"{rec.path}: every sample is missing (nan); expected accelerations")
+    means = np.nanmean(rec.acc, axis=0)
+    g = int(np.argmax(np.abs(means)))
+    others = [k for k in range(rec.acc.shape[1]) if k != g]
+    band = _band(rec.acc[:, others], step)
+    rms = np.sqrt(np.mean(band ** 2, axis=0))
+    j = int(np.argmax(rms))
+    return g, others[j], band[:, j]
+
+
+def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> AlignedRun:
+    """Put one run's sensor files on the table's time base along the shaking direction.
+
+    Parameters
+    ----------
+    records : list of SensorRecord, length c
+        The table sensor first, then floor 1 .. d.
+    channels : tuple of str, length c
+        Their channel names (``("zdd", "a1", ..., "ad")``).
+
+    Returns
+    -------
+    AlignedRun
+
+    Raises
+    ------
+    SensorDataError
+        A one-line reason: different sample intervals, a duplicated file, a
+        sensor that does not move, clocks that do not overlap and data that
+        cannot align a sensor, no common span.
+    """
+    step = records[0].step
+    for rec in records[1:]:
+        if abs(rec.step / step - 1) > STEP_TOLERANCE:
+            raise SensorDataError(f"{rec.path}: sample interval {rec.step:.6g} s differs from "
+                                  f"{step:.6g} s of {records[0].path}; expected sensors at one rate")
+    _check_distinct(records)
+    axes = [_axes(rec, step) for rec in records]
+    table_rms = float(np.sqrt(np.mean(axes[0][2] ** 2)))
+    if table_rms < STILL_RMS:
+        raise SensorDataError(f"{records[0].path}: the table does not move ({table_rms:.3g} m/s^2 RMS in "
+                              f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz on its most active axis); expected "
+                              f"at least {STILL_RMS:g} m/s^2")
+    starts, signs, links = [0], [1], [(Alignment.REFERENCE, float("nan"), 1.0, ())]
+    for rec, ch, (g, j, band) in zip(records[1:], channels[1:], axes[1:]):
+        rms = float(np.sqrt(np.mean(band ** 2)))
+        if rms < STILL_FRACTION * table_rms:
+            raise SensorDataError(f"{rec.path}: sensor {ch} does not move ({rms:.3g} m/s^2 RMS in "
+                                  f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz, the table {table_rms:.3g}); "
+                                  f"expected a sensor fixed to the floor, moving with the table")
+        start, link = _offset(records[0], rec, ch, axes[0][2], band, step)
+        starts.append(start)
+        signs.append(1 if link[1] > 0 else -1)
+        links.append((link[0], link[2], abs(link[1]), link[3]))
+    return _assemble(records, channels, axes, starts, signs, links, step)
+
+
+def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndarray, band: np.ndarray,
+            step: float) -> tuple[int, tuple]:
+    """Start index of ``rec`` on the table's grid and (alignment, correlation, clock error s, notes)."""
+    lag, corr = _lag(table_band, band)
+    data_start = int(round(-lag))
+    overlap = min(table.time[-1], rec.time[-1]) - max(table.time[0], rec.time[0])
+    reliable = abs(corr) >= MIN_ALIGN_CORRELATION
+    if overlap > 0:  # a shared clock: trust it if the data agree
+        clock_start = int(round((rec.time[0] - table.time[0]) / step))
+        error = (-lag - clock_start) * step
+        if abs(-lag - clock_start) <= CLOCK_AGREEMENT or not reliable:
+            notes = () if reliable else (f"the data cannot confirm the clock (r = {corr:+.2f} with the table)",)
+            return clock_start, (Alignment.CLOCK, corr, error, notes)
+        note = (f"its clock disagrees with the data by {error:+.4f} s ({-lag - clock_start:+.1f} samples): "
+                f"aligned from the data")
+        return data_start, (Alignment.DATA, corr, error, (note,))
+    if not reliable:
+        raise SensorDataError(f"{rec.path}: sensor {ch}'s clock does not overlap the table's and its data "
+                              f"correlate weakly with the table (r = {corr:+.2f}, expected |r| >= "
+                              f"{MIN_ALIGN_CORRELATION}); cannot align it")
+    note = f"its clock does not overlap the table's: offset {data_start * step:+.4f} s estimated"
+    return data_start, (Alignment.DATA, corr, float("nan"), (note,))
+
+
+def _assemble(records, channels, axes, starts, signs, links, step) -> AlignedRun:
+    lo = max(starts)
+    hi = min(s + rec.acc.shape[0] for s, rec in zip(starts, records))
+    if hi - lo < 3:
+        raise SensorDataError(f"{records[0].path}: the sensors share {max(hi - lo, 0)} samples once aligned; "
+                              f"expected recordings that overlap in time")
+    notes = []
+    cut = {ch: (lo - s, s + r.acc.shape[0] - hi) for ch, s, r in zip(channels, starts, records)}
+    if any(a or b for a, b in cut.values()):
+        dropped = ", ".join(f"{ch} {a}+{b}" for ch, (a, b) in cut.items() if a or b)
+        notes.append(f"sensors cover different spans: kept the {hi - lo} samples every sensor covers "
+                     f"(dropped at start+end: {dropped})")
+    values = np.empty((hi - lo, len(records)))
+    reports = []
+    for k, (rec, ch, (g, j, _), start, sign, link) in enumerate(zip(records, channels, axes, starts,
+                                                                   signs, links)):
+        series = rec.acc[lo - start:hi - start, j]
+        offset = float(np.nanmean(series))
+        values[:, k] = sign * (series - offset)
+        missing = int(np.isnan(series).sum())
+        extra = list(link[3])
+        if sign < 0:
+            extra.append("mounted reversed: sign flipped")
+        if missing:
+            first = int(np.flatnonzero(np.isnan(series))[0])
+            extra.append(f"{missing} samples missing (nan) from t = {first * step:.3f} s: kept as nan")
+        reports.append(SensorReport(
+            channel=ch, file=str(rec.path), axis=rec.axes[j], sign=sign, gravity_axis=rec.axes[g],
+            gravity=float(np.nanmean(rec.acc[:, g])), offset=offset, start=(start - lo) * step,
+            alignment=link[0], clock_error=link[1], correlation=link[2], missing=missing,
+            notes=tuple(extra)))
+    time = np.arange(hi - lo) * step
+    return AlignedRun(time=time, values=values, reports=tuple(reports), notes=tuple(notes))

@@ -351,7 +351,7 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
     # With estimated noise levels s2 ~ 1; scale the covariance when it is not (a model misfit shows here).
     return EivFit(theta=theta, covariance=cov * max(s2, 1.0), cost=float(r @ r) / 2, n_residuals=r.size,
                   n_nuisance=problem.n_nuisance, nfev=int(result.nfev), f_max=f_max, scale=s2,
-                  capped=result.status == 0, noise_sources=tuple(sp.noise_source for sp in spectra_list))
+                  capped=result.status == 0, noise_sources=tuple(f"{sp.run}: {sp.noise_source}" for sp in spectra_list))
 
 
 def fisher_information(layout, runs, theta, sigma: dict, f_max: float) -> np.ndarray:

@@ -54,10 +54,13 @@ HIGH_BAND_TOP = 0.8
 MIN_BINS = 20
 #: Window (s) of the moving RMS that finds where the table starts to move.
 LEAD_IN_WINDOW = 0.25
-#: The table is at rest while its moving RMS stays below this fraction of the
-#: record's active level (its 90th percentile): real tables start from rest to
-#: at least 20x their sensor noise.
-LEAD_IN_QUIET_RATIO = 0.05
+#: A record has a lead-in when its first :data:`MIN_LEAD_IN` seconds are below
+#: this fraction of the record's active level (the 90th percentile of the
+#: moving RMS): a shake test drives the table to at least 5x its noise at rest.
+LEAD_IN_QUIET_RATIO = 0.2
+#: The table has started once its moving RMS exceeds this multiple of the rest
+#: level (a 0.25 s window of noise alone scatters by ~15 %, never by 3x).
+LEAD_IN_START_FACTOR = 3.0
 #: Margin (s) dropped before the detected start: the first motion builds up.
 LEAD_IN_MARGIN = 0.25
 #: A lead-in shorter than this is not used (too few bins, or no rest at all).
@@ -137,7 +140,10 @@ def quiet_lead_in(run: RunData, channel: str = "zdd") -> int:
         return 0
     moving = np.sqrt(np.convolve(x ** 2, np.ones(width) / width, mode="valid"))
     active = float(np.percentile(moving, 90))
-    loud = np.flatnonzero(moving > LEAD_IN_QUIET_RATIO * active)
+    rest = float(np.sqrt(np.mean(x[: int(MIN_LEAD_IN * run.sample_rate)] ** 2)))
+    if rest >= LEAD_IN_QUIET_RATIO * active:
+        return 0
+    loud = np.flatnonzero(moving > LEAD_IN_START_FACTOR * rest)
     if loud.size == 0:
         return 0
     end = int(loud[0]) - int(round(LEAD_IN_MARGIN * run.sample_rate))

@@ -131,6 +131,7 @@ def _report(experiment, args) -> int:
         print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
     else:
         print(text)
+    _warn(result.warnings)
     return 0
 
 
@@ -167,7 +168,39 @@ def _cmd_identify(args) -> int:
               else (compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload))))
         return 0
     experiment = read_recording(args.recording)
+    runs = args.runs.split(",") if args.runs else None
+    if args.per_run:
+        from momentid.estimation.scaled import amplitude_trend, identify_per_run
+
+        results = identify_per_run(experiment, runs)
+        trend = amplitude_trend(results) if len(results) > 1 else None
+        if args.json:
+            payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
+            print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
+        else:
+            print("\n\n".join(r.table() for r in results))
+            if trend is not None:
+                print("\n" + trend.table())
+        for r in results:
+            _warn(r.warnings, r.runs[0])
+        return 0
+    from momentid.estimation.identification import identify
+
+    if args.estimator == "modal" or (args.estimator == "auto" and not any(
+            any(r.added_mass) for r in experiment.runs if runs is None or r.name in runs)):
+        result = identify(experiment, estimator=args.estimator, runs=runs, times=args.time or None)
+        for note in experiment.notes:
+            print(f"note: {note}", file=sys.stderr)
+        print(json.dumps(json_safe(result.to_dict()), indent=2, allow_nan=False) if args.json else result.table())
+        _warn(result.warnings)
+        return 0
     return _report(experiment, args)
+
+
+def _warn(warnings, run: str | None = None) -> None:
+    """Every warning on stderr, loudly: results the data contradict are never printed silently."""
+    for w in warnings:
+        print(f"WARNING{f' ({run})' if run else ''}: {w}", file=sys.stderr)
 
 
 def _cmd_import(args) -> int:
@@ -281,8 +314,10 @@ def _cmd_plan(args) -> int:
 
 
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--estimator", choices=("auto", "equation", "difference", "eiv"), default="auto",
-                   help="'auto' (default): 'equation' for noise-free data, else 'eiv'; 'equation': every "
+    p.add_argument("--estimator", choices=("auto", "equation", "difference", "eiv", "modal"), default="auto",
+                   help="'auto' (default): 'modal' when no run adds mass, else 'equation' for noise-free "
+                        "data and 'eiv' for noisy data; 'modal': modes (and K, C from stated masses) from "
+                        "runs without added mass; 'equation': every "
                         "run on its own, all samples in one least-squares problem (method.md eq. 3); "
                         "'difference': each run minus the reference run (the paper's eq. 2), needs "
                         "identical table motion; 'eiv': errors-in-variables maximum likelihood, unbiased "
@@ -325,15 +360,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="after identification, show the recording in the rerun viewer (momentid view)")
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("identify", help="identify M, C, K, mu, kappa from a recording",
+    p = sub.add_parser("identify", help="identify M, C, K, mu, kappa (or, without added mass, the modes) "
+                                        "from a recording",
                        description="Identify M, C, K, mu and kappa from an MCAP recording alone and "
-                                   "compare with the nominal model stored in it.")
+                                   "compare with the nominal model stored in it.  When no run adds mass "
+                                   "(most real labs), identify the natural frequencies, damping ratios "
+                                   "and mode shapes with standard errors, M^-1 K and M^-1 C, and K and C "
+                                   "in SI units when the lab states its floor masses.  Every result the "
+                                   "data contradict (unstable mode, non-positive mass, capped fit) is "
+                                   "printed with a WARNING on stderr.")
     p.add_argument("recording", help="MCAP recording written by momentid (or any rig following "
                                      "docs/recording-format.md)")
     _add_identify_options(p)
     p.add_argument("--stream", action="store_true",
                    help="equation form read block by block: flat memory for records of any length "
                         "(needs a, v, q of every floor)")
+    p.add_argument("--per-run", action="store_true",
+                   help="runs without added mass: one modal fit per run, and how mode 1's frequency and "
+                        "damping change with the response amplitude across runs (a linear rig shows no trend)")
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("import", help="turn a lab's raw exports (CSV files) into a recording",

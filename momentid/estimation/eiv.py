@@ -20,8 +20,9 @@ Identification: A Frequency Domain Approach*, ch. 7 and 10):
   noise through the model); the estimate minimises ``sum_k e_k^H C_k^-1 e_k``;
 * only the bins where the structure responds are used (a few hundred
   instead of tens of thousands of samples), which makes it fast, and the
-  noise levels ``s_y``, ``s_u`` are read off the bins above that band, where
-  the recordings hold noise only.
+  noise levels ``s_y``, ``s_u`` come from :mod:`momentid.estimation.noise`
+  (stated by the lab, the quiet lead-in of a real record, or the bins above
+  that band where a high-rate recording holds noise only).
 
 With white sensor noise the estimate is consistent and efficient: its
 covariance ``(J^H C^-1 J)^-1`` is the Cramér-Rao bound of the experiment, which
@@ -42,9 +43,11 @@ import scipy.optimize
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
+from momentid.estimation.noise import estimate_noise
 from momentid.estimation.linear import discretize, force_response, frequency_response, output_matrix
 
-__all__ = ["EivFit", "fit_eiv", "Spectra", "spectra", "fisher_information", "output_groups"]
+__all__ = ["EivFit", "fit_eiv", "Spectra", "spectra", "fisher_information", "output_groups",
+           "whitened_residual", "whiten_and_project"]
 
 
 def output_groups(run: RunData, d: int) -> list[str]:
@@ -88,25 +91,22 @@ class Spectra:
     freq: np.ndarray
     forces: np.ndarray | None = None     # (d, m) floor directions of extra force signals
     F: np.ndarray | None = None          # (bins, m) DFTs of the extra force signals
-
-
-def _noise_level(X: np.ndarray, band: slice) -> np.ndarray:
-    """Noise RMS per column from bins that hold noise only (robust: median/ln 2)."""
-    power = np.abs(X[band]) ** 2
-    return np.sqrt(np.median(power, axis=0) / np.log(2.0))
+    noise_source: str = ""               # where sigma_u, sigma_y came from (see momentid.estimation.noise)
 
 
 def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, float] | None = None,
-            sigma: dict | None = None) -> Spectra:
+            sigma: dict | None = None, stated=None, groups=None) -> Spectra:
     """DFTs of a run restricted to ``(0, f_max]`` Hz, with noise levels.
 
     Noise levels come from ``sigma`` (``{'zdd': s_u, 'a1': ..}``, known
-    sensors) or from the bins in ``noise_floor`` (Hz), default from
-    ``3 f_max`` to 0.8 x Nyquist.
+    sensors) or from :func:`momentid.estimation.noise.estimate_noise`
+    (``stated`` levels, the quiet lead-in, or the bins in ``noise_floor``,
+    default from ``3 f_max`` to 0.8 x Nyquist).  ``groups`` restricts the
+    outputs (default: every complete group of :func:`output_groups`).
     """
     if not run.has("zdd"):
         raise IdentificationError(f"run {run.name!r}: the errors-in-variables fit needs the base acceleration zdd")
-    groups = output_groups(run, d)
+    groups = output_groups(run, d) if groups is None else list(groups)
     y = np.column_stack([run.group(g, d) for g in groups])
     u = run["zdd"]
     n = u.shape[0]
@@ -119,29 +119,38 @@ def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, flo
         raise IdentificationError(f"run {run.name!r}: only {k_max} frequency bins below {f_max:g} Hz: "
                                   f"the record is too short for the structure's band")
     if sigma is None:
-        lo, hi = noise_floor or (3 * f_max, 0.8 * fs / 2)
-        band = slice(int(np.searchsorted(freq, lo)), int(np.searchsorted(freq, hi)))
-        if band.stop - band.start < 20:
-            raise IdentificationError(
-                f"run {run.name!r}: no noise-only band between {lo:g} and {hi:g} Hz to estimate the sensor "
-                f"noise: expected a sample rate well above the structure's band (raise it or give the noise)")
-        # A Hann window keeps the leakage of a record that does not end at rest out of the noise band.
-        w = np.hanning(n)
-        gain = np.sqrt(np.sum(w ** 2))
-        s_u = float(_noise_level(np.fft.rfft(u * w)[:, None] / gain, band)[0])
-        s_y = _noise_level(np.fft.rfft(y * w[:, None], axis=0) / gain, band)
+        estimate = estimate_noise(run, f_max=f_max, stated=stated, noise_floor=noise_floor)
+        sigma, source = estimate.sigma, f"{estimate.source.value} ({estimate.detail})"
     else:
-        s_u = float(sigma["zdd"])
-        s_y = np.array([sigma[f"{g}{i + 1}"] for g in groups for i in range(d)], float)
+        source = "given"
+    s_u = float(sigma["zdd"])
+    s_y = np.array([sigma[f"{g}{i + 1}"] for g in groups for i in range(d)], float)
     scale = np.max(np.abs(Y[1:k_max]), axis=0)
     s_y = np.maximum(s_y, 1e-9 * scale)        # noise-free data: keep the weights finite
     s_u = max(s_u, 1e-12 * float(np.max(np.abs(U[1:k_max]))))
     k = np.arange(1, k_max)
     return Spectra(run=run.name, added_mass=np.asarray(run.added_mass, float), h=1.0 / fs, groups=groups,
-                   z=np.exp(2j * np.pi * k / n), U=U[k], Y=Y[k], sigma_u=s_u, sigma_y=s_y, freq=freq[k])
+                   z=np.exp(2j * np.pi * k / n), U=U[k], Y=Y[k], sigma_u=s_u, sigma_y=s_y, freq=freq[k],
+                   noise_source=source)
 
 
-def _whitened_residual(layout, theta, sp: Spectra, *, noise=True):
+def whitened_residual(layout, theta, sp: Spectra, *, noise=True):
+    """Noise-whitened DFT residual of one run, the transient term projected out.
+
+    Parameters
+    ----------
+    layout : momentid.estimation.identification.Layout
+    theta : ndarray, shape (p,) or (p + m,)
+        Parameters (plus force coefficients when ``sp`` carries forces).
+    sp : Spectra
+
+    Returns
+    -------
+    r : ndarray, shape (2 bins n_out,)
+        Real residual with unit variance per entry when the model and noise levels are right.
+    n_nuisance : int
+        Transient parameters projected out (they cost degrees of freedom).
+    """
     M, C, K, mu = layout.unpack(theta[:layout.p])
     dm = np.diag(sp.added_mass)
     model = discretize(M + dm, C + mu * dm, K, sp.h)
@@ -151,6 +160,29 @@ def _whitened_residual(layout, theta, sp: Spectra, *, noise=True):
     if sp.F is not None:                                      # extra force signals, coefficients theta[p:]
         Gf = force_response(M + dm, C + mu * dm, K, sp.h, sp.forces, H, sp.z, model.lam, model.V, sp.groups)
         e = e - np.einsum("mok,mk->mo", Gf, sp.F * theta[layout.p:][None, :])
+    return whiten_and_project(sp, G, T, e)
+
+
+def whiten_and_project(sp: Spectra, G: np.ndarray, T: np.ndarray, e: np.ndarray):
+    """Whiten the DFT residual ``e`` of any linear model and project its transient term out.
+
+    Parameters
+    ----------
+    sp : Spectra
+    G : ndarray, shape (bins, n_out), complex
+        The model's response to the table acceleration at each bin.
+    T : ndarray, shape (bins, n_out, n_transient), complex
+        Its transient term (unknown initial and final states).
+    e : ndarray, shape (bins, n_out), complex
+        ``Y - G U`` (and any other known inputs removed).
+
+    Returns
+    -------
+    r : ndarray, shape (2 bins n_out,)
+        Unit variance per entry when model and noise levels are right.
+    n_nuisance : int
+        Transient parameters projected out.
+    """
     # Whitening by C_k^-1/2, C_k = D + s_u^2 g g^H, D = diag(s_y^2): a rank-one update.
     inv_sd = 1.0 / sp.sigma_y
     gt = G * inv_sd[None, :]                                  # D^-1/2 g
@@ -166,7 +198,7 @@ def _whitened_residual(layout, theta, sp: Spectra, *, noise=True):
         return xt + (f[:, None] * uhat)[(...,) + (None,) * (x.ndim - 2)] * proj[:, None]
 
     ew = whiten(e)
-    Tw = whiten(T)                                            # (m, n_out, 2d)
+    Tw = whiten(T)                                            # (m, n_out, n_transient)
     # sqrt(2): real and imaginary parts of a whitened bin each get unit variance.
     r = np.sqrt(2.0) * np.concatenate([ew.real.ravel(), ew.imag.ravel()])
     B = np.sqrt(2.0) * np.concatenate([Tw.real.reshape(-1, Tw.shape[2]), Tw.imag.reshape(-1, Tw.shape[2])])
@@ -188,7 +220,7 @@ class _Problem:
         self.n_nuisance = 0
         for sp in self.spectra:
             try:
-                r, k = _whitened_residual(self.layout, theta, sp)
+                r, k = whitened_residual(self.layout, theta, sp)
             except (IdentificationError, np.linalg.LinAlgError, ValueError):
                 # A trial step into a physically impossible model (singular or defective): make it
                 # so costly the optimiser steps back.
@@ -212,6 +244,8 @@ class EivFit:
     nfev: int
     f_max: float
     scale: float      # residual variance factor (1 when the noise levels are right)
+    capped: bool = False             # the optimiser stopped at max_nfev, not at convergence
+    noise_sources: tuple = ()        # per run: where its noise levels came from
 
 
 def _scales(layout, theta):
@@ -271,7 +305,7 @@ def _rescaled_start(layout, problem, theta0):
 
 
 def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
-            max_nfev: int = 60, forces=None) -> EivFit:
+            max_nfev: int = 60, forces=None, stated=None) -> EivFit:
     """Refine ``theta0`` by the errors-in-variables ML over ``runs``.
 
     Parameters
@@ -289,8 +323,11 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
     forces : list of (directions (d, m), signals (n, m)) per run, optional
         Extra generalised floor forces of known shape (a mechanism's
         signature); their m coefficients are appended to ``theta``.
+    stated : dict, optional
+        The lab's stated noise levels per channel group (see
+        :func:`momentid.estimation.noise.estimate_noise`).
     """
-    spectra_list = [spectra(r, layout.d, f_max, sigma=sigma) for r in runs]
+    spectra_list = [spectra(r, layout.d, f_max, sigma=sigma, stated=stated) for r in runs]
     if forces is not None:
         spectra_list = [_with_forces(sp, r, f) for sp, r, f in zip(spectra_list, runs, forces)]
     problem = _Problem(layout, spectra_list)
@@ -313,7 +350,8 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
                                   "identify the unknowns") from None
     # With estimated noise levels s2 ~ 1; scale the covariance when it is not (a model misfit shows here).
     return EivFit(theta=theta, covariance=cov * max(s2, 1.0), cost=float(r @ r) / 2, n_residuals=r.size,
-                  n_nuisance=problem.n_nuisance, nfev=int(result.nfev), f_max=f_max, scale=s2)
+                  n_nuisance=problem.n_nuisance, nfev=int(result.nfev), f_max=f_max, scale=s2,
+                  capped=result.status == 0, noise_sources=tuple(f"{sp.run}: {sp.noise_source}" for sp in spectra_list))
 
 
 def fisher_information(layout, runs, theta, sigma: dict, f_max: float) -> np.ndarray:

@@ -54,7 +54,7 @@ from momentid.lab.sensors import check_run
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
            "MAX_CONDITION", "Layout"]
 
-ESTIMATORS = ("auto", "equation", "difference", "eiv")
+ESTIMATORS = ("auto", "equation", "difference", "eiv", "modal")
 #: Column-scaled condition numbers above this are refused: the data cannot
 #: separate the unknowns (too little excitation, too few runs).
 MAX_CONDITION = 1e10
@@ -150,6 +150,9 @@ class Identification:
         ignores the bias that regressor noise causes).
     notes : tuple of str
         Repairs and choices made on the way (e.g. interpolated samples).
+    warnings : tuple of str
+        What the data contradict: non-positive masses, unstable modes, a fit
+        stopped at its iteration cap.  The CLI prints each as ``WARNING:``.
     """
 
     M: np.ndarray
@@ -168,6 +171,7 @@ class Identification:
     covariance: np.ndarray | None = None
     mass: str = "diagonal"
     notes: tuple[str, ...] = field(default=())
+    warnings: tuple[str, ...] = field(default=())
 
     @property
     def storeys(self) -> int:
@@ -217,7 +221,7 @@ class Identification:
             "n_equations": self.n_equations, "n_unknowns": self.n_unknowns,
             "rank": self.rank, "condition": self.condition,
             "residual_rms": self.residual_rms, "runs": list(self.runs),
-            "notes": list(self.notes),
+            "notes": list(self.notes), "warnings": list(self.warnings),
         }
         std = self.std()
         if std is not None:
@@ -335,7 +339,7 @@ def _ideal(experiment: Experiment) -> bool:
     return bool(sensors and sensors.get("ideal"))
 
 
-def _result(layout, theta, estimator, rows, rank, condition, residual_rms, names, cov, notes):
+def _result(layout, theta, estimator, rows, rank, condition, residual_rms, names, cov, notes, capped=False):
     M, C, K, mu = layout.unpack(theta)
     kappa = _kappa(layout, theta)
     misfit = float(np.linalg.norm(C - mu * M - kappa * K) / np.linalg.norm(C))
@@ -343,32 +347,67 @@ def _result(layout, theta, estimator, rows, rank, condition, residual_rms, names
         M=M, C=C, K=K, mu=mu, kappa=kappa, damping_misfit=misfit, estimator=estimator,
         n_equations=rows, n_unknowns=layout.p, rank=rank, condition=condition,
         residual_rms=residual_rms, runs=names, covariance=cov, mass=layout.mass, notes=tuple(notes),
+        warnings=tuple(_warnings(M, C, K, capped)),
     )
 
 
+def _warnings(M, C, K, capped: bool) -> list[str]:
+    """What an identified (M, C, K) says that no passive structure can do."""
+    out = []
+    masses = np.linalg.eigvalsh(0.5 * (M + M.T))
+    if np.any(masses <= 0):
+        out.append(f"the identified mass matrix is not positive definite (eigenvalues "
+                   f"{', '.join(f'{m:.4g}' for m in masses)} kg): the data do not determine the masses")
+    else:
+        modes = modal_properties(M, C, K)
+        for i, (f, z) in enumerate(zip(modes.frequency, modes.damping_ratio)):
+            if z <= 0:
+                out.append(f"mode {i + 1} at {f:.4g} Hz is UNSTABLE (damping ratio {z:.3g} <= 0): the data "
+                           f"contradict a passive linear structure there")
+    if capped:
+        out.append("the errors-in-variables fit stopped at its evaluation cap before converging: the results "
+                   "are not a minimum of the likelihood")
+    return out
+
+
 def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "diagonal", runs=None,
-             times=None, prefilter: Prefilter | str | None = "auto") -> Identification:
-    # The work is thousands of small dense products: BLAS threads only add
-    # synchronisation (300x slower for 8x8 expm on a busy 2-core machine).
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _identify(experiment, estimator=estimator, mass=mass, runs=runs, times=times,
-                         prefilter=prefilter)
+             times=None, prefilter: Prefilter | str | None = "auto"):
+    """Identify a shear building's dynamics from shake-table runs.
 
+    What comes out depends on what the runs hold:
 
-def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
-              prefilter) -> Identification:
-    """Identify M, C, K, mu and kappa from the runs of a recording.
+    * **Runs with added mass** (the Majcher 2025 method): M, C, K, the Rayleigh
+      coefficients mu and kappa, with standard errors (:class:`Identification`).
+    * **No run adds mass** (most real labs): the table-to-floor transfer fixes
+      M^-1 K and M^-1 C only.  Natural frequencies, damping ratios and mode
+      shapes with standard errors, M^-1 K and M^-1 C; with floor masses stated
+      by the lab (``experiment.statement.masses``, or the nominal model's)
+      also K and C in SI units
+      (:class:`~momentid.estimation.scaled.ModalIdentification`, see
+      :mod:`momentid.estimation.modal`).  Accelerometers only suffice, at any
+      sample rate above ~2.4 x the top mode.
+
+    Sensor noise levels come from :func:`momentid.estimation.noise.estimate_noise`:
+    stated by the lab, the quiet seconds before the table moves, or a band above
+    the structure's response (high-rate recordings); the result says which.
 
     Parameters
     ----------
     experiment : Experiment
-        Runs with floor accelerations ``a1..ad``, the base acceleration
-        ``zdd``, and displacements/velocities where measured (missing ones
-        are reconstructed, see :mod:`momentid.estimation.reconstruct`).
-    estimator : {"auto", "equation", "difference", "eiv"}
-        See the module docstring.
+        Runs with the table acceleration ``zdd`` and floor accelerations
+        ``a1..ad`` (m/s^2), plus displacements/velocities where measured (the
+        added-mass estimators reconstruct missing ones, see
+        :mod:`momentid.estimation.reconstruct`).
+    estimator : {"auto", "equation", "difference", "eiv", "modal"}
+        ``"auto"`` (default): ``"modal"`` when no selected run adds mass;
+        otherwise ``"equation"`` for noise-free data, ``"eiv"`` for noisy data.
+        ``"equation"``: method.md eq. (3) by least squares, every run on its
+        own.  ``"difference"``: the paper's eq. (2), each run minus the
+        reference run (same table motion needed).  ``"eiv"``: errors-in-variables
+        maximum likelihood, unbiased by noise on every channel.  ``"modal"``:
+        the modal errors-in-variables fit for runs without added mass.
     mass : {"diagonal", "full"}
-        Shape of the identified mass matrix.
+        Shape of the identified mass matrix (added-mass estimators).
     runs : sequence of str, optional
         Names of the runs to use (all by default).
     times : sequence of float, optional
@@ -379,14 +418,58 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
         none for ideal (noise-free) recordings, else a zero-phase low-pass
         just above the structure's response band.
 
+    Returns
+    -------
+    Identification or ModalIdentification
+        Both have ``modes()``, ``to_dict()`` (with ``frequency_hz`` and
+        ``damping_ratio`` lists, mode 1 first), ``notes`` and ``warnings``.
+        ``warnings`` lists what the data contradict or cannot support
+        (unstable modes, non-positive masses, a fit stopped at its iteration
+        cap, poorly excited modes); the CLI prints each as ``WARNING:``.
+
     Raises
     ------
     IdentificationError
-        When the runs cannot identify the unknowns: fewer than two runs, no
-        added mass, too little excitation.
+        The runs cannot identify the unknowns: a single run with added mass,
+        too little excitation, no source for the noise level.
     SensorDataError
         A needed channel is missing, or data are unusable (gaps, clipping).
+
+    Examples
+    --------
+    >>> result = identify(experiment)                      # doctest: +SKIP
+    >>> result.modes().frequency, result.to_dict()["damping_ratio"]   # doctest: +SKIP
     """
+    # The work is thousands of small dense products: BLAS threads only add
+    # synchronisation (300x slower for 8x8 expm on a busy 2-core machine).
+    with threadpool_limits(limits=1, user_api="blas"):
+        if estimator == "modal" or (estimator == "auto" and not _adds_mass(experiment, runs)):
+            return _identify_modal(experiment, runs, times)
+        return _identify(experiment, estimator=estimator, mass=mass, runs=runs, times=times,
+                         prefilter=prefilter)
+
+
+def _adds_mass(experiment: Experiment, runs) -> bool:
+    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    return any(np.any(r.added_mass) for r in selected)
+
+
+def _identify_modal(experiment: Experiment, runs, times):
+    from momentid.estimation.scaled import identify_modal
+
+    if times is not None:
+        raise IdentificationError(f"times = {list(times)}: chosen instants work only with the equation forms, "
+                                  f"which need runs with added mass")
+    if _adds_mass(experiment, runs):
+        raise IdentificationError(
+            f"{experiment.source}: estimator 'modal' fits runs without added mass, but some selected runs "
+            f"add mass: select the reference runs (--runs) or use 'eiv'")
+    return identify_modal(experiment, runs)
+
+
+def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
+              prefilter) -> Identification:
+    """The added-mass estimators of :func:`identify`."""
     if estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator = {estimator!r}: expected one of {', '.join(ESTIMATORS)}")
     ideal = _ideal(experiment)
@@ -400,8 +483,9 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     d = selected[0].added_mass.shape[0]
     if all(not np.any(r.added_mass) for r in selected):
         raise IdentificationError(
-            f"{experiment.source}: no run among {list(names)} adds mass: the equations are "
-            f"homogeneous and fix M, C, K only up to scale; expected at least one run with added mass"
+            f"{experiment.source}: no run among {list(names)} adds mass: estimator {estimator!r} fixes M, C, K "
+            f"only up to scale; use estimator 'modal' (or 'auto'), which identifies the modes and, with stated "
+            f"masses, K and C"
         )
     notes: list[str] = []
     checked = []
@@ -438,21 +522,23 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     from momentid.estimation.eiv import fit_eiv
     f_top = float(start.modes().frequency.max())
     f_max = max(band.high or 0.0, 2.0 * f_top)
-    fit = fit_eiv(layout, selected, start.theta, f_max=f_max)
+    stated = dict(experiment.statement.noise) if experiment.statement is not None else None
+    fit = fit_eiv(layout, selected, start.theta, f_max=f_max, stated=stated)
     if fit.scale > 1.5 and experiment.structure is not None and layout.mass == "diagonal":
         # The residual sits well above the noise: the equation-form start (biased by noise, badly so
         # for accelerometer-only data) may have led to a local minimum. Try the lab's nominal model.
         s0 = experiment.structure
         nominal = layout.pack(s0.mass_matrix(), s0.damping_matrix(), s0.stiffness_matrix(), s0.rayleigh_mu)
-        second = fit_eiv(layout, selected, nominal, f_max=max(f_max, 2.0 * float(
+        second = fit_eiv(layout, selected, nominal, stated=stated, f_max=max(f_max, 2.0 * float(
             modal_properties(s0.mass_matrix(), s0.damping_matrix(), s0.stiffness_matrix()).frequency.max())))
         if second.cost < fit.cost:
             fit = second
             notes.append("errors-in-variables fit restarted from the nominal model (lower cost)")
     notes.append(f"errors-in-variables fit over 0-{f_max:.3g} Hz: {fit.nfev} model evaluations, "
                  f"residual variance factor {fit.scale:.3g} (1 = at the noise level)")
+    notes.append(f"noise levels: {'; '.join(fit.noise_sources)}")
     return _result(layout, fit.theta, "eiv", fit.n_residuals, start.rank, start.condition,
-                   float(np.sqrt(fit.scale)), names, fit.covariance, notes)
+                   float(np.sqrt(fit.scale)), names, fit.covariance, notes, capped=fit.capped)
 
 
 #: Relative equation residual below which data count as noise-free.

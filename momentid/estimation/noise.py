@@ -1,0 +1,202 @@
+"""Sensor noise levels: the one estimator every identification uses.
+
+The errors-in-variables and output-error fits weight each channel by its noise
+level, so the level must come from somewhere that holds noise only.  Three
+sources, tried in this order:
+
+``stated``
+    The lab states the noise standard deviation per channel group
+    (:class:`~momentid.core.structure.LabStatement` ``noise``).
+``quiet lead-in``
+    Real recordings start before the table moves: the seconds of rest at the
+    start hold sensor noise (and, on a floor, perhaps the last ringing of the
+    previous trial, a few spectral lines that the median over bins ignores).
+``high band``
+    A sample rate far above the structure's band (simulated 1 kHz data) leaves
+    a band between ``3 f_max`` and 0.8 x Nyquist that holds noise only.
+
+A 60-200 Hz accelerometer has no such band and rarely a stated level; its
+records have a lead-in.  Every estimate says which source it used.
+
+Levels are the standard deviation of white noise in the channel's SI unit,
+which is also the RMS of one DFT bin normalised by ``sqrt(N)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+import numpy as np
+
+from momentid.core.series import RunData
+from momentid.errors import IdentificationError
+
+__all__ = ["NoiseSource", "NoiseEstimate", "estimate_noise", "band_level", "quiet_lead_in",
+           "high_band_noise", "HIGH_BAND_FACTOR"]
+
+
+class NoiseSource(Enum):
+    """Where a noise level came from."""
+
+    STATED = "stated"
+    QUIET_LEAD_IN = "quiet lead-in"
+    HIGH_BAND = "high band"
+
+
+#: The noise-only band starts at this multiple of the top frequency fitted (the
+#: response of a lightly damped structure has fallen ~(1/3)^2 x ... below its
+#: peak there) ...
+HIGH_BAND_FACTOR = 3.0
+#: ... and ends at this fraction of Nyquist, below the anti-alias roll-off.
+HIGH_BAND_TOP = 0.8
+#: Fewer DFT bins than this give a noise level uncertain by more than ~20 %.
+MIN_BINS = 20
+#: Window (s) of the moving RMS that finds where the table starts to move.
+LEAD_IN_WINDOW = 0.25
+#: A record has a lead-in when its first :data:`MIN_LEAD_IN` seconds are below
+#: this fraction of the record's active level (the 90th percentile of the
+#: moving RMS): a shake test drives the table to at least 5x its noise at rest.
+LEAD_IN_QUIET_RATIO = 0.2
+#: The table has started once its moving RMS exceeds this multiple of the rest
+#: level (a 0.25 s window of noise alone scatters by ~15 %, never by 3x).
+LEAD_IN_START_FACTOR = 3.0
+#: Margin (s) dropped before the detected start: the first motion builds up.
+LEAD_IN_MARGIN = 0.25
+#: A lead-in shorter than this is not used (too few bins, or no rest at all).
+MIN_LEAD_IN = 1.0
+
+
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """Noise standard deviation of every channel of one run.
+
+    Attributes
+    ----------
+    sigma : dict of str to float
+        Channel name to noise standard deviation (channel's SI unit).
+    source : NoiseSource
+    detail : str
+        Human-readable: which seconds or band, e.g. ``"quiet lead-in 0-9.0 s"``.
+    """
+
+    sigma: dict
+    source: NoiseSource
+    detail: str
+
+
+def band_level(X: np.ndarray, band) -> np.ndarray:
+    """Noise RMS per column from DFT bins holding noise only.
+
+    Robust to a few spectral lines: the median of ``|X|^2`` over the bins is
+    ``sigma^2 ln 2`` for complex Gaussian noise.
+
+    Parameters
+    ----------
+    X : ndarray, shape (bins, columns), complex
+        DFT normalised so that white noise of standard deviation sigma has
+        ``E|X|^2 = sigma^2``.
+    band : slice or boolean mask over the bins
+
+    Returns
+    -------
+    ndarray, shape (columns,)
+    """
+    power = np.abs(X[band]) ** 2
+    return np.sqrt(np.median(power, axis=0) / np.log(2.0))
+
+
+def _windowed_dft(values: np.ndarray) -> np.ndarray:
+    """Hann-windowed DFT normalised to the noise standard deviation, shape (bins, columns).
+
+    The window keeps the leakage of a segment that does not end at rest out of the noise bins.
+    """
+    n = values.shape[0]
+    w = np.hanning(n)
+    return np.fft.rfft(values * w[:, None], axis=0) / np.sqrt(np.sum(w ** 2))
+
+
+def high_band_noise(run: RunData, low: float, high: float) -> dict | None:
+    """Noise level of every channel from the bins in ``[low, high)`` Hz, or None if too few."""
+    freq = np.fft.rfftfreq(run.n_samples, 1.0 / run.sample_rate)
+    band = (freq >= low) & (freq < high)
+    if np.count_nonzero(band) < MIN_BINS:
+        return None
+    level = band_level(_windowed_dft(run.values), band)
+    return dict(zip(run.channels, map(float, level)))
+
+
+def quiet_lead_in(run: RunData, channel: str = "zdd") -> int:
+    """Number of samples at the start of ``run`` before ``channel`` (the table) moves.
+
+    Returns 0 when the record has no quiet start of at least :data:`MIN_LEAD_IN`
+    seconds.
+    """
+    if not run.has(channel):
+        return 0
+    x = run[channel] - np.median(run[channel][: max(int(MIN_LEAD_IN * run.sample_rate), 1)])
+    width = max(int(round(LEAD_IN_WINDOW * run.sample_rate)), 1)
+    if run.n_samples < 4 * width:
+        return 0
+    moving = np.sqrt(np.convolve(x ** 2, np.ones(width) / width, mode="valid"))
+    active = float(np.percentile(moving, 90))
+    rest = float(np.sqrt(np.mean(x[: int(MIN_LEAD_IN * run.sample_rate)] ** 2)))
+    if rest >= LEAD_IN_QUIET_RATIO * active:
+        return 0
+    loud = np.flatnonzero(moving > LEAD_IN_START_FACTOR * rest)
+    if loud.size == 0:
+        return 0
+    end = int(loud[0]) - int(round(LEAD_IN_MARGIN * run.sample_rate))
+    return end if end >= MIN_LEAD_IN * run.sample_rate else 0
+
+
+def estimate_noise(run: RunData, *, f_max: float | None = None, stated=None,
+                   noise_floor: tuple[float, float] | None = None) -> NoiseEstimate:
+    """Noise standard deviation of every channel of ``run``, and where it came from.
+
+    Parameters
+    ----------
+    run : RunData
+    f_max : float, optional
+        Top of the band the fit uses (Hz); the high band starts at
+        :data:`HIGH_BAND_FACTOR` x ``f_max``.  Without it the high band is
+        0.25-0.45 of the sample rate.
+    stated : sequence of (group, sigma) or dict, optional
+        The lab's stated levels per channel group (``"zdd"``, ``"a"``, ...) or
+        channel (``"a1"``); used when every channel is covered.
+    noise_floor : (low, high), optional
+        Force the high band to these frequencies (Hz).
+
+    Raises
+    ------
+    IdentificationError
+        No source applies: no stated level, no quiet lead-in and no band above
+        the structure's response (say a 120 Hz record that starts shaking at once).
+    """
+    stated = dict(stated or {})
+    if stated:
+        sigma = {c: stated.get(c, stated.get(c.rstrip("0123456789"))) for c in run.channels}
+        if all(s is not None for s in sigma.values()):
+            return NoiseEstimate({c: float(s) for c, s in sigma.items()}, NoiseSource.STATED,
+                                 "stated by the lab")
+    fs = run.sample_rate
+    if noise_floor is None:
+        n_quiet = quiet_lead_in(run)
+        if n_quiet:
+            X = _windowed_dft(run.values[:n_quiet] - np.mean(run.values[:n_quiet], axis=0))
+            freq = np.fft.rfftfreq(n_quiet, 1.0 / fs)
+            # Skip the lowest bins: drift and the mean removed there are not white noise.
+            band = freq > 2.0 * fs / n_quiet
+            level = band_level(X, band)
+            return NoiseEstimate(dict(zip(run.channels, map(float, level))), NoiseSource.QUIET_LEAD_IN,
+                                 f"quiet lead-in 0-{n_quiet / fs:.3g} s")
+    low, high = noise_floor or ((HIGH_BAND_FACTOR * f_max, HIGH_BAND_TOP * fs / 2) if f_max
+                                else (0.25 * fs, 0.45 * fs))
+    sigma = high_band_noise(run, low, high)
+    if sigma is None:
+        raise IdentificationError(
+            f"run {run.name!r}: no source for the sensor noise level: no stated level (experiment.toml "
+            f"[noise]), no quiet lead-in of at least {MIN_LEAD_IN:g} s before the table moves, and fewer "
+            f"than {MIN_BINS} DFT bins between {low:.3g} and {high:.3g} Hz at {fs:.4g} Hz sampling: "
+            f"expected one of them (record a few seconds of rest before shaking)")
+    return NoiseEstimate(sigma, NoiseSource.HIGH_BAND, f"high band {low:.3g}-{high:.3g} Hz")

@@ -1,0 +1,431 @@
+"""What runs without added mass identify: modes always, K and C when the lab states its masses.
+
+:func:`identify_modal` fits the modal model of :mod:`momentid.estimation.modal`
+to every selected run at once (shared modes, per-run sensor gains and clock
+offsets); :func:`identify_per_run` fits each run on its own, and
+:func:`amplitude_trend` says how the first mode changes with the response
+amplitude across runs (a linear rig shows no trend).
+
+From the identified modes (frequencies ``w``, damping ratios ``zeta``, shapes
+``Phi`` scaled to 1 at the top floor):
+
+* mass-normalised: ``M^-1 K = Phi diag(w^2) Phi^-1`` and
+  ``M^-1 C = Phi diag(2 zeta w) Phi^-1`` (no masses needed);
+* with stated masses M: the M-orthonormal set nearest to the M-normalised
+  shapes, ``Psi`` (polar decomposition of ``M^1/2 Phi``), gives the symmetric
+  ``K = M^1/2 Psi diag(w^2) Psi^T M^1/2`` and ``C`` likewise, whose modes are
+  exactly the identified frequencies and damping ratios.  How far the shapes
+  are from M-orthogonal is reported: it checks the stated masses.
+
+Standard errors of every derived quantity: delta method from the fit's covariance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from momentid.core.analytic import Modes
+from momentid.core.series import Experiment
+from momentid.errors import IdentificationError
+from momentid.estimation.modal import ModalModel, fit_modal
+from momentid.estimation.noise import estimate_noise, quiet_lead_in
+from momentid.estimation.peaks import pick_resonances, response_amplitude
+
+__all__ = ["ModalIdentification", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend"]
+
+#: A mode whose frequency is uncertain by more than this fraction, or whose
+#: damping ratio by more than half of itself, is reported as poorly determined.
+POOR_FREQUENCY = 0.01
+POOR_DAMPING = 0.5
+#: A floor sensor whose fitted gain differs from the table sensor's by more than
+#: this fraction is suspect (a real accelerometer is calibrated to ~1-2 %).
+SUSPECT_GAIN = 0.05
+#: A residual variance factor above this says the linear model does not explain
+#: the data to the noise level (standard errors are inflated by its square root).
+MISFIT_NOTE = 2.0
+#: Shapes further than this from M-orthogonal (largest off-diagonal of the
+#: normalised modal mass matrix) contradict the stated masses.
+ORTHOGONALITY_WARNING = 0.2
+#: Relative step of the delta method's central differences.
+DELTA_STEP = 1e-6
+
+
+@dataclass(frozen=True)
+class ModalIdentification:
+    """Result of :func:`identify_modal` (runs without added mass).
+
+    Attributes
+    ----------
+    frequency, frequency_std : ndarray, shape (d,)
+        Undamped natural frequencies (Hz), mode 1 first, and standard errors.
+    damping_ratio, damping_ratio_std : ndarray, shape (d,)
+        Modal damping ratios (1) and standard errors.
+    shapes, shapes_std : ndarray, shape (d, d)
+        Mode shapes, one per column, 1 at the top floor; standard errors.
+    stiffness_over_mass, stiffness_over_mass_std : ndarray, shape (d, d)
+        ``M^-1 K`` (1/s^2) and standard errors.
+    damping_over_mass, damping_over_mass_std : ndarray, shape (d, d)
+        ``M^-1 C`` (1/s) and standard errors.
+    masses : tuple of float or None
+        The floor masses used to scale (kg), None: results are mass-normalised.
+    M, K, C, K_std, C_std : ndarray, shape (d, d), or None
+        Mass (kg), stiffness (N/m), damping (N s/m) from the stated masses.
+    sensor_gain, sensor_gain_std, sensor_offset, sensor_offset_std : ndarray, shape (n_runs, d)
+        Each floor sensor's gain (1) and clock offset (s, positive: lags) relative to the table's.
+    amplitude : ndarray, shape (n_runs,)
+        RMS top-floor acceleration relative to the table after the lead-in (m/s^2).
+    residual_rms : float
+        RMS of the whitened residual (1: the model explains the data to the noise level).
+    runs : tuple of str
+    noise : tuple of str
+        Per run, where its noise levels came from.
+    f_max : float
+        Top of the fitted band (Hz).
+    nfev : int
+        Model evaluations of the fit.
+    notes : tuple of str
+        Choices and findings.
+    warnings : tuple of str
+        Results the data contradict or cannot support: unstable modes, capped fits,
+        poorly determined modes, suspect sensors.  Never empty without reason;
+        always shown by the CLI.
+    estimator : str
+        ``"modal-eiv"``.
+    """
+
+    frequency: np.ndarray
+    frequency_std: np.ndarray
+    damping_ratio: np.ndarray
+    damping_ratio_std: np.ndarray
+    shapes: np.ndarray
+    shapes_std: np.ndarray
+    stiffness_over_mass: np.ndarray
+    stiffness_over_mass_std: np.ndarray
+    damping_over_mass: np.ndarray
+    damping_over_mass_std: np.ndarray
+    masses: tuple | None
+    M: np.ndarray | None
+    K: np.ndarray | None
+    C: np.ndarray | None
+    K_std: np.ndarray | None
+    C_std: np.ndarray | None
+    sensor_gain: np.ndarray
+    sensor_gain_std: np.ndarray
+    sensor_offset: np.ndarray
+    sensor_offset_std: np.ndarray
+    amplitude: np.ndarray
+    residual_rms: float
+    runs: tuple
+    noise: tuple
+    f_max: float
+    nfev: int
+    notes: tuple = ()
+    warnings: tuple = ()
+    estimator: str = "modal-eiv"
+
+    @property
+    def storeys(self) -> int:
+        return self.frequency.shape[0]
+
+    def modes(self) -> Modes:
+        """Frequencies, damping ratios and shapes as :class:`~momentid.core.analytic.Modes`."""
+        damped = self.frequency * np.sqrt(np.clip(1 - self.damping_ratio ** 2, 0.0, None))
+        return Modes(frequency=self.frequency, damping_ratio=self.damping_ratio, damped_frequency=damped,
+                     shapes=self.shapes)
+
+    def to_dict(self) -> dict:
+        """JSON-friendly dict in SI units; ``frequency_hz`` and ``damping_ratio`` lists, mode 1 first."""
+        def lst(x):
+            return None if x is None else np.asarray(x).tolist()
+        return {
+            "estimator": self.estimator, "runs": list(self.runs),
+            "frequency_hz": lst(self.frequency), "damping_ratio": lst(self.damping_ratio),
+            "mode_shapes": lst(self.shapes),
+            "std": {"frequency_hz": lst(self.frequency_std), "damping_ratio": lst(self.damping_ratio_std),
+                    "mode_shapes": lst(self.shapes_std), "M^-1 K": lst(self.stiffness_over_mass_std),
+                    "M^-1 C": lst(self.damping_over_mass_std), "K": lst(self.K_std), "C": lst(self.C_std),
+                    "sensor_gain": lst(self.sensor_gain_std), "sensor_offset_s": lst(self.sensor_offset_std)},
+            "M^-1 K": lst(self.stiffness_over_mass), "M^-1 C": lst(self.damping_over_mass),
+            "masses": None if self.masses is None else list(self.masses),
+            "M": lst(self.M), "K": lst(self.K), "C": lst(self.C),
+            "sensor_gain": lst(self.sensor_gain), "sensor_offset_s": lst(self.sensor_offset),
+            "amplitude_m_s2": lst(self.amplitude), "residual_rms": self.residual_rms,
+            "noise": list(self.noise), "f_max_hz": self.f_max, "nfev": self.nfev,
+            "notes": list(self.notes), "warnings": list(self.warnings),
+        }
+
+    def table(self) -> str:
+        """Plain-text report: modes with standard errors, matrices, sensors, warnings."""
+        lines = [f"runs: {', '.join(self.runs)} (no added mass: modal fit, {self.estimator})",
+                 "mode  frequency (Hz)        damping ratio (%)     shape (floor 1..top)"]
+        for i in range(self.storeys):
+            shape = " ".join(f"{x:+.3f}" for x in self.shapes[:, i])
+            lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  "
+                         f"{100 * self.damping_ratio[i]:7.3f} +- {100 * self.damping_ratio_std[i]:.3f}    {shape}")
+        if self.K is not None:
+            lines.append(f"masses (stated, kg): {list(self.masses)}")
+            lines.append("K (N/m):\n" + _matrix(self.K, self.K_std))
+            lines.append("C (N s/m):\n" + _matrix(self.C, self.C_std))
+        else:
+            lines.append("no masses stated: mass-normalised results")
+            lines.append("M^-1 K (1/s^2):\n" + _matrix(self.stiffness_over_mass, self.stiffness_over_mass_std))
+            lines.append("M^-1 C (1/s):\n" + _matrix(self.damping_over_mass, self.damping_over_mass_std))
+        for r, name in enumerate(self.runs):
+            gains = " ".join(f"{g:.4f}" for g in self.sensor_gain[r])
+            offsets = " ".join(f"{1e3 * t:+.2f}" for t in self.sensor_offset[r])
+            lines.append(f"run {name}: RMS top-floor response {self.amplitude[r]:.3g} m/s^2; floor sensors vs "
+                         f"table: gain {gains}, clock offset (ms) {offsets}")
+        lines.append(f"residual RMS {self.residual_rms:.3g} x noise; fitted 0-{self.f_max:.3g} Hz")
+        lines += [f"note: {n}" for n in self.notes]
+        lines += [f"WARNING: {w}" for w in self.warnings]
+        return "\n".join(lines)
+
+
+def _matrix(X, S) -> str:
+    return "\n".join("  " + "  ".join(f"{x:11.4g} +- {s:<9.2g}" for x, s in zip(row, srow))
+                     for row, srow in zip(X, S))
+
+
+def _masses(experiment: Experiment, notes: list):
+    statement = experiment.statement
+    if statement is not None and statement.masses is not None:
+        return tuple(float(m) for m in statement.masses)
+    if experiment.structure is not None:
+        notes.append("masses from the recording's nominal model (no lab statement)")
+        return tuple(experiment.structure.masses)
+    return None
+
+
+def _derived(model: ModalModel, theta, masses) -> dict:
+    """Every reported quantity of the modal part of ``theta``."""
+    w, z, R = model.omega(theta), model.zeta(theta), model.residues(theta)
+    order = np.argsort(w)
+    w, z, R = w[order], z[order], R[order]
+    Phi = R.T / R[:, -1][None, :]                       # columns: mode shapes, 1 at the top floor
+    Phi_inv = np.linalg.inv(Phi)
+    out = {"frequency": w / (2 * np.pi), "damping_ratio": z, "shapes": Phi,
+           "stiffness_over_mass": Phi @ np.diag(w ** 2) @ Phi_inv,
+           "damping_over_mass": Phi @ np.diag(2 * z * w) @ Phi_inv}
+    if masses is not None:
+        m_half = np.sqrt(np.asarray(masses, float))
+        Phi_n = Phi / np.sqrt(np.sum(masses * Phi.T ** 2, axis=1))[None, :]
+        U, _, Vt = np.linalg.svd(m_half[:, None] * Phi_n)
+        Psi = U @ Vt                                     # nearest orthonormal set (polar decomposition)
+        S = m_half[:, None] * Psi
+        out["K"] = S @ np.diag(w ** 2) @ S.T
+        out["C"] = S @ np.diag(2 * z * w) @ S.T
+        gram = Phi_n.T @ np.diag(masses) @ Phi_n
+        out["orthogonality"] = float(np.max(np.abs(gram - np.eye(model.d))))
+    return out
+
+
+def _delta(model: ModalModel, theta, cov, masses) -> dict:
+    """Standard errors of :func:`_derived` by central differences over the modal parameters."""
+    base = _derived(model, theta, masses)
+    keys = [k for k in base if k != "orthogonality"]
+    n = model.n_modal
+    grads = {k: [] for k in keys}
+    for i in range(n):
+        step = DELTA_STEP * max(abs(theta[i]), 1.0)
+        tp, tm = theta.copy(), theta.copy()
+        tp[i] += step
+        tm[i] -= step
+        up, down = _derived(model, tp, masses), _derived(model, tm, masses)
+        for k in keys:
+            grads[k].append(((up[k] - down[k]) / (2 * step)).ravel())
+    c = cov[:n, :n]
+    return {k: np.sqrt(np.clip(np.einsum("ip,ij,jp->p", np.array(g), c, np.array(g)), 0, None)).reshape(
+        np.shape(base[k])) for k, g in grads.items()}
+
+
+def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
+    """Identify modes (and K, C with stated masses) from runs without added mass.
+
+    Parameters
+    ----------
+    experiment : Experiment
+        Runs with ``zdd`` and ``a1..ad`` (m/s^2, absolute, one time base each);
+        ``experiment.statement`` may state masses and noise levels.
+    runs : sequence of str, optional
+        Run names (all by default); fitted together with shared modes.
+
+    Returns
+    -------
+    ModalIdentification
+
+    Raises
+    ------
+    IdentificationError
+        No noise source, fewer resonances than storeys, or a singular fit.
+    """
+    from momentid.lab.sensors import check_run
+
+    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    if not selected:
+        raise IdentificationError(f"{experiment.source}: no runs to identify from")
+    d = experiment.storeys
+    notes: list[str] = []
+    checked = []
+    for run in selected:
+        run, repairs = check_run(run, experiment.source)
+        notes.extend(repairs)
+        checked.append(run)
+    selected = tuple(checked)
+    masses = _masses(experiment, notes)
+    stated = dict(experiment.statement.noise) if experiment.statement is not None else None
+    noise0 = estimate_noise(selected[0], stated=stated)       # the table's level, for the peak score
+    picked = pick_resonances(selected, d, noise0.sigma["zdd"])
+    model = ModalModel(d, len(selected))
+    fit = fit_modal(model, selected, picked, masses=masses, stated=stated)
+    values = _derived(model, fit.theta, None if masses is None else np.asarray(masses, float))
+    std = _delta(model, fit.theta, fit.covariance, None if masses is None else np.asarray(masses, float))
+    sd_all = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
+    gain = np.array([model.sensors(fit.theta, r)[0] for r in range(len(selected))])
+    offset = np.array([model.sensors(fit.theta, r)[1] for r in range(len(selected))])
+    gain_std = np.array([gain[r] * sd_all[model.n_modal + 2 * d * r:model.n_modal + 2 * d * r + d]
+                         for r in range(len(selected))])
+    offset_std = np.array([sd_all[model.n_modal + 2 * d * r + d:model.n_modal + 2 * d * (r + 1)]
+                           for r in range(len(selected))])
+    amplitude = np.array([response_amplitude(r, d, quiet_lead_in(r)) for r in selected])
+    warnings = _warnings(values, std, fit, selected, gain, masses)
+    notes += _notes(fit, selected, offset, values, len(selected))
+    has_k = masses is not None
+    return ModalIdentification(
+        frequency=values["frequency"], frequency_std=std["frequency"],
+        damping_ratio=values["damping_ratio"], damping_ratio_std=std["damping_ratio"],
+        shapes=values["shapes"], shapes_std=std["shapes"],
+        stiffness_over_mass=values["stiffness_over_mass"], stiffness_over_mass_std=std["stiffness_over_mass"],
+        damping_over_mass=values["damping_over_mass"], damping_over_mass_std=std["damping_over_mass"],
+        masses=masses, M=np.diag(masses) if has_k else None, K=values.get("K"), C=values.get("C"),
+        K_std=std.get("K"), C_std=std.get("C"),
+        sensor_gain=gain, sensor_gain_std=gain_std, sensor_offset=offset, sensor_offset_std=offset_std,
+        amplitude=amplitude, residual_rms=float(np.sqrt(fit.scale)), runs=tuple(r.name for r in selected),
+        noise=fit.noise_sources, f_max=fit.f_max, nfev=fit.nfev, notes=tuple(notes), warnings=tuple(warnings),
+    )
+
+
+def _warnings(values, std, fit, runs, gain, masses) -> list[str]:
+    out = []
+    f, z = values["frequency"], values["damping_ratio"]
+    for i in range(f.size):
+        if z[i] <= 0:
+            out.append(f"mode {i + 1} at {f[i]:.4g} Hz is UNSTABLE (damping ratio {z[i]:.3g} <= 0): the data "
+                       f"contradict a passive linear structure there (sensor fault, or the table barely "
+                       f"excites this mode); do not use its damping")
+        elif std["frequency"][i] > POOR_FREQUENCY * f[i] or std["damping_ratio"][i] > POOR_DAMPING * z[i]:
+            out.append(f"mode {i + 1} at {f[i]:.4g} Hz is poorly determined (frequency +- "
+                       f"{std['frequency'][i]:.2g} Hz, damping ratio {z[i]:.3g} +- {std['damping_ratio'][i]:.2g}): "
+                       f"the runs excite it too little")
+    if fit.capped:
+        out.append(f"the fit stopped at its evaluation cap ({fit.nfev}) before converging: the results are "
+                   f"not a minimum of the likelihood")
+    for r, run in enumerate(runs):
+        bad = np.flatnonzero(np.abs(gain[r] - 1) > SUSPECT_GAIN)
+        if bad.size:
+            out.append(f"run {run.name!r}: floor sensor(s) {', '.join(f'a{j + 1}' for j in bad)} read "
+                       f"{', '.join(f'{gain[r][j]:.3f}' for j in bad)} x the table sensor at low frequency: "
+                       f"expected within {SUSPECT_GAIN:.0%} (gain, mounting angle or a loose sensor?)")
+    if masses is not None and values["orthogonality"] > ORTHOGONALITY_WARNING:
+        out.append(f"the mode shapes are far from orthogonal with the stated masses {list(masses)} (largest "
+                   f"off-diagonal modal mass {values['orthogonality']:.2f}, expected below "
+                   f"{ORTHOGONALITY_WARNING}): K and C are the nearest consistent matrices, check the masses")
+    return out
+
+
+def _notes(fit, runs, offset, values, n_runs) -> list[str]:
+    out = [f"noise levels: {'; '.join(fit.noise_sources)}",
+           "damping model: classical modal damping (one ratio per mode); C from the modes"]
+    if fit.scale > MISFIT_NOTE:
+        out.append(f"the linear model explains the data to {np.sqrt(fit.scale):.3g} x the noise level only "
+                   f"(a rig that is not quite linear, or more than {values['frequency'].size} modes): standard "
+                   f"errors are inflated by that factor" + ("; try --per-run" if n_runs > 1 else ""))
+    for r, run in enumerate(runs):
+        h = 1.0 / run.sample_rate
+        late = np.flatnonzero(np.abs(offset[r]) > 0.5 * h)
+        for j in late:
+            out.append(f"run {run.name!r}: sensor a{j + 1} is {1e3 * offset[r][j]:+.2f} ms "
+                       f"({offset[r][j] / h:+.2f} samples) off the table sensor's clock (fitted and removed)")
+    return out
+
+
+@dataclass(frozen=True)
+class AmplitudeTrend:
+    """How the first mode changes with response amplitude across runs (:func:`amplitude_trend`).
+
+    Attributes
+    ----------
+    results : tuple of ModalIdentification
+        One per run, sorted by amplitude.
+    frequency_slope, frequency_slope_std : float
+        Weighted least-squares slope of mode 1's frequency over amplitude (Hz per m/s^2).
+    damping_slope, damping_slope_std : float
+        Same for its damping ratio (1 per m/s^2).
+    """
+
+    results: tuple
+    frequency_slope: float
+    frequency_slope_std: float
+    damping_slope: float
+    damping_slope_std: float
+
+    def table(self) -> str:
+        lines = ["run                 RMS response (m/s^2)  mode-1 frequency (Hz)  mode-1 damping (%)"]
+        for r in self.results:
+            lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {r.frequency[0]:8.4f} +- "
+                         f"{r.frequency_std[0]:.4f}   {100 * r.damping_ratio[0]:6.3f} +- "
+                         f"{100 * r.damping_ratio_std[0]:.3f}")
+        lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
+                     f"damping ratio {100 * self.damping_slope:+.3g} +- {100 * self.damping_slope_std:.2g} % per m/s^2"
+                     f" ({self._verdict()})")
+        return "\n".join(lines)
+
+    def _verdict(self) -> str:
+        softer = self.frequency_slope < -2 * self.frequency_slope_std
+        damped = self.damping_slope > 2 * self.damping_slope_std
+        if softer or damped:
+            return ("not linear: larger responses are " + " and ".join(
+                w for w, flag in (("softer", softer), ("more damped", damped)) if flag))
+        return "no trend beyond two standard errors"
+
+    def to_dict(self) -> dict:
+        return {"runs": [r.to_dict() for r in self.results],
+                "frequency_slope_hz_per_m_s2": self.frequency_slope,
+                "frequency_slope_std": self.frequency_slope_std,
+                "damping_slope_per_m_s2": self.damping_slope, "damping_slope_std": self.damping_slope_std}
+
+
+def identify_per_run(experiment: Experiment, runs=None) -> tuple:
+    """:func:`identify_modal` on every run on its own; tuple of results in run order."""
+    names = [r.name for r in experiment.runs] if runs is None else list(runs)
+    return tuple(identify_modal(experiment, runs=[n]) for n in names)
+
+
+def _slope(x, y, s):
+    """Weighted least-squares slope of ``y`` on ``x`` (weights 1/s^2) and its standard error."""
+    A = np.column_stack([np.ones_like(x), x]) / s[:, None]
+    cov = np.linalg.inv(A.T @ A)
+    coef = cov @ A.T @ (y / s)
+    resid = (y - coef[0] - coef[1] * x) / s
+    scale = max(float(resid @ resid) / max(x.size - 2, 1), 1.0)   # scatter beyond the errors widens it
+    return float(coef[1]), float(np.sqrt(cov[1, 1] * scale))
+
+
+def amplitude_trend(results) -> AmplitudeTrend:
+    """Mode 1's frequency and damping ratio against response amplitude over per-run results.
+
+    Raises
+    ------
+    IdentificationError
+        Fewer than two runs.
+    """
+    results = tuple(sorted(results, key=lambda r: float(r.amplitude[0])))
+    if len(results) < 2:
+        raise IdentificationError(f"{len(results)} run(s): an amplitude trend needs at least two")
+    x = np.array([r.amplitude[0] for r in results])
+    fs, fstd = (np.array([getattr(r, k)[0] for r in results]) for k in ("frequency", "frequency_std"))
+    zs, zstd = (np.array([getattr(r, k)[0] for r in results]) for k in ("damping_ratio", "damping_ratio_std"))
+    f_slope, f_std = _slope(x, fs, np.maximum(fstd, 1e-12))
+    z_slope, z_std = _slope(x, zs, np.maximum(zstd, 1e-12))
+    return AmplitudeTrend(results, f_slope, f_std, z_slope, z_std)

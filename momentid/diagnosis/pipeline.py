@@ -33,11 +33,12 @@ from momentid.diagnosis.selection import choose, screen, select
 from momentid.diagnosis.sensor_check import check_sensors
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 
-__all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "MECHANISM_IDS", "EXCESS", "EXPLAINED",
-           "ACCEPTED"]
+__all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "verdicts", "EXCESS", "EXPLAINED", "ACCEPTED"]
 
-#: Every verdict :func:`diagnose` can give: ``none``, ``unexplained`` or a mechanism of the library.
-MECHANISM_IDS = ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library())
+
+def verdicts() -> tuple[str, ...]:
+    """Every verdict :func:`diagnose` can give: ``none``, ``unexplained`` or a mechanism of the library."""
+    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library())
 
 #: Candidates listed in the report, best first.
 REPORTED_CANDIDATES = 8

@@ -50,14 +50,15 @@ def _inertia(mass: float, half: tuple[float, float, float]) -> list[float]:
 #: acceleration by about its inverse (1e-10 relative, below RK4's error).
 TABLE_INERTIA_RATIO = 1e10
 
-#: Storey forces the MJCF cannot express: the simulator applies them in a control callback
-#: (the registered kinds that declare ``callback``).
+#: Storey forces the MJCF cannot express, which the simulator applies in a control callback: the
+#: kinds registered when this module was imported that declare ``callback`` (for messages; code asks
+#: the registry, :func:`needs_callback`, so that a kind added later counts too).
 CALLBACK_MECHANISMS = tuple(kind.name for kind in registry.REGISTRY.values() if kind.callback)
 
 
 def needs_callback(mechanisms) -> bool:
     """True when ``mechanisms`` include storey forces the MJCF cannot express."""
-    return any(m.type in CALLBACK_MECHANISMS for m in mechanisms)
+    return any(registry.get(m.type).callback for m in mechanisms)
 
 
 def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,

@@ -99,11 +99,6 @@ class BandLimitedNoise:
 Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise]
 
 
-#: Physical mechanisms a rig may carry beyond the linear Rayleigh-damped shear model: the rig kinds of
-#: the mechanism registry (:mod:`momentid.mechanisms`), each with its parameters, units and bounds.
-MECHANISMS = {kind.name: kind for kind in mechanisms.rig_kinds()}
-
-
 @dataclass(frozen=True)
 class Tracking:
     """Run-to-run table error: the servo never repeats a motion exactly.
@@ -370,7 +365,8 @@ def _parse_truth(tab: Table, storeys: int) -> tuple[Mechanism, ...]:
         return ()
     out = []
     for m in tab.tables("mechanisms"):
-        kind = MECHANISMS[m.string("type", choices=tuple(MECHANISMS))]
+        # the rig kinds of the mechanism registry, each with its parameters, units and bounds
+        kind = mechanisms.get(m.string("type", choices=tuple(k.name for k in mechanisms.rig_kinds())))
         where = kind.target.value
         loc = m.integer(where, minimum=1)
         if loc > storeys:

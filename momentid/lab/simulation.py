@@ -75,7 +75,7 @@ class _StoreyForces:
     :func:`~momentid.lab.rig.storey_forces` applies to arrays)."""
 
     def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
-        self.mechanisms = tuple(m for m in mechanisms if m.type in rig.CALLBACK_MECHANISMS)
+        self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
         dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
         self.floor_dofs = np.array(dofs)

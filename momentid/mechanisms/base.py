@@ -70,7 +70,8 @@ class Refit(enum.Enum):
 class Param:
     """One parameter of a mechanism: name, SI unit, meaning and physical bounds.
 
-    ``low`` / ``high`` bound the value; ``low_open`` excludes ``low`` itself (``> low``).
+    ``low`` / ``high`` bound the value; ``low_open`` excludes ``low`` itself (``> low``);
+    ``example`` is a typical value on the paper's rig (docs, tests).
     """
 
     name: str
@@ -79,6 +80,7 @@ class Param:
     low: float = -math.inf
     high: float = math.inf
     low_open: bool = False
+    example: float = 1.0
 
     @property
     def bounded(self) -> bool:

@@ -10,7 +10,7 @@ from momentid.mechanisms.registry import register
 class CubicStiffness(MechanismKind):
     name = "cubic_stiffness"
     target = Target.STOREY
-    params = (Param("k3", "N/m^3", "cubic stiffness, + hardening / - softening"),)
+    params = (Param("k3", "N/m^3", "cubic stiffness, + hardening / - softening", example=3.5e7),)
     fitted = params[0]
     callback = True
     refit = Refit.RESIMULATE

@@ -10,7 +10,7 @@ from momentid.mechanisms.registry import register
 class ExtraDamper(MechanismKind):
     name = "extra_damper"
     target = Target.STOREY
-    params = (Param("c", "N*s/m", "viscous damper across the storey", low=0.0, low_open=True),)
+    params = (Param("c", "N*s/m", "viscous damper across the storey", low=0.0, low_open=True, example=3.0),)
     fitted = params[0]
     refit = Refit.DAMPING_PATTERN
     summary = "c v across a storey (v: drift velocity), in the storey tendon's damping"

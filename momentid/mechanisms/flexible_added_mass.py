@@ -24,8 +24,8 @@ class FlexibleAddedMass(MechanismKind):
     name = "flexible_added_mass"
     target = Target.FLOOR
     params = (Param("frequency", "Hz", "natural frequency of the added mass on its attachment",
-                    low=0.0, low_open=True),
-              Param("damping_ratio", "1", "damping ratio of the attachment", low=0.0))
+                    low=0.0, low_open=True, example=6.0),
+              Param("damping_ratio", "1", "damping ratio of the attachment", low=0.0, example=0.05))
     fitted = Param("amplitude", "1", "share of the attachment's relative acceleration in the floor force")
     refit = Refit.ATTACHMENT
     summary = "the added mass on a floor on a spring and damper of its own"

@@ -21,7 +21,8 @@ from momentid.mechanisms.registry import register
 class PDelta(MechanismKind):
     name = "p_delta"
     target = Target.STOREY
-    params = (Param("factor", "1", "share of the full gravity P-Delta of the weight above", low=0.0),)
+    params = (Param("factor", "1", "share of the full gravity P-Delta of the weight above", low=0.0,
+                    example=1.0),)
     fitted = Param("weight_per_height", "1/m", "factor / storey height", low=0.0, low_open=True)
     refit = Refit.RESIMULATE
     summary = "-factor g (mass above) / h x drift across a storey"

@@ -12,7 +12,7 @@ from momentid.mechanisms.registry import register
 class SensorBias(MechanismKind):
     name = "sensor_bias"
     target = Target.CHANNEL
-    fitted = Param("bias", "channel unit", "constant offset of the reading")
+    fitted = Param("bias", "channel unit", "constant offset of the reading", example=0.01)
     refit = Refit.CORRECT_DATA
     summary = "x(t) + bias recorded as x(t)"
 

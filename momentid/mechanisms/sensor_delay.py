@@ -12,7 +12,7 @@ from momentid.mechanisms.registry import register
 class SensorDelay(MechanismKind):
     name = "sensor_delay"
     target = Target.CHANNEL
-    fitted = Param("delay", "s", "how late the channel reads (+ = late)")
+    fitted = Param("delay", "s", "how late the channel reads (+ = late)", example=0.01)
     refit = Refit.CORRECT_DATA
     kinematic = True
     summary = "x(t - delay) recorded as x(t)"

@@ -22,7 +22,7 @@ def _from_replay(c, e):
 class SensorGain(MechanismKind):
     name = "sensor_gain"
     target = Target.CHANNEL
-    fitted = Param("gain", "1", "reading / true signal")
+    fitted = Param("gain", "1", "reading / true signal", example=1.05)
     refit = Refit.CORRECT_DATA
     kinematic = True
     summary = "gain x(t) recorded as x(t)"

@@ -14,8 +14,10 @@ from momentid.mechanisms.registry import register
 class StiffnessLoss(MechanismKind):
     name = "stiffness_loss"
     target = Target.STOREY
-    params = (Param("fraction", "1", "share of the storey stiffness lost", low=0.0, high=1.0, low_open=True),
-              Param("time", "s", "when the loss starts, from the start of each run", low=0.0))
+    params = (Param("fraction", "1", "share of the storey stiffness lost", low=0.0, high=1.0, low_open=True,
+                    example=0.4),
+              Param("time", "s", "when the loss starts, from the start of each run", low=0.0,
+                    example=5.0))
     truth_only = True
     callback = True
     needs_stiffness = True

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from momentid.core.series import RunData
+from momentid.diagnosis.thresholds import EXCESS
 
 __all__ = ["SensorFit", "KinematicCheck", "kinematic_check", "noise_sigma"]
 
@@ -68,14 +69,12 @@ class KinematicCheck:
 
     @property
     def consistent(self) -> bool:
-        return max(self.excess.values()) <= EXCESS_LIMIT
+        return max(self.excess.values()) <= EXCESS
 
     def best(self) -> SensorFit | None:
         return self.fits[0] if self.fits else None
 
 
-#: Residual power per bin (noise units) above which the channels disagree.
-EXCESS_LIMIT = 1.3
 
 
 def noise_sigma(run: RunData) -> dict[str, float]:

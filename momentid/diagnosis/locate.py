@@ -25,12 +25,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from momentid.lab import rig
+from momentid.diagnosis.thresholds import EXCESS
+from momentid.mechanisms.base import drifts
+from momentid.mechanisms.coulomb_friction import SCREENING_SMOOTHING
 
 __all__ = ["Localisation", "locate", "plot_localisation"]
 
-#: Ratio to the noise-only level above which a part counts as mismatched.
-MISMATCH = 1.3
+#: Band of "the modes": from this fraction of the lowest natural frequency to ...
+MODES_BELOW = 0.7
+#: ... this multiple of the highest.
+MODES_ABOVE = 1.3
 
 
 @dataclass(frozen=True)
@@ -75,9 +79,10 @@ def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None
 
     Parameters
     ----------
-    rows : sequence of (RunData, signals, residual, noise_residual)
-        Per run: the band-limited signals (``'a'``, ``'v'``, ``'q'``, each (n, d)), the floor
-        residual (n, d) of the model and the same residual of a noise-only input (n, d).
+    rows : sequence of ResidualRow
+        Per run (:class:`~momentid.diagnosis.residuals.ResidualRow`): the band-limited signals
+        (``'a'``, ``'v'``, ``'q'``, each (n, d)), the floor residual (n, d) of the model and the
+        same residual of a noise-only input (n, d).
     d : int
         Storeys.
     f_modes : (float, float)
@@ -89,14 +94,14 @@ def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None
     -------
     Localisation
     """
-    V = [_shear(r) for _, _, r, _ in rows]
-    N = [_shear(n) for _, _, _, n in rows]
+    V = [_shear(row.residual) for row in rows]
+    N = [_shear(row.noise) for row in rows]
     Vall, Nall = np.concatenate(V), np.concatenate(N)
     storeys = {f"storey{s + 1}": _ratio(Vall[:, s], Nall[:, s]) for s in range(d)}
     s = int(np.argmax([storeys[f"storey{k + 1}"] for k in range(d)]))
-    runs = {run.name: _ratio(v[:, s], n[:, s]) for (run, _, _, _), v, n in zip(rows, V, N)}
+    runs = {row.run.name: _ratio(v[:, s], n[:, s]) for row, v, n in zip(rows, V, N)}
 
-    fs = rows[0][0].sample_rate
+    fs = rows[0].run.sample_rate
     n_min = min(v.shape[0] for v in V)
     w = int(round((window_s or max(1.0, n_min / fs / 10)) * fs))
     windows = []
@@ -106,7 +111,7 @@ def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None
                         "excess": _ratio(np.concatenate([v[k0:k1, s] for v in V]),
                                          np.concatenate([n[k0:k1, s] for n in N]))})
 
-    drift = np.concatenate([rig.drifts(x[1]["q"])[:, s] for x in rows])
+    drift = np.concatenate([drifts(row.signals["q"])[:, s] for row in rows])
     edges = np.quantile(np.abs(drift), [0.0, 0.25, 0.5, 0.75, 1.0])
     amplitude = []
     for lo, hi in zip(edges[:-1], edges[1:]):
@@ -116,10 +121,11 @@ def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None
 
     bands = _bands(V, N, s, fs, f_modes)
 
-    dvel = np.concatenate([rig.drifts(x[1]["v"])[:, s] for x in rows])
+    dvel = np.concatenate([drifts(row.signals["v"])[:, s] for row in rows])
     v = Vall[:, s] - np.mean(Vall[:, s])
-    eps = 0.05 * float(np.sqrt(np.mean(dvel ** 2))) or 1.0
-    above = np.concatenate([np.full(x[1]["q"].shape[0], float(np.sum(x[0].added_mass[s:]))) for x in rows])
+    eps = SCREENING_SMOOTHING * float(np.sqrt(np.mean(dvel ** 2))) or 1.0
+    above = np.concatenate([np.full(row.signals["q"].shape[0], float(np.sum(row.run.added_mass[s:])))
+                            for row in rows])
     signature = {"drift_velocity_sign": _share(v, np.tanh(dvel / eps)),
                  "drift_velocity": _share(v, dvel),
                  "drift": _share(v, drift),
@@ -131,7 +137,7 @@ def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None
 
 
 def _bands(V, N, s, fs, f_modes) -> dict:
-    lo, hi = 0.7 * f_modes[0], 1.3 * f_modes[1]
+    lo, hi = MODES_BELOW * f_modes[0], MODES_ABOVE * f_modes[1]
     out = {"below_modes": [0.0, 0.0], "modes": [0.0, 0.0], "above_modes": [0.0, 0.0]}
     for v, n in zip(V, N):
         f = np.fft.rfftfreq(v.shape[0], 1 / fs)
@@ -145,7 +151,7 @@ def _bands(V, N, s, fs, f_modes) -> dict:
 def _words(loc: Localisation, rows) -> str:
     """One sentence in the lab's words."""
     worst = loc.storeys[f"storey{loc.storey}"]
-    if worst <= MISMATCH:
+    if worst <= EXCESS:
         return "No storey's residual stands out from the noise."
     others = [v for k, v in loc.storeys.items() if k != f"storey{loc.storey}"]
     where = (f"concentrated in storey {loc.storey}" if not others or worst > 2 * max(others)
@@ -163,8 +169,8 @@ def _words(loc: Localisation, rows) -> str:
     amp = [b["excess"] for b in loc.amplitude]
     if amp[-1] > 2 * max(amp[0], 1.0):
         parts.append("largest at the largest drifts")
-    mass = {run.name: float(np.sum(run.added_mass)) for run, *_ in rows}
-    hit = [name for name, x in loc.runs.items() if x > MISMATCH]
+    mass = {row.run.name: float(np.sum(row.run.added_mass)) for row in rows}
+    hit = [name for name, x in loc.runs.items() if x > EXCESS]
     if len(hit) == len(loc.runs):
         names = sorted(loc.runs, key=lambda k: mass[k])
         ex = [loc.runs[k] for k in names]
@@ -179,9 +185,9 @@ def _words(loc: Localisation, rows) -> str:
     win = [w["excess"] for w in loc.windows]
     if len(win) >= 4:
         k = int(np.argmax([np.mean(win[i:]) / max(np.mean(win[:i]), 1e-12) for i in range(1, len(win))])) + 1
-        if np.mean(win[:k]) <= MISMATCH < np.mean(win[k:]) and min(win[k:]) > 1.5 * max(win[:k]):
+        if np.mean(win[:k]) <= EXCESS < np.mean(win[k:]) and min(win[k:]) > 1.5 * max(win[:k]):
             parts.append(f"from t = {loc.windows[k]['t0']:.0f} s on")
-    if loc.bands["above_modes"] > 2 * MISMATCH and loc.bands["above_modes"] > 0.5 * loc.bands["modes"]:
+    if loc.bands["above_modes"] > 2 * EXCESS and loc.bands["above_modes"] > 0.5 * loc.bands["modes"]:
         parts.append("with harmonics above the modes")
     return ", ".join(parts) + "."
 
@@ -220,7 +226,7 @@ def plot_localisation(where: dict, path, title: str = "") -> None:
     ax[3].set_xlabel("|drift| quartile (mm)")
     ax[3].set_title(f"storey {s}: by drift amplitude")
     for a in ax:
-        a.axhline(MISMATCH, color="grey", ls=":", lw=1)
+        a.axhline(EXCESS, color="grey", ls=":", lw=1)
         a.set_ylabel("residual / noise")
         a.set_yscale("log")
         a.set_ylim(bottom=0.5)   # 1 = the noise level: keep it in view

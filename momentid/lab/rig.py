@@ -26,8 +26,11 @@ from __future__ import annotations
 import numpy as np
 import mujoco
 
+from momentid import mechanisms as registry
 from momentid.errors import ModelError
 from momentid.core.structure import Structure
+from momentid.mechanisms.base import GRAVITY, drifts, storey_to_floor
+from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
            "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS"]
@@ -43,19 +46,19 @@ def _inertia(mass: float, half: tuple[float, float, float]) -> list[float]:
     return [mass / 12 * (y * y + z * z), mass / 12 * (x * x + z * z), mass / 12 * (x * x + y * y)]
 
 
-GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
-
 #: Base armature / rig mass: the structure's reaction changes the table's
 #: acceleration by about its inverse (1e-10 relative, below RK4's error).
 TABLE_INERTIA_RATIO = 1e10
 
-#: Storey forces the MJCF cannot express: the simulator applies them in a control callback.
-CALLBACK_MECHANISMS = ("coulomb_friction", "cubic_stiffness", "stiffness_loss")
+#: Storey forces the MJCF cannot express, which the simulator applies in a control callback: the
+#: kinds registered when this module was imported that declare ``callback`` (for messages; code asks
+#: the registry, :func:`needs_callback`, so that a kind added later counts too).
+CALLBACK_MECHANISMS = tuple(kind.name for kind in registry.REGISTRY.values() if kind.callback)
 
 
 def needs_callback(mechanisms) -> bool:
     """True when ``mechanisms`` include storey forces the MJCF cannot express."""
-    return any(m.type in CALLBACK_MECHANISMS for m in mechanisms)
+    return any(registry.get(m.type).callback for m in mechanisms)
 
 
 def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
@@ -73,14 +76,13 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     name : str
         The MJCF model name.
     mechanisms : sequence of Mechanism
-        Physics beyond the linear model (a scenario's ``[truth]``).  The linear
-        ones are built into the MJCF: ``extra_damper`` (storey tendon
-        damping), ``p_delta`` (storey tendon stiffness reduced by ``factor`` x
-        g x (mass above) / height), ``flexible_added_mass`` (the added mass on
-        its own slide joint with a spring and damper).  The nonlinear storey
-        forces (``coulomb_friction``, ``cubic_stiffness``, ``stiffness_loss``) are applied by the
-        simulator in a control callback (:func:`storey_forces`,
-        :func:`needs_callback`).
+        Physics beyond the linear model (a scenario's ``[truth]``), each of a
+        kind registered in :mod:`momentid.mechanisms`.  A kind changes the MJCF
+        through its hooks (``storey_tendon``: the storey tendon's stiffness and
+        damping, e.g. ``extra_damper``, ``p_delta``; ``added_mass_body``: the
+        added mass's body, e.g. ``flexible_added_mass``); the ``callback``
+        kinds' storey forces are applied by the simulator in a control
+        callback (:func:`storey_forces`, :func:`needs_callback`).
 
     Returns
     -------
@@ -95,6 +97,8 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         raise ModelError(f"added_mass = {dm.tolist()}: expected {d} finite values >= 0 (kg)")
     if not timestep > 0:
         raise ModelError(f"timestep = {timestep!r}: expected a positive number of seconds")
+    for mech in mechanisms:
+        registry.validate(mech, d)
 
     spec = mujoco.MjSpec()
     spec.modelname = name
@@ -131,11 +135,9 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
             extra.mass = dm[i]
             extra.inertia = _inertia(dm[i], (0.05, 0.05, 0.02))
             for mech in mechanisms:
-                if mech.type == "flexible_added_mass" and mech.location == i + 1:
-                    w = 2 * np.pi * mech.get("frequency")
-                    j = extra.add_joint(name=f"added{i + 1}_x", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
-                    j.stiffness = [dm[i] * w * w, 0.0, 0.0]
-                    j.damping = [2 * mech.get("damping_ratio") * dm[i] * w, 0.0, 0.0]
+                kind = registry.get(mech.type)
+                if kind.target is registry.Target.FLOOR and mech.location == i + 1:
+                    kind.added_mass_body(mech, extra, dm[i])
             extra.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
                            rgba=[0.2, 0.4, 0.8, 1], contype=0, conaffinity=0)
 
@@ -147,13 +149,10 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
             tendon.wrap_joint(f"q{i}", -1.0)
         c_i = kappa * k_i
         for mech in mechanisms:
-            if mech.location != i + 1:
-                continue
-            if mech.type == "extra_damper":
-                c_i += mech.get("c")
-            elif mech.type == "p_delta":
+            kind = registry.get(mech.type)
+            if kind.target is registry.Target.STOREY and mech.location == i + 1:
                 above = sum(structure.masses[j] + dm[j] for j in range(i, d))
-                k_i -= mech.get("factor") * GRAVITY * above / structure.storey_heights[i]
+                k_i, c_i = kind.storey_tendon(mech, k_i, c_i, above, structure.storey_heights[i])
         tendon.stiffness = [k_i, 0.0, 0.0]
         tendon.damping = [c_i, 0.0, 0.0]
         tendon.springlength = [0.0, 0.0]
@@ -183,23 +182,19 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     return spec
 
 
-#: Velocity scale (m/s) of the smoothed Coulomb law ``F tanh(v / FRICTION_SMOOTHING)``.
-FRICTION_SMOOTHING = 5e-4
-
-
 def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, time: float = 0.0,
                   structure: Structure | None = None) -> np.ndarray:
-    """Storey shear forces (N) the MJCF cannot express: ``coulomb_friction``,
-    ``cubic_stiffness`` and ``stiffness_loss``.
+    """Storey shear forces (N) the MJCF cannot express: those of the ``callback`` kinds
+    (:data:`CALLBACK_MECHANISMS`), each by its registered law.
 
     Parameters
     ----------
     drift, drift_velocity : ndarray, shape (..., d)
         Storey drifts ``q_i - q_(i-1)`` (m) and their rates (m/s).
     time : float
-        Time since the run started (s), for ``stiffness_loss``.
+        Time since the run started (s), for time-dependent laws (``stiffness_loss``).
     structure : Structure, optional
-        The storey stiffnesses ``stiffness_loss`` takes its fraction of.
+        The storey stiffnesses a ``needs_stiffness`` kind takes its fraction of.
 
     Returns
     -------
@@ -208,30 +203,15 @@ def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, tim
     """
     f = np.zeros(np.broadcast(drift, drift_velocity).shape)
     for mech in mechanisms:
+        kind = registry.get(mech.type)
+        if not kind.callback:
+            continue
         s = mech.location - 1
-        if mech.type == "coulomb_friction":
-            f[..., s] += mech.get("force") * np.tanh(drift_velocity[..., s] / FRICTION_SMOOTHING)
-        elif mech.type == "cubic_stiffness":
-            f[..., s] += mech.get("k3") * drift[..., s] ** 3
-        elif mech.type == "stiffness_loss" and time >= mech.get("time"):
-            if structure is None:
-                raise ModelError("stiffness_loss needs the structure's storey stiffnesses")
-            f[..., s] -= mech.get("fraction") * structure.storey_stiffness[s] * drift[..., s]
+        if kind.needs_stiffness and structure is None:
+            raise ModelError(f"{mech.type} needs the structure's storey stiffnesses")
+        stiffness = structure.storey_stiffness[s] if kind.needs_stiffness else None
+        f[..., s] += kind.storey_force(dict(mech.parameters), drift[..., s], drift_velocity[..., s], time, stiffness)
     return f
-
-
-def storey_to_floor(f: np.ndarray) -> np.ndarray:
-    """Generalised floor forces from storey forces resisting the drifts: shape (..., d)."""
-    out = -f.copy()
-    out[..., :-1] += f[..., 1:]
-    return out
-
-
-def drifts(q: np.ndarray) -> np.ndarray:
-    """Storey drifts ``q_i - q_(i-1)`` from floor displacements (..., d)."""
-    out = q.copy()
-    out[..., 1:] -= q[..., :-1]
-    return out
 
 
 def compile_model(spec: mujoco.MjSpec) -> mujoco.MjModel:

@@ -17,6 +17,7 @@ from typing import Union
 
 import numpy as np
 
+from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.io.structure_table import parse_structure
 from momentid.io.toml_reader import Table, load_toml
@@ -98,20 +99,6 @@ class BandLimitedNoise:
 
 
 Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise]
-
-
-#: Physical mechanisms a rig may carry beyond the linear Rayleigh-damped shear model,
-#: with the parameter names each takes (SI units).
-MECHANISMS = {
-    "coulomb_friction": ("storey", ("force",)),            # N, opposes the storey drift velocity
-    "cubic_stiffness": ("storey", ("k3",)),                # N/m^3, + hardening / - softening
-    "extra_damper": ("storey", ("c",)),                    # N*s/m, a viscous damper across the storey
-    "p_delta": ("storey", ("factor",)),                    # 1 = full gravity P-Delta of the weight above
-    "flexible_added_mass": ("floor", ("frequency", "damping_ratio")),  # Hz, 1: added mass on a spring
-    # Outside the diagnosis library (to test its "unexplained" verdict): a storey connection that
-    # slips during the strong motion of every run, losing `fraction` of its stiffness from `time` (s).
-    "stiffness_loss": ("storey", ("fraction", "time")),
-}
 
 
 @dataclass(frozen=True)
@@ -448,18 +435,20 @@ def _parse_truth(tab: Table, storeys: int) -> tuple[Mechanism, ...]:
         return ()
     out = []
     for m in tab.tables("mechanisms"):
-        kind = m.string("type", choices=tuple(MECHANISMS))
-        where, names = MECHANISMS[kind]
+        # the rig kinds of the mechanism registry, each with its parameters, units and bounds
+        kind = mechanisms.get(m.string("type", choices=tuple(k.name for k in mechanisms.rig_kinds())))
+        where = kind.target.value
         loc = m.integer(where, minimum=1)
         if loc > storeys:
             raise m.error(where, f"a {where} number in 1..{storeys}")
-        params = tuple((n, m.number(n)) for n in names)
-        if kind == "flexible_added_mass" and not (params[0][1] > 0 and params[1][1] >= 0):
-            raise m.error("frequency", "a positive frequency (Hz) and a damping_ratio >= 0")
-        if kind == "stiffness_loss" and not (0 < params[0][1] <= 1 and params[1][1] >= 0):
-            raise m.error("fraction", "a fraction in (0, 1] of the storey stiffness and a time >= 0 (s)")
+        params = []
+        for p in kind.params:
+            value = m.number(p.name)
+            if not p.admits(value):
+                raise m.error(p.name, p.expected())
+            params.append((p.name, value))
         m.finish()
-        out.append(Mechanism(kind, loc, params))
+        out.append(Mechanism(kind.name, loc, tuple(params)))
     tab.finish()
     return tuple(out)
 

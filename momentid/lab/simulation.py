@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as _rollout
 
+from momentid import mechanisms as mechanisms_registry
 from momentid.lab import rig
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
@@ -68,39 +69,33 @@ class _StoreyForces:
     """Control callback applying the storey forces of ``mechanisms`` that the MJCF cannot
     express (:func:`momentid.lab.rig.storey_forces`) to the floor joints at every RK4 stage.
 
-    Called about 4 times a step, so it works on Python floats: each mechanism's storey is
-    read from two joints and pushes on two, with the laws of ``storey_forces`` (a test holds
-    the two equal)."""
+    Called about 4 times a step, so it works on floats: each mechanism's storey is read from
+    two joints and pushes on two, with its kind's registered law
+    (:meth:`~momentid.mechanisms.base.MechanismKind.storey_force`, the same that
+    :func:`~momentid.lab.rig.storey_forces` applies to arrays)."""
 
     def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
-        self.mechanisms = tuple(m for m in mechanisms if m.type in rig.CALLBACK_MECHANISMS)
+        self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
         dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
         self.floor_dofs = np.array(dofs)
         self.terms = []
         for m in self.mechanisms:
+            kind = mechanisms_registry.get(m.type)
             s = m.location - 1
             below = dofs[s - 1] if s > 0 else -1
-            k = (structure.storey_stiffness[s] if structure is not None and m.type == "stiffness_loss"
-                 else None)
-            if m.type == "stiffness_loss" and k is None:
-                raise SimulationError("stiffness_loss needs the structure's storey stiffnesses")
-            self.terms.append((m.type, dofs[s], below, dict(m.parameters), k))
+            k = structure.storey_stiffness[s] if structure is not None and kind.needs_stiffness else None
+            if kind.needs_stiffness and k is None:
+                raise SimulationError(f"{m.type} needs the structure's storey stiffnesses")
+            self.terms.append((kind.storey_force, dofs[s], below, dict(m.parameters), k))
 
     def __call__(self, model, data) -> None:
         qpos, qvel, out = data.qpos, data.qvel, data.qfrc_applied
         out[self.floor_dofs] = 0.0
-        for kind, top, below, p, k in self.terms:
+        for law, top, below, p, k in self.terms:
             x = qpos[top] - (qpos[below] if below >= 0 else 0.0)
-            if kind == "coulomb_friction":
-                v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
-                f = p["force"] * math.tanh(v / rig.FRICTION_SMOOTHING)
-            elif kind == "cubic_stiffness":
-                f = p["k3"] * x * x * x
-            elif data.time >= p["time"]:   # stiffness_loss
-                f = -p["fraction"] * k * x
-            else:
-                continue
+            v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
+            f = law(p, x, v, data.time, k)
             out[top] -= f               # the storey resists its drift on the floor above it
             if below >= 0:
                 out[below] += f

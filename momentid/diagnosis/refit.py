@@ -1,0 +1,326 @@
+"""Stage 5 of the diagnosis: refit a candidate and re-simulate its augmented MuJoCo model.
+
+A candidate's kind says how it is sized (:class:`~momentid.mechanisms.base.Refit`): a nonlinear
+storey force is refitted with the linear model by errors-in-variables, then its size searched by
+re-simulation; a flexible attachment is put on the lab's nominal model; a storey damper takes the
+damping pattern of the identified C; a sensor fault is undone on the recordings, which are then
+re-identified.  :class:`Refitter` builds each augmented model once and scores it by replaying the
+training runs in MuJoCo.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.optimize
+
+from momentid import mechanisms
+from momentid.core.analytic import shear_stiffness
+from momentid.core.series import RunData
+from momentid.core.structure import Mechanism, Structure
+from momentid.diagnosis.residuals import (LinearModel, band_filter, band_signals, nrmse, replay_noise)
+from momentid.errors import ModelError, SimulationError
+from momentid.estimation.identification import identify
+from momentid.estimation.reconstruct import Prefilter
+from momentid.lab import rig
+from momentid.mechanisms.base import MechanismKind, Refit, Target, drifts, storey_to_floor
+
+__all__ = ["Augmented", "Refitter", "identified_structure", "kind_of", "replay_check"]
+
+#: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
+_UNSTABLE = 1e200
+#: The errors-in-variables refit reads its storey force from signals low-passed at this multiple of
+#: the top mode (noise would flip the sign of small drift velocities and shrink a friction force) ...
+REFIT_BAND_OVER_TOP_MODE = 1.5
+#: ... and fits the equations up to this multiple of the top mode.
+REFIT_F_MAX_OVER_TOP_MODE = 2.0
+#: The re-simulation search of a storey force's size: from half to five times the regression's value
+#: (on a log scale; the regression is pulled towards zero, by a factor of 3 and more for a storey
+#: that sticks, at 2 % noise), to this relative tolerance, in at most this many replays ...
+SEARCH_RANGE = (0.5, 5.0)
+SEARCH_TOLERANCE = 0.005
+SEARCH_REPLAYS = 14
+#: ... and the relative step of the misfit's curvature at the optimum (the standard error).
+CURVATURE_STEP = 0.02
+#: A storey stiffness a linear fit left at or below zero becomes this (N/m): a valid MJCF.
+MIN_STIFFNESS = 1e-9
+#: Without a nominal model: storey height (m, drawing only) and platen mass (kg) of the replay model.
+DEFAULT_STOREY_HEIGHT = 0.3
+DEFAULT_BASE_MASS = 100.0
+
+
+def kind_of(mechanism: str) -> MechanismKind | None:
+    """The registered kind of a verdict's mechanism; None for ``"none"`` and ``"unexplained"``."""
+    return mechanisms.REGISTRY.get(mechanism)
+
+
+@dataclass(frozen=True)
+class Augmented:
+    """A candidate's augmented model: the linear structure it sits on, its refitted parameters and
+    standard errors, and its mechanism records (for :func:`momentid.lab.rig.build_spec`)."""
+
+    structure: Structure
+    parameters: dict
+    std: dict
+    records: tuple[Mechanism, ...]
+
+
+def identified_structure(result, nominal: Structure | None) -> Structure:
+    """An identification result as a :class:`Structure` (least-squares storey stiffnesses)."""
+    d = result.storeys
+    A = np.stack([shear_stiffness(np.eye(d)[s]) for s in range(d)], axis=-1).reshape(d * d, d)
+    k, *_ = np.linalg.lstsq(A, result.K.ravel(), rcond=None)
+    heights = nominal.storey_heights if nominal else (DEFAULT_STOREY_HEIGHT,) * d
+    base = nominal.base_mass if nominal else DEFAULT_BASE_MASS
+    return Structure(masses=tuple(np.diag(result.M)), storey_stiffness=tuple(np.maximum(k, MIN_STIFFNESS)),
+                     storey_heights=tuple(heights), rayleigh_mu=max(result.mu, 0.0),
+                     rayleigh_kappa=max(result.kappa, 0.0), base_mass=base)
+
+
+def _measured(run: RunData, d: int) -> dict[str, np.ndarray]:
+    return {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
+
+
+def augmented_replay(structure, kind, loc, params, records, run, d, static=True):
+    """Replay ``run`` through the augmented model: (simulated, measured-and-corrected) channels.
+
+    ``static``: whether ``structure`` already holds what the floors' own weight does to it (an
+    identified model does, a nominal one does not; see ``p_delta``).
+    """
+    from momentid.lab.simulation import replay
+    measured = _measured(run, d)
+    zdd = run["zdd"].copy()
+    if kind is not None:
+        structure = kind.replay_structure(structure, loc, params, static)
+        if kind.target is Target.CHANNEL:
+            fixed = kind.correct_run(run, loc, params)
+            zdd = fixed["zdd"]
+            measured = {g: fixed.group(g, d) for g in measured}
+    return replay(structure, records, run, zdd), measured
+
+
+def replay_check(model: LinearModel, linear_structure, structure, mech, loc, params, records):
+    """NRMSE of the evaluation run: linear model vs. augmented model, both in MuJoCo.
+
+    Returns (before, after, curves, augmented MJCF text).
+    """
+    from momentid.lab.simulation import replay
+    run, d, band = model.evaluation_run, model.storeys, model.band
+    kind, static = kind_of(mech), structure != model.nominal
+    fs = run.sample_rate
+    measured = _measured(run, d)
+    lin = replay(linear_structure, (), run, run["zdd"])
+    before = nrmse(lin, measured, fs, band)
+    if records or (kind is not None and kind.target is Target.CHANNEL):
+        aug, corrected = augmented_replay(structure, kind, loc, params, records, run, d, static)
+        after = nrmse(aug, corrected, fs, band)
+    else:
+        aug, after = lin, before
+    if kind is not None:
+        structure = kind.replay_structure(structure, loc, params, static)
+    spec = rig.build_spec(structure, run.added_mass, timestep=1 / fs, name="augmented", mechanisms=records)
+    spec.compiler.saveinertial = True
+    curves = {"time": run.time, "measured": measured, "linear": lin, "augmented": aug}
+    return before, after, curves, spec.to_xml()
+
+
+def _force_signature(kind, loc, params, run, signals, d):
+    """Floor direction (d, 1) and signal (n, 1) of a storey force on one run."""
+    k = loc["storey"] - 1
+    e = np.zeros((1, d))
+    e[0, k] = 1.0
+    signal = kind.force_signal(params, drifts(signals["q"])[:, k], drifts(signals["v"])[:, k],
+                               run.added_mass[k:].sum())
+    return storey_to_floor(e).T, signal[:, None]
+
+
+def _refit_eiv(kind, loc, params, runs, result, band, f_top):
+    """Errors-in-variables fit of the linear model together with the mechanism's force.
+
+    Returns (refitted result, parameters, std) or None when the runs do not allow it.
+    """
+    from momentid.estimation.eiv import fit_eiv
+    d = result.storeys
+    forces = []
+    for run in runs:
+        if not run.has("q1"):
+            return None
+        s = band_signals(run, d, Prefilter(high=REFIT_BAND_OVER_TOP_MODE * f_top) if band.high else band)
+        if s["a"].shape[0] != run.n_samples:
+            return None
+        forces.append(_force_signature(kind, loc, params, run, s, d))
+    lay = result.layout
+    key = kind.fitted.name
+    theta0 = np.concatenate([result.theta, [params[key]]])
+    fit = fit_eiv(lay, runs, theta0, f_max=REFIT_F_MAX_OVER_TOP_MODE * f_top, forces=forces)
+    M, C, K, mu = lay.unpack(fit.theta[:lay.p])
+    kappa = float(np.sum(K * (C - mu * M)) / np.sum(K * K))
+    new = replace(result, M=M, C=C, K=K, mu=mu, kappa=kappa, covariance=fit.covariance[:lay.p, :lay.p])
+    return new, dict(params, **{key: float(fit.theta[lay.p])}), {key: float(np.sqrt(fit.covariance[lay.p, lay.p]))}
+
+
+class Refitter:
+    """Builds the augmented model of a candidate and scores it by re-simulating the training runs."""
+
+    def __init__(self, model: LinearModel, pattern):
+        self.model, self.pattern = model, pattern
+        self.result, self.nominal, self.d = model.result, model.nominal, model.storeys
+        self.linear_structure = identified_structure(model.result, model.nominal)
+        self._cache: dict = {}
+
+    def augment(self, mech: str, loc: dict, params: dict, std: dict) -> Augmented:
+        """The model with ``mech`` added at ``loc`` (memoised); the linear one for a verdict with none."""
+        key = (mech, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True))
+        if key not in self._cache:
+            self._cache[key] = self._build(kind_of(mech), loc, params, std)
+        return self._cache[key]
+
+    def _build(self, kind, loc, params, std) -> Augmented:
+        model, nominal, runs = self.model, self.nominal, self.model.train.runs
+        structure = self.linear_structure
+        if kind is None:
+            return Augmented(structure, params, std, ())
+        if kind.refit is Refit.RESIMULATE and not model.ideal:
+            refit = _refit_eiv(kind, loc, params, runs, self.result, model.band, model.f_top)
+            if refit is not None:
+                refitted, params, std = refit
+                structure = identified_structure(refitted, nominal)
+            # The force's size by re-simulation, on the refitted linear model and on the nominal one
+            # (a friction that sticks a storey leaves the linear fit poorly determined); the pair that
+            # replays best wins.
+            bases = [structure] + ([nominal] if nominal is not None else [])
+            structure = min(bases, key=lambda b: self._misfit(b, kind, loc, params))
+            params, sim_std = self._resimulate(structure, kind, loc, params)
+            # the search's std is conditional on the linear model; the refit's marginal std carries
+            # the linear model's own uncertainty: report both, in quadrature
+            std = {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
+        elif kind.refit is Refit.ATTACHMENT and nominal is not None:
+            # Found by replaying the nominal model (the identified one has absorbed part of the attachment's
+            # dynamics in the runs that carry it): augment the nominal model.
+            structure = nominal
+        elif kind.refit is Refit.DAMPING_PATTERN:
+            # Rayleigh part + the storey damper: from the pattern fit of the identified C when there is one,
+            # else the nominal Rayleigh coefficients.
+            pattern = self.pattern
+            if pattern and pattern.candidate.location == loc:
+                a_, b_, c_ = pattern.info["coefficients"]
+                params = {kind.fitted.name: float(c_)}
+            elif nominal is not None:
+                a_, b_ = nominal.rayleigh_mu, nominal.rayleigh_kappa
+            else:
+                a_, b_ = structure.rayleigh_mu, structure.rayleigh_kappa
+            structure = replace(structure, rayleigh_mu=max(a_, 0.0), rayleigh_kappa=max(b_, 0.0))
+            if nominal is not None:   # the lab's own model with the damper may replay better
+                structure = min((structure, nominal), key=lambda b: self._misfit(b, kind, loc, params))
+        elif kind.refit is Refit.CORRECT_DATA:
+            fixed = replace(model.train, runs=tuple(kind.correct_run(r, loc, params) for r in runs))
+            structure = identified_structure(identify(fixed), nominal)
+            if nominal is not None:   # the corrected data may fit the lab's own model better
+                structure = min((structure, nominal), key=lambda b: self._misfit(b, kind, loc, params))
+        return Augmented(structure, params, std, kind.as_records(loc, params))
+
+    def _search_run(self) -> RunData:
+        """The training run with the most added mass (the strongest test of a storey force)."""
+        return max(self.model.train.runs, key=lambda r: float(np.sum(r.added_mass)))
+
+    def _misfit(self, structure, kind, loc, params) -> float:
+        """Normalised sum of squares of the search run replayed through the augmented model:
+        sum over channels and samples of ((measured - simulated) / RMS(measured))^2."""
+        run = self._search_run()
+        try:
+            sim, measured = augmented_replay(structure, kind, loc, params, kind.as_records(loc, params),
+                                             run, self.d, structure != self.nominal)
+        except (SimulationError, ModelError):   # e.g. a storey made unstable: not a candidate fit
+            return _UNSTABLE
+        fs, band = run.sample_rate, self.model.band
+        q = 0.0
+        for g in measured:
+            m = band_filter(measured[g], fs, band)
+            q += float(np.sum(((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
+        return q
+
+    def _resimulate(self, structure, kind, loc, params) -> tuple[dict, dict]:
+        """Output-error refinement of a nonlinear storey force's size by re-simulation.
+
+        The regression estimates it from measured drift velocities and drifts, whose noise
+        pulls it towards zero (a noisy velocity flips sign around its zero crossings); a
+        simulation has no such noise.  A bounded scalar search (over :data:`SEARCH_RANGE` times
+        the regression's value, on a log scale) of :meth:`_misfit` on one training run.  The
+        standard error comes from the misfit's curvature at the minimum, ``var = 2 s^2 / Q''`` with
+        ``s^2`` the misfit per independent sample (band-limited channels), so it grows with any
+        misfit the model leaves.
+
+        Returns
+        -------
+        params, std : the refined parameters and their standard errors.
+        """
+        key = kind.fitted.name
+        p0 = float(params[key])
+        if not np.isfinite(p0) or p0 == 0:
+            return params, {}
+        seen: dict[float, float] = {}
+
+        def cost(x):
+            x = float(x)
+            if x not in seen:
+                seen[x] = self._misfit(structure, kind, loc, dict(params, **{key: x}))
+            return seen[x]
+
+        sign = math.copysign(1.0, p0)
+        low, high = SEARCH_RANGE
+        res = scipy.optimize.minimize_scalar(lambda u: cost(sign * math.exp(u)),
+                                             bounds=(math.log(low * abs(p0)), math.log(high * abs(p0))),
+                                             method="bounded",
+                                             options={"xatol": SEARCH_TOLERANCE, "maxiter": SEARCH_REPLAYS})
+        best = sign * math.exp(float(res.x)) if res.fun < cost(p0) else p0
+        step = CURVATURE_STEP * abs(best)
+        q0, qm, qp = cost(best), cost(best - step), cost(best + step)
+        curvature = (qp - 2 * q0 + qm) / step ** 2
+        if curvature > 0:   # the search stops within its tolerance: finish with the parabola's vertex
+            vertex = best - step * (qp - qm) / (2 * (qp - 2 * q0 + qm))
+            if abs(vertex - best) < step and cost(vertex) < q0:
+                best, q0 = vertex, cost(vertex)
+        run = self._search_run()
+        n_channels = sum(1 for g in ("a", "q") if run.has(f"{g}1")) * self.d
+        band = self.model.band.high or run.sample_rate / 2
+        n_eff = n_channels * run.n_samples * min(1.0, 2 * band / run.sample_rate)
+        std = float(np.sqrt(2 * (q0 / max(n_eff - 1, 1)) / curvature)) if curvature > 0 else float("inf")
+        return dict(params, **{key: best}), {key: std}
+
+    def score(self, augmented: Augmented, mech: str, loc: dict) -> float:
+        """Mean NRMSE of the training runs replayed through an augmented model (band-limited)."""
+        params, structure = augmented.parameters, augmented.structure
+        key = ("score", repr(structure), mech, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True))
+        if key not in self._cache:
+            out = []
+            for run in self.model.train.runs:
+                try:
+                    sim, measured = augmented_replay(structure, kind_of(mech), loc, params, augmented.records,
+                                                     run, self.d, structure != self.nominal)
+                except (SimulationError, ModelError):   # an unstable augmented model explains nothing
+                    out.append(float("inf"))
+                    break
+                out.append(nrmse(sim, measured, run.sample_rate, self.model.band))
+            self._cache[key] = float(np.mean(out))
+        return self._cache[key]
+
+    def linear_score(self) -> float:
+        """:meth:`score` of the linear model."""
+        return self.score(Augmented(self.linear_structure, {}, {}, ()), "none", {})
+
+    def noise_nrmse(self) -> float:
+        """The NRMSE sensor noise alone leaves in :meth:`score` (white levels, band-limited)."""
+        out = []
+        band = self.model.band
+        for run in self.model.train.runs:
+            fs = run.sample_rate
+            noise = replay_noise(self.result, run, self.d, band)
+            for g in ("a", "q"):
+                if not run.has(f"{g}1"):
+                    continue
+                m = band_filter(run.group(g, self.d), fs, band)
+                out += list(noise[g] / np.sqrt(np.mean(m ** 2, axis=0)))
+        return float(np.mean(out))

@@ -1,0 +1,341 @@
+"""Stage 4 of the diagnosis: every registered mechanism's signature, fitted where it could be.
+
+Each kind of :mod:`momentid.mechanisms` states its signature in the floor-force residual
+(:meth:`~momentid.mechanisms.base.MechanismKind.screen_equation`); its coefficients are fitted by
+least squares together with the linear confounds the identified model may already have absorbed,
+on half of the data (alternate time blocks), and scored on the other half by the share of the
+*excess over noise* it explains.  Faults of the table channel show only in replays driven by it
+(:func:`screen_replay`); a flexibly attached mass is tested by replay too
+(:func:`screen_attachment`); a linear damper hides in the identified C, so it is also tested on
+the identified matrices (:func:`damping_pattern`).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+
+from momentid import mechanisms
+from momentid.diagnosis.residuals import (LinearModel, ResidualRow, band_filter, blocks, replay_noise,
+                                          replay_outputs)
+from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
+from momentid.estimation.identification import damping_models
+from momentid.estimation.linear import discretize, outputs, simulate_linear
+from momentid.mechanisms.base import EquationSignals, Refit, Screened, Target, drifts
+
+__all__ = ["Domain", "Candidate", "ReplayResiduals", "DampingPattern", "screen_equation", "screen_replay",
+           "screen_attachment", "damping_pattern"]
+
+#: Replay residual floor for noise-free data: this fraction of the replayed channels' RMS.
+REPLAY_ROUND_OFF = 1e-6
+#: Attachment frequencies tried by replay: from just above the top mode ...
+ATTACHMENT_LOW_OVER_TOP_MODE = 1.1
+#: ... to the lower of 0.4 x the sample rate (the band's ceiling) and 20 x the top mode (an
+#: attachment that stiff moves with its floor) ...
+ATTACHMENT_HIGH_OVER_SAMPLE_RATE = 0.4
+ATTACHMENT_HIGH_OVER_TOP_MODE = 20.0
+#: ... in this many log-spaced points, at this damping ratio; the best is then refined.
+ATTACHMENT_GRID_POINTS = 28
+ATTACHMENT_DAMPING_RATIO = 0.05
+#: The damping-pattern test runs when the Rayleigh model of the identified C is rejected (p-value
+#: below this) and misses by more than this share of C's norm.
+RAYLEIGH_P_VALUE = 1e-3
+RAYLEIGH_MISFIT = 0.02
+
+
+class Domain(str, enum.Enum):
+    """Where a candidate was screened (its ``domain`` in ``report.json``)."""
+
+    EQUATION = "equation"                    # floor-force residual of the identified model
+    NOMINAL = "equation (nominal model)"     # floor-force residual of the lab's nominal model
+    REPLAY = "replay"                        # replay residual (driven by the recorded table channel)
+    SENSORS = "sensors"                      # the channels checked against each other
+    PARAMETERS = "parameters"                # the pattern of the identified matrices
+
+    def __str__(self) -> str:
+        return self.value
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One fitted candidate mechanism."""
+
+    mechanism: str
+    location: dict
+    parameters: dict
+    std: dict
+    explained: float          # share of the excess residual explained on held-out blocks
+    domain: Domain
+
+
+@dataclass(frozen=True)
+class ReplayResiduals:
+    """The replay residual of the floor accelerometers (driven by the recorded table channel).
+
+    ``excess``: per channel, residual RMS / noise-only RMS; ``candidates``: table-channel faults.
+    """
+
+    excess: dict
+    candidates: tuple[Candidate, ...]
+
+    @property
+    def mismatch(self) -> bool:
+        return max(self.excess.values(), default=0) > EXCESS
+
+
+@dataclass(frozen=True)
+class DampingPattern:
+    """A storey damper read from the identified C (``candidate``) and the fits behind it (``info``,
+    reported as ``parameter_pattern``)."""
+
+    candidate: Candidate
+    info: dict
+
+
+def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndarray, train, test,
+         noise_rss_test: float):
+    """LS of ``target`` on signature + confound columns on ``train``; score on ``test``.
+
+    A handful of columns over many samples: solved through the (scaled) normal equations of each
+    half, so every sum of squares below is a quadratic form of small Gram matrices.  Returns
+    (coefficients, standard errors, share explained) of the signature columns, or None when a
+    column is zero.
+    """
+    X = np.column_stack(columns + confounds)
+    Xtr, ytr, Xte, yte = X[train], target[train], X[test], target[test]
+    scale = np.linalg.norm(Xtr, axis=0)
+    if np.any(scale == 0):
+        return None
+    Xtr, Xte = Xtr / scale, Xte / scale
+    G, g, yy = Xtr.T @ Xtr, Xtr.T @ ytr, float(ytr @ ytr)
+    H, h, zz = Xte.T @ Xte, Xte.T @ yte, float(yte @ yte)
+    k = len(columns)
+
+    def solve(idx):
+        return np.linalg.lstsq(G[np.ix_(idx, idx)], g[idx], rcond=1e-12)[0]
+
+    def test_rss(idx, c):
+        return max(zz - 2 * float(c @ h[idx]) + float(c @ H[np.ix_(idx, idx)] @ c), 0.0)
+
+    every = np.arange(X.shape[1])
+    coef = solve(every)
+    after = test_rss(every, coef)
+    # Confounds alone: the part of the improvement that needs no mechanism.
+    base = test_rss(every[k:], solve(every[k:])) if confounds else zz
+    if base <= NOTHING_TO_EXPLAIN * noise_rss_test:
+        return coef[:k] / scale[:k], np.zeros(k), 0.0
+    explained = (base - after) / (base - noise_rss_test)
+    rss = max(yy - 2 * float(coef @ g) + float(coef @ G @ coef), 0.0)
+    dof = max(int(train.sum()) - X.shape[1], 1)
+    cov = np.linalg.pinv(G) * (rss / dof)
+    return coef[:k] / scale[:k], np.sqrt(np.diag(cov)[:k]) / scale[:k], float(explained)
+
+
+def _fitter(target: np.ndarray, train: np.ndarray, test: np.ndarray, noise_rss: float):
+    """The :data:`~momentid.mechanisms.base.Fitter` of one residual (n, d) and its block masks (n,)."""
+    d = target.shape[1]
+    train_d, test_d, y = np.repeat(train, d), np.repeat(test, d), target.ravel()
+
+    def fit(columns, confounds, location, to_params) -> list[Screened]:
+        res = _fit([c.ravel() for c in columns], [c.ravel() for c in confounds], y, train_d, test_d, noise_rss)
+        if res is None:
+            return []
+        coef, std, explained = res
+        params, pstd = to_params(coef, std)
+        return [Screened(location, params, pstd, explained)]
+    return fit
+
+
+def _attachment_response(fs: float):
+    def response(a_j, frequency, damping_ratio):
+        w = 2 * np.pi * frequency
+        osc = discretize(np.eye(1), np.eye(1) * 2 * damping_ratio * w, np.eye(1) * w * w, 1 / fs)
+        return outputs(osc, simulate_linear(osc, a_j))["a"][:, 0]
+    return response
+
+
+def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
+                    domain: Domain) -> list[Candidate]:
+    """Candidates whose signature lives in the floor-force residual ``rows`` of the model ``result``."""
+    fs = rows[0].run.sample_rate
+    train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
+    test = ~train
+    target = np.concatenate([r.residual for r in rows])                     # (N, d)
+    noise_rss = float(np.sum(noise_floor ** 2)) * int(test.sum())
+    a, v, q = (np.concatenate([r.signals[g] for r in rows]) for g in ("a", "v", "q"))
+    dm = np.concatenate([np.broadcast_to(r.run.added_mass, r.signals["a"].shape) for r in rows])
+    signals = EquationSignals(a=a, v=v, q=q, added_mass=dm, drift=drifts(q), drift_velocity=drifts(v),
+                              jerk=np.gradient(a, 1 / fs, axis=0), masses=np.diag(result.M), C=result.C,
+                              K=result.K, sample_rate=fs, f_top=f_top, attachment_response=_attachment_response(fs))
+    fit = _fitter(target, train, test, noise_rss)
+    kinds = mechanisms.library()
+    out = []
+    for targets in ((Target.STOREY,), (Target.FLOOR, Target.CHANNEL)):
+        for index in range(signals.storeys):
+            for kind in kinds:
+                if kind.target in targets:
+                    out += [Candidate(kind.name, s.location, s.parameters, s.std, s.explained, domain)
+                            for s in kind.screen_equation(signals, fit, index)]
+    return out
+
+
+def screen_replay(result, runs, d: int, band) -> ReplayResiduals:
+    """Table-accelerometer faults: visible only when the model is driven by the recorded base."""
+    fs = runs[0].sample_rate
+    target, sims, rates, steps, noise = [], [], [], [], []
+    for run in runs:
+        meas = band_filter(run.group("a", d), fs, band)
+        sim = band_filter(replay_outputs(result, run)["a"], fs, band)
+        target.append(meas - sim)
+        sims.append(sim)
+        rates.append(np.gradient(sim, 1 / fs, axis=0))
+        steps.append(band_filter(replay_outputs(result, run, np.ones(run.n_samples))["a"], fs, band))
+        noise.append(replay_noise(result, run, d, band)["a"])
+    target = np.concatenate(target)
+    scale = np.sqrt(np.mean(np.concatenate(sims) ** 2, axis=0))
+    rms = np.sqrt(np.mean(target ** 2, axis=0))
+    floor = np.maximum(np.mean(noise, axis=0), REPLAY_ROUND_OFF * scale)
+    excess = {f"a{j + 1}": float(rms[j] / floor[j]) for j in range(d)}
+    train = np.concatenate([blocks(r.n_samples, fs)[0] for r in runs])
+    test = ~train
+    fit = _fitter(target, train, test, float(np.sum(floor ** 2)) * int(test.sum()))
+    sims, rates, steps = np.concatenate(sims), np.concatenate(rates), np.concatenate(steps)
+    cands = []
+    for kind in mechanisms.library():
+        signature = kind.replay_column(sims, rates, steps)
+        if signature is not None:
+            column, to_params = signature
+            cands += [Candidate(kind.name, s.location, s.parameters, s.std, s.explained, Domain.REPLAY)
+                      for s in fit([column], [], {"channel": "zdd"}, to_params)]
+    return ReplayResiduals(excess=excess, candidates=tuple(cands))
+
+
+def _attachment_replay(kind, result, run, d, j, f_a, zeta):
+    """Floor accelerations (n, d) of the model with ``run``'s added mass on floor j on its attachment."""
+    dm = np.asarray(run.added_mass, float).copy()
+    m_a = dm[j]
+    dm[j] = 0.0
+    # floor damping as before: mu times the floor's mass with every added mass
+    M, C, K = kind.attachment_matrices(result.M + np.diag(dm), result.C + result.mu * np.diag(np.asarray(run.added_mass)),
+                                       result.K, j, m_a, f_a, zeta)
+    linear = discretize(M, C, K, 1 / run.sample_rate)
+    return outputs(linear, simulate_linear(linear, run["zdd"]))["a"][:, :d]
+
+
+def screen_attachment(result, runs, d: int, band, f_top: float) -> list[Candidate]:
+    """A flexibly attached added mass, tested by replay (sensor noise does not enter the signature)."""
+    fs = runs[0].sample_rate
+    out = []
+    for kind in mechanisms.library():
+        if kind.refit is not Refit.ATTACHMENT:
+            continue
+        found = []
+        for j in range(d):
+            loaded = [r for r in runs if r.added_mass[j] > 0 and r.has("a1")]
+            if not loaded:
+                continue
+            meas = [band_filter(r.group("a", d), fs, band) for r in loaded]
+            rigid = [band_filter(replay_outputs(result, r)["a"], fs, band) for r in loaded]
+            noise = sum(r.n_samples * float(np.sum(replay_noise(result, r, d, band)["a"] ** 2)) for r in loaded)
+            base = sum(float(np.sum((m - y) ** 2)) for m, y in zip(meas, rigid))
+            if base <= NOTHING_TO_EXPLAIN * noise:
+                continue
+
+            def rss(f_a, zeta, j=j, meas=meas, loaded=loaded):   # bound now: refined after the loop
+                return sum(float(np.sum((m - band_filter(_attachment_replay(kind, result, r, d, j, f_a, zeta), fs,
+                                                         band)) ** 2)) for m, r in zip(meas, loaded))
+
+            grid = [(f_a, rss(f_a, ATTACHMENT_DAMPING_RATIO)) for f_a in np.geomspace(
+                ATTACHMENT_LOW_OVER_TOP_MODE * f_top,
+                min(ATTACHMENT_HIGH_OVER_SAMPLE_RATE * fs, ATTACHMENT_HIGH_OVER_TOP_MODE * f_top),
+                ATTACHMENT_GRID_POINTS)]
+            f_a, best = min(grid, key=lambda x: x[1])
+            n_eff = sum(r.n_samples for r in loaded) * d * min(1.0, 2 * (band.high or fs / 2) / fs)
+            found.append((best, j, f_a, base, noise, rss, n_eff))
+        if not found:
+            continue
+        # The attachment's frequency and damping, refined where the grid fits best.
+        _, j, f_a, base, noise, rss, n_eff = min(found, key=lambda x: x[0])
+        params, std, best = _refine_oscillator(rss, f_a, ATTACHMENT_DAMPING_RATIO, n_eff)
+        out.append(Candidate(kind.name, {"floor": j + 1}, params, std, float((base - best) / (base - noise)),
+                             Domain.REPLAY))
+        for b, k, f_k, base_k, noise_k, _, _ in found:
+            if k != j:
+                out.append(Candidate(kind.name, {"floor": k + 1}, {"frequency": float(f_k),
+                                     "damping_ratio": ATTACHMENT_DAMPING_RATIO}, {},
+                                     float((base_k - b) / (base_k - noise_k)), Domain.REPLAY))
+    return out
+
+
+#: Refinement of an attachment: Nelder-Mead tolerance on (log f, log zeta), evaluations allowed, the
+#: largest damping ratio tried, and the steps in (log f, log zeta) of the curvature's differences.
+_REFINE_XATOL, _REFINE_EVALUATIONS, _MAX_DAMPING_RATIO = 1e-3, 80, 2.0
+#: Nelder-Mead stops when the misfit changes by less than this fraction of its starting value.
+_REFINE_FATOL = 1e-9
+_CURVATURE_STEPS = (0.002, 0.02)
+
+
+def _refine_oscillator(rss, f0: float, zeta0: float, n_eff: float):
+    """Least-squares (frequency, damping ratio) of an attachment from the grid's best point.
+
+    Nelder-Mead on (log f, log zeta); standard errors from the curvature of the misfit,
+    ``cov = 2 s^2 H^-1`` with ``s^2 = rss / n_eff``.  Returns (parameters, std, rss at the optimum).
+    """
+    def cost(x):
+        return rss(math.exp(x[0]), min(math.exp(x[1]), _MAX_DAMPING_RATIO))
+
+    x0 = np.array([math.log(f0), math.log(zeta0)])
+    res = scipy.optimize.minimize(cost, x0, method="Nelder-Mead",
+                                  options={"xatol": _REFINE_XATOL, "fatol": _REFINE_FATOL * cost(x0),
+                                           "maxfev": _REFINE_EVALUATIONS})
+    x = res.x if res.fun < cost(x0) else x0
+    f, zeta = math.exp(x[0]), min(math.exp(x[1]), _MAX_DAMPING_RATIO)
+    q0 = cost(x)
+    h = np.array(_CURVATURE_STEPS)
+    H = np.zeros((2, 2))
+    for a in range(2):
+        for b in range(2):
+            ea, eb = np.eye(2)[a] * h[a], np.eye(2)[b] * h[b]
+            H[a, b] = (cost(x + ea + eb) - cost(x + ea - eb) - cost(x - ea + eb) + cost(x - ea - eb)) / (4 * h[a] * h[b])
+    std = {}
+    try:
+        cov = 2 * (q0 / max(n_eff - 2, 1)) * np.linalg.inv(H)
+        if np.all(np.diag(cov) > 0):
+            std = {"frequency": float(f * math.sqrt(cov[0, 0])), "damping_ratio": float(zeta * math.sqrt(cov[1, 1]))}
+    except np.linalg.LinAlgError:
+        pass
+    return {"frequency": float(f), "damping_ratio": float(zeta)}, std, float(q0)
+
+
+def damping_pattern(result, d: int) -> DampingPattern | None:
+    """A linear damper across one storey hides in the identified C: look for its pattern
+    (``C = a M + b K + c e_s e_s^T``, ``e_s`` the storey's drift direction)."""
+    kinds = [k for k in mechanisms.library() if k.refit is Refit.DAMPING_PATTERN]
+    fits = {f.model: f for f in damping_models(result)}
+    ray = fits["rayleigh"]
+    if not kinds or not (ray.p_value < RAYLEIGH_P_VALUE and ray.misfit > RAYLEIGH_MISFIT):
+        return None
+    iu = np.triu_indices(d)
+    c = result.C[iu]
+    best = None
+    for s in range(d):
+        e = np.zeros(d)
+        e[s] = 1.0
+        if s > 0:
+            e[s - 1] = -1.0
+        P = np.outer(e, e)[iu]
+        A = np.column_stack([result.M[iu], result.K[iu], P])
+        coef, *_ = np.linalg.lstsq(A, c, rcond=None)
+        mis = float(np.linalg.norm(c - A @ coef) / np.linalg.norm(c))
+        if best is None or mis < best[1]:
+            best = (s, mis, coef)
+    s, mis, coef = best
+    kind = kinds[0]
+    cand = Candidate(kind.name, {"storey": s + 1}, {kind.fitted.name: float(coef[2])}, {},
+                     float(1.0 - mis / ray.misfit), Domain.PARAMETERS)
+    return DampingPattern(cand, {"rayleigh_misfit": ray.misfit, "rayleigh_p_value": ray.p_value,
+                                 "with_damper_misfit": mis, "coefficients": [float(x) for x in coef]})

@@ -1,0 +1,27 @@
+"""The diagnosis's decision thresholds, one name each, shared by every stage."""
+
+from __future__ import annotations
+
+__all__ = ["EXCESS", "EXPLAINED", "ACCEPTED", "NOTHING_TO_EXPLAIN", "BLOCK_S"]
+
+#: A residual above this multiple of its noise-only level counts as a mismatch: equation and replay
+#: residual RMS (:mod:`~momentid.diagnosis.residuals`), storey/run/window excess
+#: (:mod:`~momentid.diagnosis.locate`) and the kinematic check's weighted residual power per
+#: frequency bin (:mod:`~momentid.diagnosis.consistency`).  Noise alone gives ratios near 1; 1.3
+#: leaves room for the scatter of the estimates and the approximations of the noise propagation.
+EXCESS = 1.3
+
+#: A screened candidate must explain this share of the excess (on held-out blocks) to be named.
+EXPLAINED = 0.5
+
+#: ... and its augmented model must remove this share of the training runs' replay misfit above the
+#: noise (0.75: the misfit at least halves when noise is negligible).
+ACCEPTED = 0.75
+
+#: A fit's residual within 2 % of the noise-only level leaves nothing to explain (its "explained"
+#: share would divide by a difference of two nearly equal numbers).
+NOTHING_TO_EXPLAIN = 1.02
+
+#: Length (s) of the alternate time blocks of screening: fitted on even blocks, scored on odd ones.
+#: 1 s: several periods of the slowest mode, so a block's samples are not the neighbours' echo.
+BLOCK_S = 1.0

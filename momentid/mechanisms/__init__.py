@@ -1,0 +1,15 @@
+"""Mechanisms: the physics beyond the linear shear model, one module per kind.
+
+Each module declares a :class:`~momentid.mechanisms.base.MechanismKind` (parameters and bounds,
+MuJoCo or sensor effect, screening signature, refit, report wording) and registers it;
+:mod:`~momentid.mechanisms.registry` finds them all.  The lab builds truth rigs with them, the
+diagnosis screens with them.  See ``docs/mechanisms.md``.
+"""
+
+from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit, Target
+from momentid.mechanisms.registry import REGISTRY, get, library, load, names, register, rig_kinds, validate
+
+load()
+
+__all__ = ["GRAVITY", "MechanismKind", "Param", "Refit", "Target", "REGISTRY", "get", "library", "load",
+           "names", "register", "rig_kinds", "validate"]

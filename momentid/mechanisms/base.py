@@ -1,0 +1,337 @@
+"""The contract of a mechanism: one piece of physics beyond the linear shear model.
+
+A mechanism kind is a subclass of :class:`MechanismKind` in its own module of
+:mod:`momentid.mechanisms`, registered with :func:`momentid.mechanisms.registry.register`.
+It declares, in one place, everything the rest of the project needs to know about it:
+
+- its **name**, **target** (a storey, a floor or a sensor channel), **parameters** with their
+  SI units and physical bounds (a scenario's ``[truth]`` record is validated against them);
+- how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
+  :meth:`MechanismKind.added_mass_body`), or the **storey force** the simulator applies in its
+  control callback (:meth:`MechanismKind.storey_force`), or the **sensor model**
+  (:meth:`MechanismKind.distort` / :meth:`MechanismKind.correct`);
+- its **screening signature**: the columns of the equation residual it would explain
+  (:meth:`MechanismKind.screen_equation`), and for the table channel the replay residual
+  (:meth:`MechanismKind.replay_column`);
+- how the diagnosis **refits** it (:attr:`MechanismKind.refit`) and turns the fitted
+  coefficients back into a model record (:meth:`MechanismKind.as_records`);
+- its **report wording** (:meth:`MechanismKind.describe`).
+
+``truth_only`` kinds can be built into a rig (hidden scenarios) but are not in the diagnosis
+library: the diagnosis must call them "unexplained".
+
+This package sits below :mod:`momentid.lab` and :mod:`momentid.diagnosis`: it imports only
+:mod:`momentid.core`, :mod:`momentid.errors`, numpy and mujoco.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass, replace
+from typing import Callable, ClassVar
+
+import numpy as np
+
+from momentid.core.series import RunData
+from momentid.core.structure import Mechanism, Structure
+from momentid.errors import ModelError
+
+__all__ = ["GRAVITY", "Target", "Refit", "Param", "MechanismKind", "Screened", "EquationSignals"]
+
+GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
+
+
+class Target(enum.Enum):
+    """What a mechanism sits on: a storey (between floors i-1 and i), a floor, or a sensor channel."""
+
+    STOREY = "storey"
+    FLOOR = "floor"
+    CHANNEL = "channel"
+
+
+class Refit(enum.Enum):
+    """How the diagnosis sizes a screened candidate before it is re-simulated.
+
+    ``RESIMULATE``: a nonlinear storey force, refitted by errors-in-variables together with the
+    linear model, then its size searched by re-simulation.  ``ATTACHMENT``: a change of the rig the
+    identified model partly absorbed, kept on the lab's nominal model.  ``DAMPING_PATTERN``: a linear
+    term the identified C holds, read from its pattern.  ``CORRECT_DATA``: a sensor fault, undone on
+    the recordings, which are then re-identified.
+    """
+
+    RESIMULATE = "resimulate"
+    ATTACHMENT = "attachment"
+    DAMPING_PATTERN = "damping pattern"
+    CORRECT_DATA = "correct data"
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of a mechanism: name, SI unit, meaning and physical bounds.
+
+    ``low`` / ``high`` bound the value; ``low_open`` excludes ``low`` itself (``> low``);
+    ``example`` is a typical value on the paper's rig (docs, tests).
+    """
+
+    name: str
+    unit: str
+    meaning: str
+    low: float = -math.inf
+    high: float = math.inf
+    low_open: bool = False
+    example: float = 1.0
+
+    @property
+    def bounded(self) -> bool:
+        return self.low > -math.inf or self.high < math.inf
+
+    def within(self, value: float) -> bool:
+        """True when ``value`` is within the bounds."""
+        above = value > self.low if self.low_open else value >= self.low
+        return above and value <= self.high
+
+    def admits(self, value: float) -> bool:
+        """True when ``value`` is finite and within the bounds."""
+        return math.isfinite(value) and self.within(value)
+
+    def expected(self) -> str:
+        """The bounds in words, for error messages (``"a number > 0 (N)"``)."""
+        lo = f"{'>' if self.low_open else '>='} {self.low:g}" if self.low > -math.inf else ""
+        hi = f"<= {self.high:g}" if self.high < math.inf else ""
+        bounds = " and ".join(b for b in (lo, hi) if b)
+        return f"a number{' ' + bounds if bounds else ''} ({self.unit}): {self.meaning}"
+
+
+@dataclass(frozen=True)
+class Screened:
+    """A mechanism's fitted signature at one location, before the diagnosis names it a candidate."""
+
+    location: dict
+    parameters: dict
+    std: dict
+    explained: float
+
+
+@dataclass(frozen=True)
+class EquationSignals:
+    """Band-limited signals of the training runs, stacked in time, for equation screening.
+
+    Attributes
+    ----------
+    a, v, q : ndarray, shape (n, d)
+        Floor absolute accelerations (m/s^2), relative velocities (m/s), displacements (m).
+    added_mass : ndarray, shape (n, d)
+        Each sample's run's added masses (kg).
+    drift, drift_velocity : ndarray, shape (n, d)
+        Storey drifts (m) and their rates (m/s).
+    jerk : ndarray, shape (n, d)
+        Time derivative of ``a`` (m/s^3).
+    masses : ndarray, shape (d,)
+        Floor masses of the model screened against (kg).
+    C, K : ndarray, shape (d, d)
+        Damping (N s/m) and stiffness (N/m) matrices of that model.
+    sample_rate, f_top : float
+        Sample rate and the model's highest natural frequency (Hz).
+    attachment_response : callable
+        ``(a_j, frequency, damping_ratio) -> x``: absolute acceleration (n,) of a unit oscillator
+        driven at its base by ``a_j`` (the diagnosis's linear simulator).
+    """
+
+    a: np.ndarray
+    v: np.ndarray
+    q: np.ndarray
+    added_mass: np.ndarray
+    drift: np.ndarray
+    drift_velocity: np.ndarray
+    jerk: np.ndarray
+    masses: np.ndarray
+    C: np.ndarray
+    K: np.ndarray
+    sample_rate: float
+    f_top: float
+    attachment_response: Callable[[np.ndarray, float, float], np.ndarray]
+
+    @property
+    def storeys(self) -> int:
+        return self.a.shape[1]
+
+    def storey_columns(self, phi: np.ndarray, s: int) -> np.ndarray:
+        """Floor forces (n, d) of a force ``phi`` (n,) resisting storey ``s``'s drift (0-based)."""
+        e = np.zeros((len(phi), self.storeys))
+        e[:, s] = phi
+        return storey_to_floor(e)
+
+    def floor_columns(self, phi: np.ndarray, j: int) -> np.ndarray:
+        """Floor forces (n, d) of a force ``phi`` (n,) on floor ``j`` alone (0-based)."""
+        e = np.zeros((len(phi), self.storeys))
+        e[:, j] = phi
+        return e
+
+
+#: ``fit(columns, confounds, location, to_params) -> list[Screened]``: the screening's held-out least
+#: squares of the residual on signature ``columns`` and ``confounds`` (each (n, d) floor forces);
+#: ``to_params(coef, std) -> (parameters, std)`` names the fitted coefficients.  Empty when the
+#: columns cannot be fitted (one of them is zero).
+Fitter = Callable[[list, list, dict, Callable], "list[Screened]"]
+
+
+def storey_to_floor(f: np.ndarray) -> np.ndarray:
+    """Generalised floor forces from storey forces resisting the drifts: shape (..., d)."""
+    out = -f.copy()
+    out[..., :-1] += f[..., 1:]
+    return out
+
+
+def drifts(q: np.ndarray) -> np.ndarray:
+    """Storey drifts ``q_i - q_(i-1)`` from floor displacements (..., d)."""
+    out = q.copy()
+    out[..., 1:] -= q[..., :-1]
+    return out
+
+
+def one_coefficient(name: str) -> Callable[[np.ndarray, np.ndarray], tuple[dict, dict]]:
+    """Parameters and standard errors of a signature whose coefficient is the parameter itself."""
+    return lambda c, e: ({name: float(c[0])}, {name: float(e[0])})
+
+
+class MechanismKind:
+    """Base class of a mechanism kind; see the module docstring for the contract.
+
+    Subclasses set the class attributes and override the hooks their physics needs; the
+    defaults are "no effect".  One instance per kind lives in the registry.
+    """
+
+    #: Identifier used in scenarios' ``[truth]``, reports and the CLI.
+    name: ClassVar[str]
+    #: What the mechanism sits on.
+    target: ClassVar[Target]
+    #: Parameters of the model record (a scenario's ``[truth]`` entry), with bounds.
+    params: ClassVar[tuple[Param, ...]] = ()
+    #: The coefficient the screening fits and the refit refines (None: not diagnosable alone).
+    fitted: ClassVar[Param | None] = None
+    #: Built into rigs but outside the diagnosis library (its answer is "unexplained").
+    truth_only: ClassVar[bool] = False
+    #: A storey force the MJCF cannot express, applied by the simulator's control callback.
+    callback: ClassVar[bool] = False
+    #: Its storey force takes a fraction of the storey's own stiffness (the callback needs it).
+    needs_stiffness: ClassVar[bool] = False
+    #: A sensor fault the kinematic check (``a_j = zdd + q_j''``) tests: channels found consistent
+    #: rule it out.
+    kinematic: ClassVar[bool] = False
+    #: How the diagnosis sizes it (None for truth-only kinds).
+    refit: ClassVar[Refit | None] = None
+    #: One line for the docs and ``describe``.
+    summary: ClassVar[str] = ""
+
+    # ---------------------------------------------------------------- the record
+
+    def validate(self, mech: Mechanism, storeys: int) -> None:
+        """Raise :class:`ModelError` unless ``mech`` is a valid record of this kind in a rig of
+        ``storeys`` storeys (location in range, every parameter present and within bounds)."""
+        if self.target is Target.CHANNEL:
+            raise ModelError(f"mechanism {self.name!r} is a sensor fault: it has no place in the rig's model")
+        if not 1 <= mech.location <= storeys:
+            raise ModelError(f"mechanism {self.name!r}: {self.target.value} {mech.location}, "
+                             f"expected 1..{storeys}")
+        values = dict(mech.parameters)
+        for p in self.params:
+            if p.name not in values or not p.admits(values[p.name]):
+                raise ModelError(f"mechanism {self.name!r}: {p.name} = {values.get(p.name)!r}, "
+                                 f"expected {p.expected()}")
+        extra = set(values) - {p.name for p in self.params}
+        if extra:
+            raise ModelError(f"mechanism {self.name!r}: unknown parameters {sorted(extra)}, "
+                             f"expected {[p.name for p in self.params]}")
+
+    # ---------------------------------------------------------------- the lab: MuJoCo model and sensors
+
+    def storey_tendon(self, mech: Mechanism, stiffness: float, damping: float, weight_above: float,
+                      height: float) -> tuple[float, float]:
+        """(stiffness N/m, damping N s/m) of the storey tendon ``mech`` sits on, changed by it.
+
+        ``weight_above`` is the mass (kg) of the floors and added masses above the storey,
+        ``height`` the storey's height (m).
+        """
+        return stiffness, damping
+
+    def added_mass_body(self, mech: Mechanism, body, mass: float) -> None:
+        """Change the MJCF body (``mujoco.MjsBody``) of the added mass ``mass`` (kg) on ``mech``'s floor."""
+
+    def storey_force(self, params: dict, drift, drift_velocity, time: float, stiffness: float | None):
+        """Force (N) the storey exerts against its drift (positive resists); floats or arrays.
+
+        Only for ``callback`` kinds.  ``params`` maps parameter names to values; ``time`` is the
+        time since the run started (s); ``stiffness`` the storey's linear stiffness (N/m) when
+        ``needs_stiffness``.
+        """
+        raise NotImplementedError(f"{self.name} is not a callback storey force")
+
+    def distort(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """A sensor fault: the reading (n,) of a channel whose true signal is ``x`` (n,)."""
+        raise NotImplementedError(f"{self.name} is not a sensor fault")
+
+    def correct(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """A sensor fault undone: the true signal (n,) from the faulty reading ``x`` (n,)."""
+        raise NotImplementedError(f"{self.name} is not a sensor fault")
+
+    def correct_run(self, run: RunData, location: dict, params: dict) -> RunData:
+        """``run`` with this sensor fault undone on ``location['channel']`` (unchanged if absent)."""
+        channel = location["channel"]
+        if not run.has(channel):
+            return run
+        j = run.channels.index(channel)
+        values = run.values.copy()
+        values[:, j] = self.correct(run.time, run.values[:, j], params)
+        return replace(run, values=values)
+
+    # ---------------------------------------------------------------- the diagnosis
+
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, index: int) -> list[Screened]:
+        """Fits of this kind's signature in the floor-force residual at storey/floor ``index`` (0-based).
+
+        ``fit`` (:data:`Fitter`) is the screening's held-out least squares: each column an (n, d)
+        array of floor forces; confounds are linear terms the identified model may have absorbed.
+        Returns the fits, none when the signature does not apply here.
+        """
+        return []
+
+    def replay_column(self, sim: np.ndarray, sim_rate: np.ndarray, step: np.ndarray):
+        """Signature of a fault on the table channel in the replay residual, or None.
+
+        ``sim``: band-limited replayed floor accelerations (n, d); ``sim_rate``: their time
+        derivative; ``step``: the replay of a unit table acceleration.  Returns
+        ``(column (n, d), to_params)`` with ``to_params(c, e) -> (params, std)``.
+        """
+        return None
+
+    def force_signal(self, params: dict, drift: np.ndarray, drift_velocity: np.ndarray,
+                     weight_above: float) -> np.ndarray:
+        """For ``RESIMULATE`` kinds: the storey force (n,) per unit of the fitted coefficient."""
+        raise NotImplementedError(f"{self.name} has no storey force signal")
+
+    def physical(self, params: dict) -> bool:
+        """A passive rig: the fitted coefficient within its physical bounds (absent: 0)."""
+        return self.fitted is None or not self.fitted.bounded or self.fitted.within(params.get(self.fitted.name, 0.0))
+
+    def as_records(self, location: dict, params: dict) -> tuple[Mechanism, ...]:
+        """The model records (for :func:`momentid.lab.rig.build_spec`) of a diagnosed candidate."""
+        if self.target is Target.CHANNEL:
+            return ()
+        return (Mechanism(self.name, location[self.target.value],
+                          tuple((p.name, params[p.name]) for p in self.params)),)
+
+    def replay_structure(self, structure: Structure, location: dict, params: dict, static: bool) -> Structure:
+        """The structure to build the augmented model on (a mechanism expressed through it)."""
+        return structure
+
+    def in_lab_terms(self, params: dict, std: dict, location: dict,
+                     nominal: Structure | None) -> tuple[dict, dict]:
+        """Fitted parameters and standard errors as the report states them."""
+        return params, std
+
+    def describe(self, location: dict, params: dict, std: dict) -> str:
+        """The report's sentence naming this mechanism with its fitted parameters."""
+        where = ", ".join(f"{k} {v}" for k, v in location.items())
+        p = ", ".join(f"{k} = {v:.4g}" + (f" +/- {std[k]:.2g}" if k in std else "") for k, v in params.items())
+        return f"Best explanation: {self.name.replace('_', ' ')} at {where}: {p}."

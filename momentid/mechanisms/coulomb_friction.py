@@ -1,0 +1,52 @@
+"""Coulomb friction across a storey: a force of constant size opposing the storey's drift velocity."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.registry import register
+
+#: Velocity scale (m/s) of the smoothed Coulomb law ``F tanh(v / FRICTION_SMOOTHING)`` the rig
+#: simulates and the refit fits: a sign function for any drift velocity the rig reaches (its
+#: storeys move at cm/s), smooth enough for RK4 at a 1 ms step.
+FRICTION_SMOOTHING = 5e-4
+
+#: Screening does not use the law's scale: its drift velocities are measured, band-limited and noisy,
+#: and a sharp sign of a noisy velocity flips at every zero crossing, so the screening signature is
+#: ``tanh(v / (SCREENING_SMOOTHING x RMS(v)))`` (a sign for all but the slowest 5 % of the motion).
+SCREENING_SMOOTHING = 0.05
+
+#: Smoothing scale (m/s) of the screening signature when a storey does not move at all.
+_STILL = 1e-9
+
+
+def smooth_sign(x):
+    """``tanh(x)`` of a float (``math.tanh``, the simulator's callback) or of an array (``np.tanh``)."""
+    return math.tanh(x) if isinstance(x, float) else np.tanh(x)
+
+
+@register
+class CoulombFriction(MechanismKind):
+    name = "coulomb_friction"
+    target = Target.STOREY
+    params = (Param("force", "N", "friction force, opposes the storey drift velocity", low=0.0, low_open=True, example=0.3),)
+    fitted = params[0]
+    callback = True
+    refit = Refit.RESIMULATE
+    summary = "F tanh(v / FRICTION_SMOOTHING) across a storey (v: drift velocity)"
+
+    def storey_force(self, params, drift, drift_velocity, time, stiffness):
+        return params["force"] * smooth_sign(drift_velocity / FRICTION_SMOOTHING)
+
+    def screen_equation(self, signals, fit, index):
+        s, drift, velocity = index, signals.drift[:, index], signals.drift_velocity[:, index]
+        confounds = [signals.storey_columns(drift, s), signals.storey_columns(velocity, s)]
+        eps = SCREENING_SMOOTHING * float(np.sqrt(np.mean(velocity ** 2))) or _STILL
+        return fit([signals.storey_columns(np.tanh(velocity / eps), s)], confounds,
+                   {"storey": s + 1}, one_coefficient("force"))
+
+    def force_signal(self, params, drift, drift_velocity, weight_above):
+        return np.tanh(drift_velocity / FRICTION_SMOOTHING)

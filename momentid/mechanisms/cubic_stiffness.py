@@ -1,0 +1,28 @@
+"""Cubic stiffness of a storey: a force ``k3 x^3`` on its drift ``x`` (k3 > 0 hardens, < 0 softens)."""
+
+from __future__ import annotations
+
+from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.registry import register
+
+
+@register
+class CubicStiffness(MechanismKind):
+    name = "cubic_stiffness"
+    target = Target.STOREY
+    params = (Param("k3", "N/m^3", "cubic stiffness, + hardening / - softening", example=3.5e7),)
+    fitted = params[0]
+    callback = True
+    refit = Refit.RESIMULATE
+    summary = "k3 x^3 across a storey (x: drift)"
+
+    def storey_force(self, params, drift, drift_velocity, time, stiffness):
+        return params["k3"] * drift * drift * drift
+
+    def screen_equation(self, signals, fit, index):
+        s, drift = index, signals.drift[:, index]
+        confounds = [signals.storey_columns(drift, s), signals.storey_columns(signals.drift_velocity[:, s], s)]
+        return fit([signals.storey_columns(drift ** 3, s)], confounds, {"storey": s + 1}, one_coefficient("k3"))
+
+    def force_signal(self, params, drift, drift_velocity, weight_above):
+        return drift ** 3

@@ -1,0 +1,26 @@
+"""A linear viscous damper across one storey, beyond the Rayleigh damping."""
+
+from __future__ import annotations
+
+from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.registry import register
+
+
+@register
+class ExtraDamper(MechanismKind):
+    name = "extra_damper"
+    target = Target.STOREY
+    params = (Param("c", "N*s/m", "viscous damper across the storey", low=0.0, low_open=True, example=3.0),)
+    fitted = params[0]
+    refit = Refit.DAMPING_PATTERN
+    summary = "c v across a storey (v: drift velocity), in the storey tendon's damping"
+
+    def storey_tendon(self, mech, stiffness, damping, weight_above, height):
+        return stiffness, damping + mech.get("c")
+
+    def screen_equation(self, signals, fit, index):
+        s = index
+        # A linear damper hides in an identified C: screened against the drift alone (the damping
+        # pattern of the identified C is the diagnosis's other test of it).
+        return fit([signals.storey_columns(signals.drift_velocity[:, s], s)],
+                   [signals.storey_columns(signals.drift[:, s], s)], {"storey": s + 1}, one_coefficient("c"))

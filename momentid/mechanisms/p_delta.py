@@ -1,0 +1,69 @@
+"""P-Delta: the weight above a storey, leaning on it as it drifts, takes ``g W / h`` from its stiffness.
+
+In a rig the loss is ``factor x g x (mass above) / height`` (1 = the full gravity effect).  The
+diagnosis cannot tell the floors' own weight from the stiffness (it is the same in every run), so
+it fits the part the added masses change: ``weight_per_height`` (1/m) times ``-g (added mass
+above) x drift``, and reports it as ``factor`` when the lab states its storey heights.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from momentid.core.structure import Mechanism
+from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.registry import register
+
+
+@register
+class PDelta(MechanismKind):
+    name = "p_delta"
+    target = Target.STOREY
+    params = (Param("factor", "1", "share of the full gravity P-Delta of the weight above", low=0.0,
+                    example=1.0),)
+    fitted = Param("weight_per_height", "1/m", "factor / storey height", low=0.0, low_open=True)
+    refit = Refit.RESIMULATE
+    summary = "-factor g (mass above) / h x drift across a storey"
+
+    def storey_tendon(self, mech, stiffness, damping, weight_above, height):
+        return stiffness - mech.get("factor") * GRAVITY * weight_above / height, damping
+
+    def screen_equation(self, signals, fit, index):
+        s = index
+        above = signals.added_mass[:, s:].sum(axis=1)
+        if not np.any(above > 0):   # no run adds mass above: indistinguishable from the stiffness
+            return []
+        drift = signals.drift[:, s]
+        confounds = [signals.storey_columns(drift, s), signals.storey_columns(signals.drift_velocity[:, s], s)]
+        return fit([signals.storey_columns(-GRAVITY * above * drift, s)], confounds, {"storey": s + 1},
+                   one_coefficient("weight_per_height"))
+
+    def force_signal(self, params, drift, drift_velocity, weight_above):
+        return -GRAVITY * weight_above * drift
+
+    def as_records(self, location, params):
+        # Built with factor 1 on a structure whose storey height is 1 / weight_per_height.
+        return (Mechanism(self.name, location["storey"], (("factor", 1.0),)),)
+
+    def replay_structure(self, structure, location, params, static):
+        """The structure whose MJCF ``p_delta`` (factor 1) loses ``weight_per_height x g x weight
+        above``: the storey's height is set to 1 / weight_per_height; with ``static`` the loss of the
+        floors' own weight, which an identified stiffness already holds, is added back."""
+        s = location["storey"] - 1
+        h_eff = 1.0 / params["weight_per_height"] if params["weight_per_height"] > 0 else float("inf")
+        k = list(structure.storey_stiffness)
+        if static:
+            k[s] += GRAVITY * sum(structure.masses[s:]) / h_eff
+        return replace(structure, storey_stiffness=tuple(k), storey_heights=tuple(
+            h_eff if i == s else h for i, h in enumerate(structure.storey_heights)))
+
+    def in_lab_terms(self, params, std, location, nominal):
+        if nominal is None:   # no stated storey height: weight_per_height it stays
+            return params, std
+        h = nominal.storey_heights[location["storey"] - 1]
+        params = {**params, "factor": params["weight_per_height"] * h}
+        if "weight_per_height" in std:
+            std = {**std, "factor": std["weight_per_height"] * h}
+        return params, std

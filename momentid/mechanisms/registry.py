@@ -1,0 +1,73 @@
+"""The registry of mechanism kinds: every module of :mod:`momentid.mechanisms` declares its own.
+
+A kind registers itself with the :func:`register` class decorator when its module is imported;
+:func:`load` imports every module of the package (``pkgutil.iter_modules``), so adding a
+mechanism is one new file in ``momentid/mechanisms/`` and nothing else.  See ``docs/mechanisms.md``.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from types import ModuleType
+
+from momentid.core.structure import Mechanism
+from momentid.errors import ModelError
+from momentid.mechanisms.base import MechanismKind, Target
+
+__all__ = ["REGISTRY", "register", "load", "get", "names", "library", "rig_kinds", "validate"]
+
+#: name -> kind, in the order the package's modules are imported (alphabetical).
+REGISTRY: dict[str, MechanismKind] = {}
+
+#: Modules of the package that declare no kind.
+_INFRASTRUCTURE = {"base", "registry"}
+
+
+def register(cls: type[MechanismKind]) -> type[MechanismKind]:
+    """Class decorator: put one instance of ``cls`` in :data:`REGISTRY` under ``cls.name``."""
+    if not isinstance(getattr(cls, "name", None), str) or not isinstance(getattr(cls, "target", None), Target):
+        raise ModelError(f"{cls.__qualname__}: a mechanism kind needs a str `name` and a Target `target`")
+    known = REGISTRY.get(cls.name)
+    if known is not None and type(known).__qualname__ != cls.__qualname__:
+        raise ModelError(f"mechanism {cls.name!r} registered twice ({type(known).__module__} and {cls.__module__})")
+    REGISTRY[cls.name] = cls()
+    return cls
+
+
+def load(package: ModuleType | None = None) -> dict[str, MechanismKind]:
+    """Import every module of ``package`` (default: :mod:`momentid.mechanisms`) so its kinds register."""
+    if package is None:
+        package = importlib.import_module("momentid.mechanisms")
+    for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
+        if info.name not in _INFRASTRUCTURE and not info.name.startswith("_"):
+            importlib.import_module(f"{package.__name__}.{info.name}")
+    return REGISTRY
+
+
+def get(name: str) -> MechanismKind:
+    """The kind called ``name``; :class:`ModelError` naming the known ones otherwise."""
+    try:
+        return REGISTRY[name]
+    except KeyError:
+        raise ModelError(f"unknown mechanism {name!r}: expected one of {', '.join(REGISTRY)}") from None
+
+
+def names() -> tuple[str, ...]:
+    """Every registered kind's name."""
+    return tuple(REGISTRY)
+
+
+def library() -> tuple[MechanismKind, ...]:
+    """The kinds the diagnosis can name (every kind but the truth-only ones)."""
+    return tuple(k for k in REGISTRY.values() if not k.truth_only)
+
+
+def rig_kinds() -> tuple[MechanismKind, ...]:
+    """The kinds a rig's model can carry (a scenario's ``[truth]``): storey and floor kinds."""
+    return tuple(k for k in REGISTRY.values() if k.target is not Target.CHANNEL)
+
+
+def validate(mech: Mechanism, storeys: int) -> None:
+    """Raise :class:`ModelError` unless ``mech`` is a valid record of a registered rig kind."""
+    get(mech.type).validate(mech, storeys)

@@ -1,0 +1,218 @@
+"""The mechanism registry: every kind round-trips through the rig, and a new kind is one new file.
+
+Every registered rig kind is built into a rig and stepped (a replay raises on any MuJoCo warning),
+and its force on the floors is held to its law; every sensor kind's distortion is held to the lab's
+sensor model.  The worked example of ``docs/mechanisms.md`` is dropped into the package as a file
+and must be found, parsed from a ``[truth]`` table, simulated and screened with no other edit.
+"""
+
+from __future__ import annotations
+
+import re
+import sys
+import tomllib
+from types import SimpleNamespace
+
+import mujoco
+import numpy as np
+import pytest
+
+from momentid import mechanisms
+from momentid.core.analytic import modal_properties
+from momentid.core.series import RunData
+from momentid.core.structure import Mechanism
+from momentid.diagnosis.residuals import ResidualRow, floor_residual
+from momentid.diagnosis.screening import Domain, screen_equation
+from momentid.errors import ModelError, ScenarioError
+from momentid.lab import rig
+from momentid.lab import simulation as sim
+from momentid.lab.scenario import ChannelFault, Sensors, parse_scenario
+from momentid.lab.sensors import measure
+from momentid.mechanisms import registry
+from momentid.mechanisms.base import GRAVITY, Target, storey_to_floor
+from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
+
+from conftest import ROOT, SCENARIOS, load
+
+#: The paper's rig (3 storeys) with added masses on every floor, so floor kinds have a body to act on.
+ADDED = np.array([1.0, 1.0, 2.0])
+FS = 500.0          # Hz: the rig's modes are below 20 Hz, RK4 at 2 ms resolves them
+DURATION = 8.0      # s: longer than the stiffness_loss example's onset (5 s)
+
+
+def _structure():
+    return load("hidden/clean").structure
+
+
+def _record(kind, location: int) -> Mechanism:
+    return Mechanism(kind.name, location, tuple((p.name, p.example) for p in kind.params))
+
+
+def _table_run(duration=DURATION, fs=FS) -> RunData:
+    """A table acceleration (m/s^2) sweeping through the rig's modes, tapered at both ends."""
+    t = np.arange(int(duration * fs)) / fs
+    zdd = 2.0 * np.sin(2 * np.pi * (1.0 + 1.5 * t) * t) * np.sin(np.pi * t / duration) ** 2
+    return RunData("sweep", ADDED.copy(), t, ("zdd",), zdd[:, None])
+
+
+def _storey_forces_on_floors(structure, mechs, qpos, qvel, time):
+    """Generalised forces on the floor joints (passive + callback) of the rig built with ``mechs``."""
+    model = rig.compile_model(rig.build_spec(structure, ADDED, mechanisms=mechs))
+    data = mujoco.MjData(model)
+    data.qpos[1:], data.qvel[1:], data.time = qpos, qvel, time
+    if rig.needs_callback(mechs):
+        sim._StoreyForces(model, mechs, structure)(model, data)
+    mujoco.mj_forward(model, data)
+    return data.qfrc_passive[1:] + data.qfrc_applied[1:]
+
+
+@pytest.mark.parametrize("name", [k.name for k in mechanisms.rig_kinds()])
+def test_every_rig_kind_builds_steps_and_changes_the_response(name):
+    kind, structure = mechanisms.get(name), _structure()
+    mech = _record(kind, 2)
+    run = _table_run()
+    with_it = sim.replay(structure, (mech,), run)       # SimulationError on any MuJoCo warning
+    without = sim.replay(structure, (), run)
+    change = np.max(np.abs(with_it["q"] - without["q"])) / np.max(np.abs(without["q"]))
+    # Every example value is a mechanism the diagnosis must see on this rig: it moves a floor by
+    # well over 0.1 % of the response (the smallest, the storey damper, by several percent).
+    assert np.all(np.isfinite(with_it["q"])) and change > 1e-3, change
+
+
+#: Storey force (N) resisting drift ``x`` (m) at drift velocity ``v`` (m/s) and time ``t`` (s), written
+#: out independently of the kinds; ``W``: mass above the storey (kg), ``h``: its height (m), ``k``: its
+#: stiffness (N/m).
+LAWS = {
+    "coulomb_friction": lambda p, x, v, t, W, h, k: p["force"] * np.tanh(v / FRICTION_SMOOTHING),
+    "cubic_stiffness": lambda p, x, v, t, W, h, k: p["k3"] * x ** 3,
+    "extra_damper": lambda p, x, v, t, W, h, k: p["c"] * v,
+    "p_delta": lambda p, x, v, t, W, h, k: -p["factor"] * GRAVITY * W / h * x,
+    "stiffness_loss": lambda p, x, v, t, W, h, k: -p["fraction"] * k * x if t >= p["time"] else 0.0,
+}
+
+
+@pytest.mark.parametrize("name", sorted(LAWS))
+@pytest.mark.parametrize("time", [1.0, 6.0])   # before and after the stiffness_loss example's onset
+def test_storey_kinds_apply_their_law(name, time):
+    kind, structure = mechanisms.get(name), _structure()
+    rng = np.random.default_rng(3)
+    qpos, qvel = rng.normal(0, 3e-3, 3), rng.normal(0, 3e-2, 3)
+    mech, s = _record(kind, 2), 1
+    x, v = rig.drifts(qpos)[s], rig.drifts(qvel)[s]
+    above = float(np.sum(np.asarray(structure.masses[s:]) + ADDED[s:]))
+    f = np.zeros(3)
+    f[s] = LAWS[name](dict(mech.parameters), x, v, time, above, structure.storey_heights[s],
+                      structure.storey_stiffness[s])
+    got = (_storey_forces_on_floors(structure, (mech,), qpos, qvel, time)
+           - _storey_forces_on_floors(structure, (), qpos, qvel, time))
+    # Two evaluations of the same forces (MuJoCo's tendons and callback vs. the law): round-off of
+    # the linear forces (~1 N here) apart.
+    assert np.allclose(got, storey_to_floor(f), rtol=1e-9, atol=1e-9)
+
+
+def test_flexible_added_mass_is_its_mass_on_a_spring_and_damper():
+    kind = mechanisms.get("flexible_added_mass")
+    mech = _record(kind, 3)
+    model = rig.compile_model(rig.build_spec(_structure(), ADDED, mechanisms=(mech,)))
+    joint = model.joint("added3_x")
+    k, c, m = float(model.jnt_stiffness[joint.id]), float(model.dof_damping[joint.dofadr[0]]), ADDED[2]
+    w = 2 * np.pi * mech.get("frequency")
+    # The attachment's frequency and damping ratio are exactly those stated (round-off apart).
+    assert np.isclose(np.sqrt(k / m), w, rtol=1e-12)
+    assert np.isclose(c / (2 * m * w), mech.get("damping_ratio"), rtol=1e-12)
+
+
+#: Each sensor kind's parameter in the lab's sensor model (``[sensors.channel.*]``).
+CHANNEL_FAULTS = {"sensor_delay": "clock_offset", "sensor_gain": "gain", "sensor_bias": "bias"}
+
+
+@pytest.mark.parametrize("name", [k.name for k in mechanisms.REGISTRY.values() if k.target is Target.CHANNEL])
+def test_sensor_kinds_match_the_lab_sensor_model_and_undo(name):
+    kind = mechanisms.get(name)
+    value = kind.fitted.example
+    t = np.arange(4000) / 1000.0
+    x = np.sin(2 * np.pi * 2.0 * t)
+    distorted = kind.distort(t, x, {kind.fitted.name: value})
+    inner = slice(100, -100)   # away from the ends, where a shifted record has no samples to read
+    # Undoing a fault by interpolation: linear interpolation of a 2 Hz sine at 1 kHz, twice, errs
+    # by ~(2 pi 2 / 1000)^2 / 8 ~ 2e-5 of its amplitude; 1e-4 bounds it.
+    assert np.max(np.abs(kind.correct(t, distorted, {kind.fitted.name: value})[inner] - x[inner])) < 1e-4
+    if name in CHANNEL_FAULTS:
+        channels = ("zdd", "z", "zd", "a1", "q1", "v1")
+        run = RunData("r", np.zeros(1), t, channels, np.column_stack([x] * len(channels)))
+        fault = ChannelFault(**{CHANNEL_FAULTS[name]: value})
+        lab = measure(run, Sensors(faults=(("a1", fault),)), seed=0, run_index=0)["a1"]
+        # The lab shifts by cubic interpolation, the kind by linear: the difference above, again.
+        assert np.max(np.abs(lab[inner] - distorted[inner])) < 1e-4
+
+
+def test_truth_records_are_validated_against_the_parameter_bounds():
+    structure = _structure()
+    bad = Mechanism("coulomb_friction", 2, (("force", -0.3),))
+    with pytest.raises(ModelError, match="force = -0.3"):
+        rig.build_spec(structure, None, mechanisms=(bad,))
+    with pytest.raises(ModelError, match="storey 4"):
+        rig.build_spec(structure, None, mechanisms=(Mechanism("extra_damper", 4, (("c", 1.0),)),))
+    data = tomllib.loads((SCENARIOS / "hidden" / "friction_storey2.toml").read_text())
+    data["truth"]["mechanisms"][0]["force"] = -0.3
+    with pytest.raises(ScenarioError, match=r"force. = -0.3: expected a number > 0 \(N\)"):
+        parse_scenario(data, source=SCENARIOS / "hidden" / "friction.toml")
+    with pytest.raises(ModelError, match="unknown mechanism 'no_such'"):
+        mechanisms.get("no_such")
+
+
+def _worked_example() -> str:
+    """The mechanism file shown in ``docs/mechanisms.md``."""
+    doc = (ROOT / "docs" / "mechanisms.md").read_text()
+    return re.search(r"<!-- quadratic_damper.py -->\s*```python\n(.*?)```", doc, re.S).group(1)
+
+
+@pytest.fixture
+def new_kind_file(tmp_path, monkeypatch):
+    """The worked example dropped into the package (a folder on its search path) and registered."""
+    folder = tmp_path / "more_mechanisms"
+    folder.mkdir()
+    (folder / "quadratic_damper.py").write_text(_worked_example())
+    monkeypatch.setattr(mechanisms, "__path__", [*mechanisms.__path__, str(folder)])
+    assert "quadratic_damper" not in registry.REGISTRY
+    try:
+        registry.load()
+        yield registry.get("quadratic_damper")
+    finally:
+        registry.REGISTRY.pop("quadratic_damper", None)
+        sys.modules.pop("momentid.mechanisms.quadratic_damper", None)
+
+
+def test_a_new_mechanism_file_is_all_it_takes(new_kind_file):
+    kind = new_kind_file
+    assert kind in mechanisms.library() and kind in mechanisms.rig_kinds()
+    # A hidden scenario's [truth] takes it ...
+    data = tomllib.loads((SCENARIOS / "hidden" / "clean.toml").read_text())
+    data["truth"] = {"mechanisms": [{"type": "quadratic_damper", "storey": 2, "c2": 300.0}]}
+    scenario = parse_scenario(data, source=SCENARIOS / "hidden" / "quadratic.toml")
+    assert scenario.truth == (Mechanism("quadratic_damper", 2, (("c2", 300.0),)),)
+    # ... the simulator applies its law in the callback ...
+    structure = scenario.structure
+    rng = np.random.default_rng(5)
+    qpos, qvel = rng.normal(0, 3e-3, 3), rng.normal(0, 3e-2, 3)
+    got = (_storey_forces_on_floors(structure, scenario.truth, qpos, qvel, 0.0)
+           - _storey_forces_on_floors(structure, (), qpos, qvel, 0.0))
+    v = rig.drifts(qvel)[1]
+    # Same force through MuJoCo's passive forces and the callback: round-off apart.
+    assert np.allclose(got, storey_to_floor(np.array([0.0, 300.0 * v * abs(v), 0.0])), rtol=1e-9, atol=1e-9)
+    # ... and the diagnosis screens for it: in the equation residual of a rig carrying it, it is the
+    # candidate that explains the most, at its storey, with its coefficient.
+    run = _table_run()
+    out = sim.replay(structure, scenario.truth, run)
+    signals = {"a": out["a"], "v": out["v"], "q": out["q"]}
+    model = SimpleNamespace(M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
+                            mu=structure.rayleigh_mu)
+    residual = floor_residual(model, signals, run.added_mass)
+    row = ResidualRow(run, signals, residual, np.zeros_like(residual))
+    f_top = float(modal_properties(model.M, model.C, model.K).frequency.max())
+    # noise-free: the noise floor is the residual's own round-off scale
+    best = max(screen_equation(model, (row,), 1e-9 * np.sqrt(np.mean(residual ** 2, axis=0)), f_top,
+                               Domain.EQUATION), key=lambda c: c.explained)
+    assert (best.mechanism, best.location) == ("quadratic_damper", {"storey": 2})
+    # The replay's residual is the force itself, up to RK4's error at 2 ms: 1 % on the coefficient.
+    assert best.explained > 0.99 and abs(best.parameters["c2"] - 300.0) < 3.0

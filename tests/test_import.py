@@ -18,6 +18,7 @@ import pytest
 
 import momentid as mi
 from momentid.cli import main
+from momentid.core.structure import LabStatement
 from momentid.errors import ScenarioError, SensorDataError
 from momentid.io.importer import import_folder, import_recording, read_csv_run
 
@@ -176,6 +177,34 @@ def test_a_long_file_reads_every_sample(tmp_path):
     _, channels, values = read_csv_run(path, 3)
     # repr() round-trips float64 exactly, so the parse must give back every bit.
     assert values.shape == (n, 10) and channels == FULL and np.array_equal(values, data[:, 1:])
+
+
+def test_a_lab_without_a_nominal_model_states_what_it_knows(tmp_path, sim):
+    folder = write_lab(tmp_path / "lab", sim)
+    path = folder / "experiment.toml"
+    text = path.read_text()
+    for line in text.splitlines():
+        if line.startswith(("storey_stiffness", "rayleigh_")):
+            text = text.replace(line + "\n", "")
+    path.write_text(text.replace("storey_height = 0.3\n",
+                                 "storey_height = 0.3\n\n[sensors]\nnoise = {a = 0.01, zdd = 0.02}\n"))
+    exp = import_folder(folder)
+    assert exp.structure is None
+    assert exp.statement == LabStatement(storeys=3, masses=sim.structure.masses, storey_heights=(0.3,) * 3,
+                                            noise=(("zdd", 0.02), ("a", 0.01)))
+    back = mi.read_recording(import_recording(folder, tmp_path / "lab.mcap"))
+    assert back.structure is None and back.statement == exp.statement
+
+
+def test_storeys_alone_are_a_statement_without_masses(tmp_path, sim):
+    folder = write_lab(tmp_path / "lab", sim)
+    path = folder / "experiment.toml"
+    text = path.read_text()
+    keep = [line for line in text.splitlines()
+            if not line.startswith(("masses", "storey_stiffness", "rayleigh_", "storey_height"))]
+    path.write_text("\n".join(keep) + "\n")
+    exp = import_folder(folder)
+    assert exp.structure is None and exp.statement == LabStatement(storeys=3)
 
 
 # ----------------------------------------------------------------------------- bad CSV files

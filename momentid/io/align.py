@@ -260,23 +260,37 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
         raise SensorDataError(f"{records[0].path}: the table does not move ({table_rms:.3g} m/s^2 RMS in "
                               f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz on its most active axis); expected "
                               f"at least {STILL_RMS:g} m/s^2")
-    starts, signs, links = [0], [1], [(Alignment.REFERENCE, float("nan"), 1.0, ())]
-    for rec, ch, (g, j, band) in zip(records[1:], channels[1:], axes[1:]):
+    links = [_Link(start=0, alignment=Alignment.REFERENCE, correlation=1.0, clock_error=float("nan"))]
+    for rec, ch, (_, _, band) in zip(records[1:], channels[1:], axes[1:]):
         rms = float(np.sqrt(np.mean(band ** 2)))
         if rms < STILL_FRACTION * table_rms:
             raise SensorDataError(f"{rec.path}: sensor {ch} does not move ({rms:.3g} m/s^2 RMS in "
                                   f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz, the table {table_rms:.3g}); "
                                   f"expected a sensor fixed to the floor, moving with the table")
-        start, link = _offset(records[0], rec, ch, axes[0][2], band, step)
-        starts.append(start)
-        signs.append(1 if link[1] > 0 else -1)
-        links.append((link[0], link[2], abs(link[1]), link[3]))
-    return _assemble(records, channels, axes, starts, signs, links, step)
+        links.append(_offset(records[0], rec, ch, axes[0][2], band, step))
+    return _assemble(records, channels, axes, links, step)
+
+
+@dataclass(frozen=True)
+class _Link:
+    """How one sensor joins the table: its first sample's index on the table's grid, how that was
+    found, the band-limited correlation with the table there (its sign is the sensor's), the clock's
+    error (s; nan without an overlapping clock) and notes."""
+
+    start: int
+    alignment: Alignment
+    correlation: float
+    clock_error: float
+    notes: tuple[str, ...] = ()
+
+    @property
+    def sign(self) -> int:
+        return 1 if self.correlation > 0 else -1
 
 
 def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndarray, band: np.ndarray,
-            step: float) -> tuple[int, tuple]:
-    """Start index of ``rec`` on the table's grid and (alignment, correlation, clock error s, notes)."""
+            step: float) -> _Link:
+    """How ``rec`` joins the table: the shared clock if the data agree, else the data."""
     lag, corr = _lag(table_band, band)
     data_start = int(round(-lag))
     overlap = min(table.time[-1], rec.time[-1]) - max(table.time[0], rec.time[0])
@@ -285,20 +299,24 @@ def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndar
         clock_start = int(round((rec.time[0] - table.time[0]) / step))
         error = (-lag - clock_start) * step
         if abs(-lag - clock_start) <= CLOCK_AGREEMENT or not reliable:
-            notes = () if reliable else (f"the data cannot confirm the clock (r = {corr:+.2f} with the table)",)
-            return clock_start, (Alignment.CLOCK, corr, error, notes)
+            notes = () if reliable else (f"the data cannot confirm the clock (r = {corr:+.2f} with the "
+                                         f"table): its clock and sign are unchecked",)
+            return _Link(clock_start, Alignment.CLOCK, corr, error, notes)
         note = (f"its clock disagrees with the data by {error:+.4f} s ({-lag - clock_start:+.1f} samples): "
                 f"aligned from the data")
-        return data_start, (Alignment.DATA, corr, error, (note,))
+        return _Link(data_start, Alignment.DATA, corr, error, (note,))
     if not reliable:
         raise SensorDataError(f"{rec.path}: sensor {ch}'s clock does not overlap the table's and its data "
                               f"correlate weakly with the table (r = {corr:+.2f}, expected |r| >= "
                               f"{MIN_ALIGN_CORRELATION}); cannot align it")
     note = f"its clock does not overlap the table's: offset {data_start * step:+.4f} s estimated"
-    return data_start, (Alignment.DATA, corr, float("nan"), (note,))
+    return _Link(data_start, Alignment.DATA, corr, float("nan"), (note,))
 
 
-def _assemble(records, channels, axes, starts, signs, links, step) -> AlignedRun:
+def _assemble(records: list[SensorRecord], channels: tuple[str, ...], axes: list, links: list[_Link],
+              step: float) -> AlignedRun:
+    """Cut every sensor to the common span, orient it and remove its mean; report what was done."""
+    starts = [link.start for link in links]
     lo = max(starts)
     hi = min(s + rec.acc.shape[0] for s, rec in zip(starts, records))
     if hi - lo < 3:
@@ -312,13 +330,13 @@ def _assemble(records, channels, axes, starts, signs, links, step) -> AlignedRun
                      f"(dropped at start+end: {dropped})")
     values = np.empty((hi - lo, len(records)))
     reports = []
-    for k, (rec, ch, (g, j, _), start, sign, link) in enumerate(zip(records, channels, axes, starts,
-                                                                   signs, links)):
+    for k, (rec, ch, (g, j, _), link) in enumerate(zip(records, channels, axes, links)):
+        start, sign = link.start, link.sign
         series = rec.acc[lo - start:hi - start, j]
         offset = float(np.nanmean(series))
         values[:, k] = sign * (series - offset)
         missing = int(np.isnan(series).sum())
-        extra = list(link[3])
+        extra = list(link.notes)
         if sign < 0:
             extra.append("mounted reversed: sign flipped")
         if missing:
@@ -327,7 +345,8 @@ def _assemble(records, channels, axes, starts, signs, links, step) -> AlignedRun
         reports.append(SensorReport(
             channel=ch, file=str(rec.path), axis=rec.axes[j], sign=sign, gravity_axis=rec.axes[g],
             gravity=float(np.nanmean(rec.acc[:, g])), offset=offset, start=(start - lo) * step,
-            alignment=link[0], clock_error=link[1], correlation=link[2], missing=missing,
+            alignment=link.alignment, clock_error=link.clock_error, correlation=abs(link.correlation),
+            missing=missing,
             notes=tuple(extra)))
     time = np.arange(hi - lo) * step
     return AlignedRun(time=time, values=values, reports=tuple(reports), notes=tuple(notes))

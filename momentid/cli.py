@@ -113,11 +113,15 @@ def _os_error(exc: OSError) -> str:
 def _report(experiment, args) -> int:
     from momentid.estimation.comparison import compare
     from momentid.estimation.identification import identify
+    from momentid.estimation.scaled import ModalIdentification
 
     times = args.time if args.time else None
     runs = args.runs.split(",") if args.runs else None
     result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
-    if experiment.structure is not None:
+
+    if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
+        payload, text = result.to_dict(), result.table()
+    elif experiment.structure is not None:
         comparison = compare(result, experiment.structure)
         payload = comparison.to_dict()
         text = comparison.table()
@@ -183,16 +187,6 @@ def _cmd_identify(args) -> int:
                 print("\n" + trend.table())
         for r in results:
             _warn(r.warnings, r.runs[0])
-        return 0
-    from momentid.estimation.identification import identify
-
-    if args.estimator == "modal" or (args.estimator == "auto" and not any(
-            any(r.added_mass) for r in experiment.runs if runs is None or r.name in runs)):
-        result = identify(experiment, estimator=args.estimator, runs=runs, times=args.time or None)
-        for note in experiment.notes:
-            print(f"note: {note}", file=sys.stderr)
-        print(json.dumps(json_safe(result.to_dict()), indent=2, allow_nan=False) if args.json else result.table())
-        _warn(result.warnings)
         return 0
     return _report(experiment, args)
 

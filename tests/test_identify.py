@@ -58,10 +58,10 @@ def test_added_mass_estimators_refuse_runs_without_added_mass(simulated):
         identify(ex, estimator="modal")
 
 
-def test_without_added_mass_auto_identifies_the_modes(simulated):
+def test_modal_estimator_on_the_reference_run(simulated):
     """The reference run alone (no added mass, noise-free, every channel): modes from the modal fit."""
     sc = load("default")
-    result = identify(simulated("default"), runs=["reference"])
+    result = identify(simulated("default"), runs=["reference"], estimator="modal")
     assert result.estimator == "modal-eiv"
     truth = mi.modal_properties(sc.structure.mass_matrix(), sc.structure.damping_matrix(),
                                 sc.structure.stiffness_matrix())

@@ -8,6 +8,7 @@ import tomllib
 
 import numpy as np
 import pytest
+import scipy.signal
 
 import momentid as mi
 from momentid.cli import main
@@ -229,3 +230,55 @@ def test_damping_model_check(truth):
     assert fits["rayleigh"].p_value > 0.001          # Rayleigh damping is the truth here
     assert fits["mass"].p_value < 1e-6 and fits["stiffness"].p_value < 1e-6
     assert fits["rayleigh"].coefficients["a"] == pytest.approx(sc.structure.rayleigh_mu, rel=0.2)
+
+
+# ----------------------------------------------------------------------------- one noise estimator
+
+def shaken(fs=120.0, rest=10.0, duration=40.0, sigma=0.01, ring=0.0, seed=0):
+    """Table + one floor: ``rest`` s at rest, then band noise; white sensor noise ``sigma``; ``ring``
+    m/s^2 of a 3.8 Hz free vibration on the floor during the rest (a previous trial's last ringing)."""
+    from momentid.core.series import RunData
+
+    rng = np.random.default_rng(seed)
+    n, n0 = int(duration * fs), int(rest * fs)
+    t = np.arange(n) / fs
+    drive = np.zeros(n)
+    band = scipy.signal.butter(8, 30.0, fs=fs, output="sos")            # a table's drive is band-limited
+    drive[n0:] = scipy.signal.sosfiltfilt(band, rng.standard_normal(n - n0))
+    floor = 1.5 * drive
+    floor[:n0] += ring * np.sin(2 * np.pi * 3.8 * t[:n0])
+    values = np.column_stack([drive, floor]) + sigma * rng.standard_normal((n, 2))
+    return RunData("trial", np.zeros(1), t, ("zdd", "a1"), values)
+
+
+def test_noise_from_the_quiet_lead_in_of_a_low_rate_record():
+    from momentid.estimation.noise import NoiseSource, estimate_noise
+
+    est = estimate_noise(shaken(ring=0.05), f_max=25.0)   # 120 Hz: no band above 3 x 25 Hz
+    assert est.source is NoiseSource.QUIET_LEAD_IN
+    assert est.detail.startswith("quiet lead-in 0-9.")      # ends a little before the table moves at 10 s
+    # ~1100 samples -> ~550 bins: the median-based level scatters by ~5 %; 15 % is 3 standard errors.
+    # The floor's 3.8 Hz ringing (5x the noise) occupies a few bins and must not bias it.
+    assert est.sigma["zdd"] == pytest.approx(0.01, rel=0.15)
+    assert est.sigma["a1"] == pytest.approx(0.01, rel=0.15)
+
+
+def test_noise_stated_and_high_band_and_refusal():
+    from momentid.estimation.noise import NoiseSource, estimate_noise
+
+    est = estimate_noise(shaken(), stated=(("zdd", 0.02), ("a", 0.03)))
+    assert est.source is NoiseSource.STATED and est.sigma == {"zdd": 0.02, "a1": 0.03}
+    fast = shaken(fs=1000.0, rest=0.0, duration=20.0)     # shakes at once, but 1 kHz: a noise-only band
+    est = estimate_noise(fast, f_max=25.0)
+    assert est.source is NoiseSource.HIGH_BAND and est.detail == "high band 75-400 Hz"
+    assert est.sigma["zdd"] == pytest.approx(0.01, rel=0.15)   # as above (thousands of bins: tighter)
+    with pytest.raises(mi.IdentificationError, match=r"run 'trial': no source for the sensor noise level"):
+        estimate_noise(shaken(rest=0.0), f_max=25.0)
+
+
+def test_eiv_spectra_say_where_the_noise_came_from(truth):
+    from momentid.estimation.eiv import spectra
+
+    _, ex = truth
+    sp = spectra(noisy(ex, LAB, seed=1).runs[0], 3, 20.0)
+    assert sp.noise_source == "high band (high band 60-400 Hz)"

@@ -183,6 +183,9 @@ def test_cli_identify_without_added_mass(tmp_path, capsys):
     assert np.all(np.abs(f - modes.frequency) < 4 * f_std)     # as above
     assert "high band" in out["noise"][0]
     assert out["masses"] == list(s.masses)                      # the nominal model's masses
+    assert main(["identify", str(rec), "--per-run"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("runs: reference (no added mass") and "K (N/m):" in text
 
 
 @pytest.mark.slow

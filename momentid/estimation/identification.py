@@ -399,8 +399,10 @@ def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "di
         added-mass estimators reconstruct missing ones, see
         :mod:`momentid.estimation.reconstruct`).
     estimator : {"auto", "equation", "difference", "eiv", "modal"}
-        ``"auto"`` (default): ``"modal"`` when no selected run adds mass;
-        otherwise ``"equation"`` for noise-free data, ``"eiv"`` for noisy data.
+        ``"auto"`` (default): ``"modal"`` when no run of the experiment adds
+        mass; otherwise ``"equation"`` for noise-free data, ``"eiv"`` for noisy
+        data (select only reference runs of an added-mass experiment with
+        ``"modal"`` explicitly).
         ``"equation"``: method.md eq. (3) by least squares, every run on its
         own.  ``"difference"``: the paper's eq. (2), each run minus the
         reference run (same table motion needed).  ``"eiv"``: errors-in-variables
@@ -443,7 +445,7 @@ def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "di
     # The work is thousands of small dense products: BLAS threads only add
     # synchronisation (300x slower for 8x8 expm on a busy 2-core machine).
     with threadpool_limits(limits=1, user_api="blas"):
-        if estimator == "modal" or (estimator == "auto" and not _adds_mass(experiment, runs)):
+        if estimator == "modal" or (estimator == "auto" and not _adds_mass(experiment, None)):
             return _identify_modal(experiment, runs, times)
         return _identify(experiment, estimator=estimator, mass=mass, runs=runs, times=times,
                          prefilter=prefilter)
@@ -478,7 +480,8 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     if len(selected) < 2:
         raise IdentificationError(
             f"{experiment.source}: {len(selected)} run(s) {list(names)}: expected at least two "
-            f"(a reference run and a run with added mass)"
+            f"(a reference run and a run with added mass), or estimator 'modal' for the modes of runs "
+            f"without added mass"
         )
     d = selected[0].added_mass.shape[0]
     if all(not np.any(r.added_mass) for r in selected):

@@ -273,7 +273,15 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         notes.extend(repairs)
         checked.append(run)
     selected = tuple(checked)
+    added = selected[0].added_mass
+    if any(not np.array_equal(r.added_mass, added) for r in selected):
+        raise IdentificationError(
+            f"{experiment.source}: runs {[r.name for r in selected]} carry different added masses: one modal "
+            f"model fits runs of one structure; fit them one by one (--per-run)")
     masses = _masses(experiment, notes)
+    if masses is not None and np.any(added):
+        masses = tuple(float(m) for m in np.asarray(masses) + added)
+        notes.append(f"masses include the run's added mass: {list(masses)} kg")
     stated = dict(experiment.statement.noise) if experiment.statement is not None else None
     noise0 = estimate_noise(selected[0], stated=stated)       # the table's level, for the peak score
     picked = pick_resonances(selected, d, noise0.sigma["zdd"])

@@ -43,8 +43,9 @@ _TRUTH: dict = {}
 
 
 def _scenario(n_runs: int):
-    sc = mi.load_scenario(ROOT / "scenarios" / "lab_noisy.toml")
-    return dataclasses.replace(sc, runs=RUNS[n_runs], sensors=Sensors())
+    """The lab rig with ``n_runs`` runs and ideal sensors (each draw adds its own noise)."""
+    runs = [{"name": r.name, "added_mass": list(r.added_mass)} for r in RUNS[n_runs]]
+    return mi.load_scenario(ROOT / "scenarios" / "lab_noisy.toml", overrides={"runs": runs, "sensors": {}})
 
 
 def _truth(n_runs: int):

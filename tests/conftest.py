@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 from pathlib import Path
 
 import pytest
 
 import momentid as mi
-from momentid.lab.scenario import Sensors
 from momentid.lab.simulation import simulate
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -37,10 +35,8 @@ def load(name: str) -> mi.Scenario:
 
 @functools.lru_cache(maxsize=None)
 def _simulated(name: str, ideal: bool):
-    scenario = mi.load_scenario(SCENARIOS / f"{name}.toml")
-    if ideal:
-        scenario = dataclasses.replace(scenario, sensors=Sensors())
-    return simulate(scenario)
+    overrides = {"sensors": {}} if ideal else {}   # an empty [sensors]: every channel, exact
+    return simulate(mi.load_scenario(SCENARIOS / f"{name}.toml", overrides=overrides))
 
 
 @pytest.fixture(scope="session")

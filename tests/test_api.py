@@ -61,8 +61,8 @@ def test_no_public_name_is_also_a_module_name(name):
     assert not clashes, f"{name} exports {clashes}, spelled like modules of momentid"
 
 
-def test_subpackage_exports_reach_the_top_level_or_stay_in_their_package():
-    """What the top level re-exports is the object of the subpackage, not a copy or a namesake."""
+def test_top_level_names_are_their_modules_objects_under_the_same_name():
+    """``momentid.X`` is the object its defining module calls X: no renamed re-exports."""
     for name in momentid.__all__:
         obj = getattr(momentid, name)
         home = inspect.getmodule(obj)

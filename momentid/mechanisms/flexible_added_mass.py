@@ -5,7 +5,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Refit, Screened, Target
+from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
 from momentid.mechanisms.registry import register
 
 #: Damping ratio of the attachment oscillators on the screening grid (a lightly damped bolt-on).

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.optimize
 
 from momentid import mechanisms
-from momentid.diagnosis.residuals import (LinearModel, ResidualRow, band_filter, blocks, replay_noise,
+from momentid.diagnosis.residuals import (ResidualRow, band_filter, blocks, replay_noise,
                                           replay_outputs)
 from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
 from momentid.estimation.identification import damping_models

@@ -29,7 +29,7 @@ import mujoco
 from momentid import mechanisms as registry
 from momentid.errors import ModelError
 from momentid.core.structure import Structure
-from momentid.mechanisms.base import GRAVITY, drifts, storey_to_floor
+from momentid.mechanisms.base import drifts, storey_to_floor
 from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",

@@ -310,6 +310,11 @@ class MechanismKind:
         """For ``RESIMULATE`` kinds: the storey force (n,) per unit of the fitted coefficient."""
         raise NotImplementedError(f"{self.name} has no storey force signal")
 
+    def attachment_matrices(self, M, C, K, floor: int, mass: float, frequency: float, damping_ratio: float):
+        """For ``ATTACHMENT`` kinds: M, C, K (d+1, d+1) of the model (d, d) with ``mass`` (kg) on floor
+        ``floor`` (0-based) on its attachment (the replay screening's extra degree of freedom)."""
+        raise NotImplementedError(f"{self.name} is not an attachment")
+
     def physical(self, params: dict) -> bool:
         """A passive rig: the fitted coefficient within its physical bounds (absent: 0)."""
         return self.fitted is None or not self.fitted.bounded or self.fitted.within(params.get(self.fitted.name, 0.0))

@@ -342,11 +342,13 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
             scene.notes.append(f"not identified: {exc}")
     scene.result = result
     if result is not None:
-        if experiment.structure is not None:
+        if experiment.structure is not None and not _is_modal(result):
             scene.comparison = compare(result, experiment.structure)
         else:
             scene.notes.append("the recording holds no nominal structure: no analytic comparison")
         for r in experiment.runs:
+            if _is_modal(result):
+                break  # a modal fit of acceleration records has no eq. (3) residual to draw
             try:
                 scene.residuals[r.name] = equation_residual(result, r)
             except SensorDataError as exc:
@@ -502,10 +504,19 @@ def _fmt(x: float) -> str:
     return f"{x:.6g}" if math.isfinite(x) else "n/a"
 
 
+def _is_modal(result) -> bool:
+    """True for the modal fit of runs without added mass (it has no M, mu, kappa of eq. (3))."""
+    from momentid.estimation.scaled import ModalIdentification
+
+    return isinstance(result, ModalIdentification)
+
+
 def _parameters_markdown(scene: Scene) -> str:
     r = scene.result
     if r is None:
         return "# Identification\n\n" + "\n\n".join(n for n in scene.notes if n.startswith("not identified"))
+    if _is_modal(r):  # no added mass: modes, and K, C only when the lab states its masses
+        return f"# Identification of {scene.experiment.name}\n\n```\n{r.table()}\n```"
     lines = [f"# Identification of {scene.experiment.name}", "",
              f"estimator **{r.estimator}**, runs {', '.join(r.runs)}: {r.n_equations} equations, "
              f"{r.n_unknowns} unknowns, rank {r.rank}, condition {r.condition:.3g}, residual RMS "

@@ -9,6 +9,8 @@ import numpy as np
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
 
+__all__ = ["CoulombFriction", "FRICTION_SMOOTHING", "SCREENING_SMOOTHING", "smooth_sign"]
+
 #: Velocity scale (m/s) of the smoothed Coulomb law ``F tanh(v / FRICTION_SMOOTHING)`` the rig
 #: simulates and the refit fits: a sign function for any drift velocity the rig reaches (its
 #: storeys move at cm/s), smooth enough for RK4 at a 1 ms step.

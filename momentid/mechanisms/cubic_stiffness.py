@@ -5,6 +5,8 @@ from __future__ import annotations
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
 
+__all__ = ["CubicStiffness"]
+
 
 @register
 class CubicStiffness(MechanismKind):

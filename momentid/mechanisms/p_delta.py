@@ -16,6 +16,8 @@ from momentid.core.structure import Mechanism
 from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
 
+__all__ = ["PDelta"]
+
 
 @register
 class PDelta(MechanismKind):

@@ -7,6 +7,8 @@ import numpy as np
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
 
+__all__ = ["SensorDelay"]
+
 
 @register
 class SensorDelay(MechanismKind):

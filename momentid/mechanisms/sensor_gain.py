@@ -7,6 +7,8 @@ import numpy as np
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
 from momentid.mechanisms.registry import register
 
+__all__ = ["SensorGain"]
+
 
 def _from_equation(c, e):
     """Gain of a channel whose reading r = g x leaves (1 - 1/g) r in the residual: c = 1 - 1/g."""

@@ -9,6 +9,8 @@ from __future__ import annotations
 from momentid.mechanisms.base import MechanismKind, Param, Target
 from momentid.mechanisms.registry import register
 
+__all__ = ["StiffnessLoss"]
+
 
 @register
 class StiffnessLoss(MechanismKind):

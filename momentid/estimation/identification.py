@@ -253,6 +253,21 @@ def _signals(run: RunData, d: int) -> dict[str, np.ndarray]:
     return out
 
 
+def _check_times(selected, times) -> None:
+    """Chosen instants must be finite and inside every selected run's record."""
+    if times is None:
+        return
+    values = np.asarray(times, float)
+    if values.size == 0 or not np.all(np.isfinite(values)):
+        raise IdentificationError(f"times = {list(times)}: expected finite instants in seconds")
+    for run in selected:
+        lo, hi = float(run.time[0]), float(run.time[-1])
+        outside = values[(values < lo) | (values > hi)]
+        if outside.size:
+            raise IdentificationError(f"times = {list(times)}: {outside.tolist()} s lies outside run "
+                                      f"{run.name!r}, recorded from {lo:g} to {hi:g} s")
+
+
 def _sample_index(run: RunData, times) -> np.ndarray:
     if times is None:
         return np.arange(run.n_samples)
@@ -318,11 +333,18 @@ def _solve(acc: _Accumulator, estimator: str, runs):
     tol = sv[0] * max(acc.rows, p) * np.finfo(float).eps
     rank = int(np.sum(sv > tol))
     condition = float(sv[0] / sv[-1]) if sv[-1] > 0 else float("inf")
-    if rank < p or condition > MAX_CONDITION:
+    if acc.rows < p:
         raise IdentificationError(
-            f"estimator {estimator!r} on runs {list(runs)}: the equations determine only {rank} of "
-            f"{p} unknowns (condition number {condition:.3g}, refusing above {MAX_CONDITION:.0e}): "
-            f"expected a richer excitation (more frequencies than storeys) or more added-mass runs"
+            f"estimator {estimator!r} on runs {list(runs)}: {acc.rows} equations for {p} unknowns: "
+            f"expected more equations than unknowns (a longer record, more chosen instants or more runs)"
+        )
+    if rank < p or condition > MAX_CONDITION:
+        what = (f"determine only {rank} of {p} unknowns" if rank < p else
+                f"determine the {p} unknowns only with condition number {condition:.3g} "
+                f"(refusing above {MAX_CONDITION:.0e})")
+        raise IdentificationError(
+            f"estimator {estimator!r} on runs {list(runs)}: the equations {what}: expected a richer "
+            f"excitation (more frequencies than storeys), a longer record or more added-mass runs"
         )
     theta_s, *_ = np.linalg.lstsq(As, b, rcond=None)
     theta = theta_s / norms
@@ -498,6 +520,7 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
             notes.extend(repairs)
         checked.append(run)
     selected = tuple(checked)
+    _check_times(selected, times)
     layout = Layout(d, mass)
     if estimator == "auto" and times is not None:
         estimator = "equation"
@@ -519,7 +542,12 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     if band.active:
         notes.append(f"equation form on signals filtered to {band.low:g}-{band.high or 'inf'} Hz")
     eq_name = "difference" if estimator == "difference" else "equation"
-    start = _equation_form(experiment, selected, layout, eq_name, times, band, names, notes)
+    try:
+        start = _equation_form(experiment, selected, layout, eq_name, times, band, names, notes)
+    except IdentificationError as exc:
+        if estimator != "eiv":
+            raise
+        raise IdentificationError(f"estimator 'eiv' starts from the equation form, which failed: {exc}") from None
     if estimator != "eiv":
         return start
     from momentid.estimation.eiv import fit_eiv
@@ -636,7 +664,13 @@ def _difference_rows(experiment: Experiment, selected, d: int, times, acc: _Accu
                 f"{ref.name!r} by {mismatch:.3g} m/s^2 (peak {peak:.3g}): the difference form needs the "
                 f"same table motion in every run; use estimator 'equation'"
             )
-        idx = _sample_index(run, times)
+        if si["a"].shape[0] == run.n_samples:
+            idx = _sample_index(run, times)
+        elif times is None:
+            idx = np.arange(si["a"].shape[0])   # weak form: one equation per bump position
+        else:
+            raise IdentificationError(f"times = {list(times)}: chosen instants need measured displacements "
+                                      f"(run {run.name!r} has accelerations only)")
         dm = run.added_mass
         rel_i = si["a"] - zi[:, None]
         rel_1 = s1["a"] - z1[:, None]

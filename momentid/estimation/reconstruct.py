@@ -76,6 +76,10 @@ def _filter(x: np.ndarray, fs: float, band: Prefilter) -> np.ndarray:
         sos = scipy.signal.butter(band.order, band.high, btype="lowpass", fs=fs, output="sos")
     else:
         sos = scipy.signal.butter(band.order, band.low, btype="highpass", fs=fs, output="sos")
+    padlen = 3 * (2 * len(sos) + 1)   # scipy's default edge padding of sosfiltfilt
+    if x.shape[0] <= padlen:
+        raise SensorDataError(f"{x.shape[0]} samples are too few to filter to {band.low:g}-{band.high or 'inf'} Hz "
+                              f"without edge effects: expected more than {padlen} samples")
     return scipy.signal.sosfiltfilt(sos, x, axis=0)
 
 

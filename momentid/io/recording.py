@@ -13,11 +13,13 @@ recovers them from a truncated file (see :func:`read_recording`).
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import re
 import struct
 import warnings
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,12 +28,13 @@ from google.protobuf import descriptor_pb2, descriptor_pool
 from google.protobuf.message import DecodeError
 from google.protobuf.message_factory import GetMessageClass
 from mcap.exceptions import McapError, RecordLengthLimitExceeded
-from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata, Schema
+from mcap.records import (Attachment, AttachmentIndex, Channel, ChunkIndex, DataEnd, Footer, Message, Metadata,
+                          MetadataIndex, Schema)
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
 from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
-from momentid.errors import RecordingError, TruncatedRecordingError
+from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
 from momentid.core.structure import LabStatement, Structure
 
 __all__ = [
@@ -221,22 +224,46 @@ class RecordingWriter:
             self._schema_id = self._writer.register_schema(SCHEMA_NAME, "protobuf", SCHEMA_DATA)
             self._writer.add_metadata(EXPERIMENT_RECORD, meta)
             self._sync()
+        except OSError as e:
+            self._abandon()
+            raise self._disk_error(e, "the header") from None
         except BaseException:
-            self._closed = True
-            self._file.close()
+            self._abandon()
             raise
 
     def __enter__(self) -> "RecordingWriter":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc is None:
+            self.close()
+            return False
         try:
-            if exc is not None and not self._closed:
+            if not self._closed:
                 self._writer.add_metadata(ABORTED_RECORD, {"error": f"{exc_type.__name__}: {exc}",
                                                            "runs_written": str(self._completed)})
-        finally:
             self.close()
+        except (OSError, RecordingError):
+            # The disk refused more bytes (it is full, say): the completed runs are already fsynced
+            # and read back as a truncated file; the error that got us here is the one to report.
+            self._abandon()
         return False
+
+    def _abandon(self) -> None:
+        """Close the file without writing more (after a write failed)."""
+        self._closed = True
+        try:
+            self._file.close()
+        except OSError:
+            pass  # the bytes it still held could not be written either; the recovery note says so
+
+    def _disk_error(self, exc: OSError, doing: str) -> RecordingError:
+        """A one-line error for a failed write that says what the file still holds."""
+        kept = self._runs[:self._completed]
+        runs = (f"the {len(kept)} completed run(s) ({', '.join(kept)}) are on disk and read back "
+                "with a note" if kept else "no run was completed")
+        return RecordingError(f"{self.path}: cannot write {doing} ({exc.strerror or exc}); {runs}; "
+                              "expected free space on the disk")
 
     def _sync(self) -> None:
         self._writer.flush()  # closes the open chunk
@@ -262,8 +289,15 @@ class RecordingWriter:
         ------
         RecordingError
             The writer is closed, the name is empty or already used, or the
-            data would not read back (bad times, channel names, added mass).
+            data would not read back (bad times, channel names, added mass), or
+            the disk refused the bytes (full: the message names the runs kept).
         """
+        try:
+            self._write_run(run, model_xml, block_size)
+        except OSError as e:  # a full disk, an I/O error
+            raise self._disk_error(e, f"run {run.name!r}") from None
+
+    def _write_run(self, run: RunData, model_xml: str | None, block_size: int) -> None:
         where = f"{self.path}: run {run.name!r}"
         if self._closed:
             raise RecordingError(f"{where}: the writer is closed; expected write_run before close()")
@@ -320,13 +354,15 @@ class RecordingWriter:
         """Write the summary and footer and close the file (idempotent)."""
         if self._closed:
             return
-        self._closed = True
         try:
             self._writer.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
-        finally:
-            self._file.close()
+        except OSError as e:
+            self._abandon()
+            raise self._disk_error(e, "the summary and footer") from None
+        self._closed = True
+        self._file.close()
 
 
 def write_experiment(path, experiment: Experiment, *, model_xml: dict[str, str] | None = None) -> Path:
@@ -417,7 +453,7 @@ def read_recording(path) -> Experiment:
     Experiment
         Runs in index order; ``complete`` is False and ``notes`` say what
         was lost when the file was truncated, corrupted or aborted (a
-        ``warnings.warn`` repeats every note).
+        a :class:`~momentid.errors.RecoveryWarning` repeats every note).
 
     Raises
     ------
@@ -515,7 +551,58 @@ def _scan(path: Path, on_block=None) -> _Scan:
                 scan.data_end = True
             elif not scan.data_end:  # the summary section only repeats what came before
                 _take(path, scan, record)
+        if scan.data_end and scan.failure is None:
+            damage = _summary_damage(f, size)
+            if damage is not None:
+                scan.failure = f"({damage})"
     return scan
+
+
+#: The footer record (opcode, length, summary_start, summary_offset_start, summary_crc) and the
+#: closing magic: the last bytes of a complete MCAP file.
+_FOOTER = struct.Struct("<BQQQI")
+_OPCODE_FOOTER, _OPCODE_CHUNK, _OPCODE_METADATA, _OPCODE_ATTACHMENT = 0x02, 0x06, 0x0C, 0x09
+
+
+def _summary_damage(f, size: int) -> str | None:
+    """What is wrong with the summary section and footer of the open file ``f`` (or None).
+
+    The streaming read never needs them, but other MCAP tools jump through their indexes, so
+    damage there is reported: a summary CRC mismatch, or an index that points at the wrong record.
+    """
+    footer_at = size - _FOOTER.size - len(MCAP_MAGIC)
+    if footer_at < len(MCAP_MAGIC):
+        return "no footer"
+    f.seek(footer_at)
+    tail = f.read(_FOOTER.size + len(MCAP_MAGIC))
+    opcode, length, summary_start, _, crc = _FOOTER.unpack(tail[:_FOOTER.size])
+    if opcode != _OPCODE_FOOTER or length != _FOOTER.size - 9 or tail[_FOOTER.size:] != MCAP_MAGIC:
+        return f"the last {len(tail)} bytes are not a footer and the MCAP magic"
+    if summary_start == 0:
+        return None  # a file without a summary section: allowed by the format
+    if not len(MCAP_MAGIC) <= summary_start <= footer_at:
+        return f"footer summary_start = {summary_start}, outside the file"
+    f.seek(summary_start)
+    summary = f.read(footer_at - summary_start)
+    if crc != 0 and zlib.crc32(summary + tail[:_FOOTER.size - 4]) != crc:
+        return f"summary CRC mismatch (footer says {crc:#010x})"
+    try:
+        for record in StreamReader(io.BytesIO(summary + tail), skip_magic=True,
+                                   record_size_limit=len(summary) + len(tail)).records:
+            if isinstance(record, ChunkIndex):
+                where, want = record.chunk_start_offset, _OPCODE_CHUNK
+            elif isinstance(record, MetadataIndex):
+                where, want = record.offset, _OPCODE_METADATA
+            elif isinstance(record, AttachmentIndex):
+                where, want = record.offset, _OPCODE_ATTACHMENT
+            else:
+                continue
+            f.seek(where)
+            if where >= summary_start or f.read(1) != bytes([want]):
+                return f"{type(record).__name__} points at byte {where}, which holds no such record"
+    except _DAMAGE as e:
+        return f"{type(e).__name__}: {e}"
+    return None
 
 
 def _take(path: Path, scan: _Scan, record) -> None:
@@ -769,7 +856,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     if not complete and not runs:  # notes say why
         raise TruncatedRecordingError(f"{notes[0]}; no completed run to recover")
     for note in notes:
-        warnings.warn(note, stacklevel=3)
+        warnings.warn(note, RecoveryWarning, stacklevel=3)  # points at the caller of read_recording
     return Experiment(runs=runs, structure=structure, scenario=scenario,
                       scenario_text=exp.get("scenario_text", ""), source=str(path),
                       complete=complete, notes=tuple(notes), statement=statement)

@@ -28,7 +28,13 @@ import numpy as np
 
 from momentid.errors import ScenarioError, SensorDataError
 
-__all__ = ["Layout", "ExportFormat", "SensorRecord", "FORMATS", "register", "get_format", "read_text"]
+__all__ = ["Layout", "ExportFormat", "SensorRecord", "FORMATS", "register", "get_format", "read_text",
+           "MAX_ABS_SAMPLE", "first_absurd"]
+
+#: Largest magnitude a sample may have, in SI units (m, m/s, m/s^2).  No shake table moves a
+#: kilometre or accelerates at 10^5 g; a larger cell is a corrupt or mis-scaled export, and passing
+#: it on would overflow sums of squares (1e308**2 = inf) deep inside identification.
+MAX_ABS_SAMPLE = 1e6
 
 #: First two bytes of a gzip stream (RFC 1952): such files are read decompressed.
 GZIP_MAGIC = b"\x1f\x8b"
@@ -100,6 +106,13 @@ def get_format(name: str, file: Path | str, key: str = "sensors.format") -> Expo
         known = ", ".join(f"{n!r} ({f.description})" for n, f in sorted(FORMATS.items()))
         raise ScenarioError(f"{file}: key '{key}' = {name!r}: expected one of {known}")
     return FORMATS[name]
+
+
+def first_absurd(values: np.ndarray) -> tuple[int, int] | None:
+    """``(row, column)`` index of the first sample of ``values`` (n, c) that is infinite or larger in
+    magnitude than :data:`MAX_ABS_SAMPLE`, or None (``nan``, a missing sample, passes)."""
+    bad = np.argwhere(np.abs(values) > MAX_ABS_SAMPLE)  # inf too; nan compares False
+    return None if bad.size == 0 else (int(bad[0][0]), int(bad[0][1]))
 
 
 def read_text(path: Path) -> str:

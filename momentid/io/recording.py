@@ -18,6 +18,7 @@ import json
 import os
 import re
 import struct
+import tomllib
 import warnings
 import zlib
 from dataclasses import dataclass, field
@@ -508,7 +509,7 @@ def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
         (complete if ok else notes).append(name if ok else f"{path}: run {name!r} is incomplete; left out")
     if scan.failure or not scan.data_end:
         notes.append(f"{path}: the recording ends early ({scan.failure or 'no end-of-data record'}); "
-                     f"only completed runs were used")
+                     f"only completed runs were used; {_lost_runs(scan.experiment, complete)}")
     return scan.experiment, complete, notes
 
 
@@ -842,7 +843,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     if not scan.data_end:
         what = "truncated" if scan.at_end else "corrupted"
         after = f"after run {runs[-1].name!r}" if runs else "before any run completed"
-        notes.append(f"{path}: {what} {after}; {recovered}, later runs are lost; "
+        notes.append(f"{path}: {what} {after}; {recovered}, {_lost_runs(exp, runs)}; "
                      f"reading stopped {scan.failure}")
     elif scan.data_crc_bad:
         notes.append(f"{path}: data section CRC mismatch ({scan.failure}): a record outside the "
@@ -860,6 +861,21 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     return Experiment(runs=runs, structure=structure, scenario=scenario,
                       scenario_text=exp.get("scenario_text", ""), source=str(path),
                       complete=complete, notes=tuple(notes), statement=statement)
+
+
+def _lost_runs(experiment: dict, kept) -> str:
+    """Which runs a damaged file lost: the ``[[runs]]`` of the stored scenario (or experiment.toml)
+    text that are not in ``kept`` (RunData or names), or "later runs are lost" when it names none."""
+    kept = {getattr(r, "name", r) for r in kept}
+    try:
+        tables = tomllib.loads(experiment.get("scenario_text", "")).get("runs", [])
+        planned = [t["name"] for t in tables]
+    except (tomllib.TOMLDecodeError, AttributeError, KeyError, TypeError):
+        planned = []
+    if not planned or not all(isinstance(n, str) for n in planned):
+        return "later runs are lost"
+    lost = [n for n in planned if n not in kept]
+    return f"lost {len(lost)} of the {len(planned)} planned runs ({', '.join(lost) or 'none'})"
 
 
 def _statement_dict(statement: LabStatement | None) -> dict | None:

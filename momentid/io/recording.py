@@ -513,6 +513,23 @@ def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
     return scan.experiment, complete, notes
 
 
+class _Bounded:
+    """A read-only view of an open file that never asks for more bytes than the file has left: a
+    damaged length field inside a record (a chunk's data length of 2**57, say) then reads short
+    and fails as damage instead of making the stock reader allocate that many bytes.  (Not an
+    ``io.RawIOBase``: the stock reader would wrap that in a BufferedReader, which reads around it.)"""
+
+    def __init__(self, f, size: int):
+        self._f, self._size = f, size
+
+    def read(self, n: int = -1) -> bytes:
+        left = max(self._size - self._f.tell(), 0)
+        return self._f.read(left if n is None or n < 0 else min(n, left))
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+
 def _scan(path: Path, on_block=None) -> _Scan:
     try:
         f = open(path, "rb")
@@ -531,7 +548,7 @@ def _scan(path: Path, on_block=None) -> _Scan:
                                  f"the MCAP magic {MCAP_MAGIC!r})")
         f.seek(0)
         scan = _Scan(on_block=on_block)
-        records = StreamReader(f, validate_crcs=True, record_size_limit=size).records
+        records = StreamReader(_Bounded(f, size), validate_crcs=True, record_size_limit=size).records
         while True:
             try:
                 record = next(records)

@@ -30,6 +30,8 @@ from momentid.io.recording import (SCHEMA_DATA, SCHEMA_NAME, SENSOR_BLOCK_PROTO,
                                 SensorBlock, _encode_block, read_recording, write_experiment)
 from momentid.core.structure import Structure
 
+from bad_input.faults import fill_disk_at
+
 DOC = Path(__file__).resolve().parents[1] / "docs" / "recording-format.md"
 CHANNELS = ("zdd", "a1", "a2", "q1", "q2")
 STRUCTURE = Structure(masses=(10.0, 12.5), storey_stiffness=(2000.0, 1500.0),
@@ -303,33 +305,11 @@ def read_noting(path) -> Experiment:
         return read_recording(path)
 
 
-class _FullDisk:
-    """A file on a disk with ``room`` bytes left: a write past it fails as a full disk does."""
-
-    def __init__(self, f, room: int):
-        self._f, self.room = f, room
-
-    def write(self, data) -> int:
-        if len(data) > self.room:
-            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-        self.room -= len(data)
-        return self._f.write(data)
-
-    def __getattr__(self, name):
-        return getattr(self._f, name)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self._f.close()
-
-
 def _full_disk_after(monkeypatch, room: int) -> None:
-    """Every file the recording module opens sits on a disk with ``room`` bytes left."""
+    """Every file the recording module opens sits on a disk with ``room`` bytes."""
     import momentid.io.recording as recording
 
-    monkeypatch.setattr(recording, "open", lambda *a, **k: _FullDisk(open(*a, **k), room), raising=False)
+    fill_disk_at(monkeypatch, recording, room)
 
 
 def _room_for_two_runs(tmp_path) -> int:

@@ -8,7 +8,6 @@ import json
 from pathlib import Path
 
 import momentid as mi
-from momentid.io.recording import write_experiment
 
 from ._core import Case, CliResult, Group, Outcome, cli
 from .csv_import import lab_folder

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import struct
 from pathlib import Path
 
@@ -11,8 +10,7 @@ from mcap.writer import Writer
 
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import Structure
-from momentid.io.recording import (SCHEMA_DATA, SCHEMA_NAME, RecordingWriter, SensorBlock, read_recording,
-                                   write_experiment)
+from momentid.io.recording import SCHEMA_DATA, SCHEMA_NAME, RecordingWriter, SensorBlock, read_recording
 
 from ._core import Case, Group, Outcome
 
@@ -27,6 +25,11 @@ def run(i: int) -> RunData:
     """Run ``r<i>``: seeded noise at 200 Hz."""
     values = np.random.default_rng(i).normal(0.0, 0.1, (N_SAMPLES, len(CHANNELS)))
     return RunData(f"r{i}", np.array([0.1 * i, 0.1 * i]), np.arange(N_SAMPLES) / 200.0, CHANNELS, values)
+
+
+def tiny_experiment(n_runs: int = 2) -> Experiment:
+    """Runs r1.. of :func:`run` on the two-storey ``STRUCTURE``."""
+    return Experiment(tuple(run(i + 1) for i in range(n_runs)), STRUCTURE, {"name": "tiny"}, "")
 
 
 def good(folder: Path, n_runs: int = 3) -> tuple[Path, list[int]]:

@@ -11,33 +11,28 @@ import warnings
 from collections import Counter
 from pathlib import Path
 
-from . import CASES, Group, Outcome, check, observe
+from . import CASES, check, observe
+from ._core import KNOWN_DEFECT, table
 
 
 def summary() -> int:
+    """Run every case; print the table of outcomes and every case that ended otherwise."""
     counts: Counter = Counter()
     wrong = []
     for case in CASES:
         with tempfile.TemporaryDirectory() as tmp, warnings.catch_warnings():
             warnings.simplefilter("ignore")
             problem = check(case, observe(case, Path(tmp)))
+        where = f"{case.group.name.lower()}:{case.id}"
         if case.xfail:
-            counts[case.group, "known defect"] += 1
+            counts[case.group, KNOWN_DEFECT] += 1
             if problem is None:
-                wrong.append(f"{case.group.name.lower()}:{case.id}: marked as a known defect but passes")
-        else:
+                wrong.append(f"{where}: marked as a known defect but passes")
+        elif problem is None:
             counts[case.group, case.outcome] += 1
-            if problem is not None:
-                wrong.append(f"{case.group.name.lower()}:{case.id}: {problem}")
-    columns = [*Outcome, "known defect"]
-    names = [c.name.lower() if isinstance(c, Outcome) else c for c in columns]
-    print(f"| entry point | {' | '.join(names)} | cases |")
-    print("|---" * (len(columns) + 2) + "|")
-    for group in Group:
-        row = [counts[group, c] for c in columns]
-        print(f"| {group.value} | {' | '.join(map(str, row))} | {sum(row)} |")
-    totals = [sum(counts[g, c] for g in Group) for c in columns]
-    print(f"| all | {' | '.join(map(str, totals))} | {sum(totals)} |")
+        else:
+            wrong.append(f"{where}: {problem}")
+    print("\n".join(table(counts)))
     print(f"\n{len(CASES) - len(wrong)} of {len(CASES)} cases end as promised "
           f"(known defects: still failing as recorded)")
     for line in wrong:

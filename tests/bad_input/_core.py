@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import enum
+from collections import Counter
 import io
 import os
 import warnings
@@ -147,3 +148,25 @@ def check(case: Case, seen: Observed) -> str | None:
     if missing:
         return f"the message does not name {missing}: {seen.message[:400]}"
     return None
+
+
+#: The columns of the summary table: the three outcome classes, then the known defects (xfail).
+KNOWN_DEFECT = "known defect"
+
+
+def promised(cases) -> Counter:
+    """Cases per (entry point, outcome class or :data:`KNOWN_DEFECT`), as the tables promise them."""
+    return Counter((c.group, KNOWN_DEFECT if c.xfail else c.outcome) for c in cases)
+
+
+def table(counts: Counter) -> list[str]:
+    """The Markdown table of ``counts`` (docs/reliability.md pastes it)."""
+    columns = [*Outcome, KNOWN_DEFECT]
+    names = [c.name.lower() if isinstance(c, Outcome) else c for c in columns]
+    lines = [f"| entry point | {' | '.join(names)} | cases |", "|---" * (len(columns) + 2) + "|"]
+    for group in Group:
+        row = [counts[group, c] for c in columns]
+        lines.append(f"| {group.value} | {' | '.join(map(str, row))} | {sum(row)} |")
+    totals = [sum(counts[g, c] for g in Group) for c in columns]
+    lines.append(f"| all | {' | '.join(map(str, totals))} | {sum(totals)} |")
+    return lines

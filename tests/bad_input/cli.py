@@ -38,17 +38,24 @@ def recording_bytes(sensors: str = "") -> tuple[bytes, tuple[int, ...]]:
         return out.read_bytes(), tuple(sizes)
 
 
-def _rec(folder: Path, cut_after: int | None = None, sensors: str = "") -> Path:
+def _rec(folder: Path, cut_after: int | None = None, sensors: str = "", flip_in: int | None = None) -> Path:
+    """The simulated recording, cut after run ``cut_after`` or with a byte of run ``flip_in`` (1-based)
+    flipped (a chunk CRC mismatch)."""
     data, sizes = recording_bytes(sensors)
+    if cut_after is not None:
+        data = data[:sizes[cut_after - 1]]
+    if flip_in is not None:
+        at = (sizes[flip_in - 2] + sizes[flip_in - 1]) // 2
+        data = data[:at] + bytes([data[at] ^ 0xFF]) + data[at + 1:]
     path = folder / "rec.mcap"
-    path.write_bytes(data if cut_after is None else data[:sizes[cut_after - 1]])
+    path.write_bytes(data)
     return path
 
 
-def _with_rec(*argv, cut_after=None, sensors=""):
+def _with_rec(*argv, cut_after=None, sensors="", flip_in=None):
     """``momentid <argv>`` where ``REC`` stands for a fresh copy of the simulated recording."""
     def act(folder: Path) -> CliResult:
-        rec = _rec(folder, cut_after, sensors)
+        rec = _rec(folder, cut_after, sensors, flip_in)
         return cli(*(rec if a == "REC" else a for a in argv))
     return act
 
@@ -74,11 +81,11 @@ def _lab_with(r1: str):
     return lambda folder: lab_folder(folder, r1=r1)
 
 
-def _json_notes(*argv, cut_after):
-    """``--json`` on a recording cut after ``cut_after`` runs: stdout must be one JSON object that
-    carries the note of the lost run (a script reads only stdout)."""
+def _json_notes(*argv, cut_after=None, flip_in=None):
+    """``--json`` on a damaged recording: stdout must be one JSON object that carries the note of the
+    lost run (a script reads only stdout)."""
     def act(folder: Path) -> CliResult:
-        result = _with_rec(*argv, cut_after=cut_after)(folder)
+        result = _with_rec(*argv, cut_after=cut_after, flip_in=flip_in)(folder)
         payload = json.loads(result.stdout)
         notes = payload.get("notes") or payload.get("lost_runs")
         if not notes:
@@ -126,6 +133,10 @@ CASES = [
                "result's notes (they name the lost runs; --json carries them) on stderr in text mode"),
     Case(Group.CLI, "identify-stream-truncated-json", Outcome.RECOVERY,
          _json_notes("identify", "REC", "--stream", "--json", cut_after=2), ("m2",)),
+    Case(Group.CLI, "identify-crc-damaged", Outcome.RECOVERY, _with_rec("identify", "REC", flip_in=3),
+         ("corrupted after run 'm1'", "(m2)")),
+    Case(Group.CLI, "identify-stream-crc-damaged-json", Outcome.RECOVERY,
+         _json_notes("identify", "REC", "--stream", "--json", flip_in=3), ("CRCValidationError", "m2")),
     Case(Group.CLI, "identify-time-beyond-record", Outcome.ERROR, _with_rec("identify", "REC", "--time", "100"),
          ("--time", "100"), xfail=f"{_XFAIL_ID}: refuse --time outside the record naming the option and value"),
     Case(Group.CLI, "identify-time-nan", Outcome.ERROR, _with_rec("identify", "REC", "--time", "nan"),

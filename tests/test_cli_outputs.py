@@ -135,3 +135,27 @@ def test_diagnose_json_names_the_runs_a_truncated_recording_lost(tmp_path):
     payload = json.loads(proc.stdout)
     report = json.loads((tmp_path / "report" / "report.json").read_text())
     assert any("m2" in n for n in payload.get("notes", [])) and any("m2" in n for n in report.get("notes", []))
+
+
+def test_run_onto_a_full_disk_is_one_line_and_keeps_the_completed_runs(tmp_path, capsys, monkeypatch):
+    """Issue 12: disk full during `momentid run` ended in three chained OSErrors (recording.py close)."""
+    import warnings
+
+    import momentid.io.recording as recording
+    from bad_input.cli import THREE_RUNS, recording_bytes
+    from bad_input.faults import fill_disk_at
+    from bad_input.scenario import write
+    from momentid.io.recording import read_recording
+
+    _, sizes = recording_bytes()  # the same three-run scenario written whole: the size after each run
+    scenario = write(tmp_path, text=THREE_RUNS)
+    fill_disk_at(monkeypatch, recording, (sizes[0] + sizes[1]) // 2)  # full in the middle of run 2
+    out = tmp_path / "out.mcap"
+    assert cli.main(["run", str(scenario), "-q", "-j", "1", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: ") and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "cannot write run 'm1'" in err and "(ref)" in err
+    monkeypatch.undo()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert [r.name for r in read_recording(out).runs] == ["ref"]

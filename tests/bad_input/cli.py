@@ -14,7 +14,7 @@ from .csv_import import lab_folder
 from .scenario import BASE, write
 
 #: Three runs (two with added mass) of the tiny scenario: enough for every estimator.
-_THREE_RUNS = BASE + '\n[[runs]]\nname = "m2"\nadded_mass = [1.0, 0.0]\n'
+THREE_RUNS = BASE + '\n[[runs]]\nname = "m2"\nadded_mass = [1.0, 0.0]\n'
 
 
 @functools.lru_cache(maxsize=None)
@@ -25,7 +25,7 @@ def recording_bytes(sensors: str = "") -> tuple[bytes, tuple[int, ...]]:
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "s.toml"
-        path.write_text(_THREE_RUNS + sensors)
+        path.write_text(THREE_RUNS + sensors)
         experiment = mi.simulate(mi.load_scenario(path))
         out = Path(tmp) / "rec.mcap"
         sizes = []

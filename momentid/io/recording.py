@@ -13,14 +13,11 @@ recovers them from a truncated file (see :func:`read_recording`).
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import re
-import struct
 import tomllib
 import warnings
-import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -28,14 +25,14 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool
 from google.protobuf.message import DecodeError
 from google.protobuf.message_factory import GetMessageClass
-from mcap.exceptions import McapError, RecordLengthLimitExceeded
-from mcap.records import (Attachment, AttachmentIndex, Channel, ChunkIndex, DataEnd, Footer, Message, Metadata,
-                          MetadataIndex, Schema)
+from mcap.exceptions import RecordLengthLimitExceeded
+from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
 from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
 from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
+from momentid.io.mcap_check import DAMAGE, MCAP_MAGIC, Bounded, summary_damage
 from momentid.core.structure import LabStatement, Structure
 
 __all__ = [
@@ -62,7 +59,6 @@ SCHEMA_NAME = "momentid.SensorBlock"
 EXPERIMENT_RECORD = "momentid.experiment"
 RUN_RECORD = "momentid.run"
 ABORTED_RECORD = "momentid.aborted"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 #: The schema as .proto text (documentation; the file embeds the descriptor).
 SENSOR_BLOCK_PROTO = """\
@@ -428,12 +424,6 @@ class _Scan:
     on_block: object = None  # streaming: called with each decoded block instead of keeping it
 
 
-_DAMAGE = (McapError, struct.error, ValueError, EOFError, RuntimeError, OverflowError)
-try:  # chunks compressed by other writers
-    import zstandard
-    _DAMAGE += (zstandard.ZstdError,)
-except ImportError:  # pragma: no cover
-    pass
 
 
 def read_recording(path) -> Experiment:
@@ -513,23 +503,6 @@ def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
     return scan.experiment, complete, notes
 
 
-class _Bounded:
-    """A read-only view of an open file that never asks for more bytes than the file has left: a
-    damaged length field inside a record (a chunk's data length of 2**57, say) then reads short
-    and fails as damage instead of making the stock reader allocate that many bytes.  (Not an
-    ``io.RawIOBase``: the stock reader would wrap that in a BufferedReader, which reads around it.)"""
-
-    def __init__(self, f, size: int):
-        self._f, self._size = f, size
-
-    def read(self, n: int = -1) -> bytes:
-        left = max(self._size - self._f.tell(), 0)
-        return self._f.read(left if n is None or n < 0 else min(n, left))
-
-    def tell(self) -> int:
-        return self._f.tell()
-
-
 def _scan(path: Path, on_block=None) -> _Scan:
     try:
         f = open(path, "rb")
@@ -548,13 +521,13 @@ def _scan(path: Path, on_block=None) -> _Scan:
                                  f"the MCAP magic {MCAP_MAGIC!r})")
         f.seek(0)
         scan = _Scan(on_block=on_block)
-        records = StreamReader(_Bounded(f, size), validate_crcs=True, record_size_limit=size).records
+        records = StreamReader(Bounded(f, size), validate_crcs=True, record_size_limit=size).records
         while True:
             try:
                 record = next(records)
             except StopIteration:
                 break
-            except _DAMAGE as e:
+            except DAMAGE as e:
                 if isinstance(e, CRCValidationError) and isinstance(e.record, DataEnd):
                     scan.data_end, scan.data_crc_bad = True, True
                 pos = f.tell()
@@ -570,57 +543,10 @@ def _scan(path: Path, on_block=None) -> _Scan:
             elif not scan.data_end:  # the summary section only repeats what came before
                 _take(path, scan, record)
         if scan.data_end and scan.failure is None:
-            damage = _summary_damage(f, size)
+            damage = summary_damage(f, size)
             if damage is not None:
                 scan.failure = f"({damage})"
     return scan
-
-
-#: The footer record (opcode, length, summary_start, summary_offset_start, summary_crc) and the
-#: closing magic: the last bytes of a complete MCAP file.
-_FOOTER = struct.Struct("<BQQQI")
-_OPCODE_FOOTER, _OPCODE_CHUNK, _OPCODE_METADATA, _OPCODE_ATTACHMENT = 0x02, 0x06, 0x0C, 0x09
-
-
-def _summary_damage(f, size: int) -> str | None:
-    """What is wrong with the summary section and footer of the open file ``f`` (or None).
-
-    The streaming read never needs them, but other MCAP tools jump through their indexes, so
-    damage there is reported: a summary CRC mismatch, or an index that points at the wrong record.
-    """
-    footer_at = size - _FOOTER.size - len(MCAP_MAGIC)
-    if footer_at < len(MCAP_MAGIC):
-        return "no footer"
-    f.seek(footer_at)
-    tail = f.read(_FOOTER.size + len(MCAP_MAGIC))
-    opcode, length, summary_start, _, crc = _FOOTER.unpack(tail[:_FOOTER.size])
-    if opcode != _OPCODE_FOOTER or length != _FOOTER.size - 9 or tail[_FOOTER.size:] != MCAP_MAGIC:
-        return f"the last {len(tail)} bytes are not a footer and the MCAP magic"
-    if summary_start == 0:
-        return None  # a file without a summary section: allowed by the format
-    if not len(MCAP_MAGIC) <= summary_start <= footer_at:
-        return f"footer summary_start = {summary_start}, outside the file"
-    f.seek(summary_start)
-    summary = f.read(footer_at - summary_start)
-    if crc != 0 and zlib.crc32(summary + tail[:_FOOTER.size - 4]) != crc:
-        return f"summary CRC mismatch (footer says {crc:#010x})"
-    try:
-        for record in StreamReader(io.BytesIO(summary + tail), skip_magic=True,
-                                   record_size_limit=len(summary) + len(tail)).records:
-            if isinstance(record, ChunkIndex):
-                where, want = record.chunk_start_offset, _OPCODE_CHUNK
-            elif isinstance(record, MetadataIndex):
-                where, want = record.offset, _OPCODE_METADATA
-            elif isinstance(record, AttachmentIndex):
-                where, want = record.offset, _OPCODE_ATTACHMENT
-            else:
-                continue
-            f.seek(where)
-            if where >= summary_start or f.read(1) != bytes([want]):
-                return f"{type(record).__name__} points at byte {where}, which holds no such record"
-    except _DAMAGE as e:
-        return f"{type(e).__name__}: {e}"
-    return None
 
 
 def _take(path: Path, scan: _Scan, record) -> None:

@@ -94,6 +94,54 @@ def _json_notes(*argv, cut_after=None, flip_in=None):
     return act
 
 
+def _edited(edit, *argv):
+    """``momentid identify REC <argv>`` on the simulated recording with its runs edited by
+    ``edit(run) -> RunData`` (a lab's slip: wrong units, swapped columns)."""
+    def act(folder: Path) -> CliResult:
+        import dataclasses
+        import warnings
+
+        from momentid.io.recording import read_recording, write_experiment
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            experiment = read_recording(_rec(folder))
+        runs = tuple(edit(r) for r in experiment.runs)
+        path = write_experiment(folder / "edited.mcap", dataclasses.replace(experiment, runs=runs))
+        return cli("identify", path, *argv)
+    return act
+
+
+def _scaled(run, channels, factor):
+    import dataclasses
+
+    values = run.values.copy()
+    for c in channels:
+        values[:, run.channels.index(c)] *= factor
+    return dataclasses.replace(run, values=values)
+
+
+def _floors_in_g(run):
+    return _scaled(run, ("a1", "a2"), 1 / 9.80665)  # a lab that exported g, not m/s^2
+
+
+def _grams(run):
+    import dataclasses
+
+    return dataclasses.replace(run, added_mass=run.added_mass * 1000)  # added masses typed in grams
+
+
+def _swapped(run):
+    import dataclasses
+
+    order = [run.channels.index(c) for c in run.channels]
+    i, j = run.channels.index("a1"), run.channels.index("a2")
+    order[i], order[j] = j, i
+    return dataclasses.replace(run, values=run.values[:, order])
+
+
+_REFUSE = "needs momentid.estimation (identification/comparison): refuse or warn loudly when "
+
 _ACCEL_ONLY = '\n[sensors]\nset = "accel"\n'
 _XFAIL_ID = "needs momentid.estimation.identification"
 
@@ -144,6 +192,12 @@ CASES = [
     Case(Group.CLI, "identify-difference-accel-only", Outcome.ERROR,
          _with_rec("identify", "REC", "--estimator", "difference", sensors=_ACCEL_ONLY), ("difference",),
          xfail=f"{_XFAIL_ID}: _difference_rows IndexError on accelerometer-only data"),
+    Case(Group.CLI, "identify-floors-in-g", Outcome.REFUSAL, _edited(_floors_in_g), ("refused",),
+         xfail=_REFUSE + "floor accelerations are 9.8x too small for the table's (units in g?)"),
+    Case(Group.CLI, "identify-added-mass-in-grams", Outcome.REFUSAL, _edited(_grams), ("refused",),
+         xfail=_REFUSE + "added masses are 1000x the nominal floor masses (grams?)"),
+    Case(Group.CLI, "identify-swapped-floor-columns", Outcome.REFUSAL, _edited(_swapped), ("refused",),
+         xfail=_REFUSE + "the residual is orders of magnitude above the noise (a1/a2 swapped)"),
     Case(Group.CLI, "import-missing-folder", Outcome.ERROR, _in("import", "nowhere"), ("nowhere",)),
     Case(Group.CLI, "import-cell-1e308", Outcome.ERROR,
          _in("import", "lab", "-o", "out", setup=_lab_with(

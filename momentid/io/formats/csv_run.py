@@ -20,7 +20,7 @@ import numpy as np
 
 from momentid.core.series import channel_unit
 from momentid.errors import SensorDataError
-from momentid.io.formats import MAX_ABS_SAMPLE, ExportFormat, Layout, first_absurd, read_text, register
+from momentid.io.formats.base import MAX_ABS_SAMPLE, ExportFormat, Layout, first_absurd, read_text, register
 
 __all__ = ["read_csv_run", "csv_error", "TIME_TOLERANCE", "MIN_SAMPLES"]
 

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from momentid.errors import SensorDataError
-from momentid.io.formats import MAX_ABS_SAMPLE, ExportFormat, Layout, SensorRecord, first_absurd, read_text, register
+from momentid.io.formats.base import MAX_ABS_SAMPLE, ExportFormat, Layout, SensorRecord, first_absurd, read_text, register
 
 __all__ = ["read_xsens_dot", "CLOCK_COLUMN", "ACC_COLUMNS"]
 

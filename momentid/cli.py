@@ -13,6 +13,7 @@ import json
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 
 from momentid.core.series import json_safe
@@ -102,6 +103,15 @@ def _only_json_on_stdout(active: bool):
         sys.stdout = old
         os.dup2(saved, 1)
         os.close(saved)
+
+
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line on stderr: ``note:`` for data recovered from a damaged input, else
+    ``warning:``; never the source line of the code that warned."""
+    from momentid.errors import RecoveryWarning
+
+    kind = "note" if issubclass(category, RecoveryWarning) else "warning"
+    print(f"{kind}: {message}", file=sys.stderr)
 
 
 def _os_error(exc: OSError) -> str:
@@ -254,9 +264,7 @@ def _cmd_diagnose(args) -> int:
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
     diag = diagnose(experiment)
-    write_report(diag, out)
-    for note in experiment.notes:
-        print(f"note: {note}", file=sys.stderr)
+    write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
@@ -458,7 +466,8 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
-        with _only_json_on_stdout(getattr(args, "json", False)):
+        with _only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning
             return args.func(args)
     except MomentidError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -18,6 +18,7 @@ __all__ = [
     "SensorDataError",
     "ViewerError",
     "ResourceError",
+    "RecoveryWarning",
 ]
 
 
@@ -82,3 +83,10 @@ def _size(nbytes: float) -> str:
             return f"{nbytes:.3g} {unit}"
         nbytes /= 1000
     return f"{nbytes:.3g} PB"
+
+
+class RecoveryWarning(UserWarning):
+    """Data were recovered from a damaged input; the message says what was kept and what was lost.
+
+    The same text is in the result's ``notes``; the CLI prints it as one ``note:`` line.
+    """

@@ -46,3 +46,13 @@ def simulated():
     def get(name: str, ideal: bool = False):
         return _simulated(name, ideal)
     return get
+
+
+# Hypothesis profiles of tests/test_fuzz_readers.py: a bounded, derandomized run by default (the same
+# examples on every machine, a few seconds per reader) and a long random one selected by -m slow.
+from hypothesis import HealthCheck, settings  # noqa: E402
+
+settings.register_profile("fuzz-fast", max_examples=150, deadline=None, derandomize=True, database=None,
+                          suppress_health_check=[HealthCheck.too_slow])
+settings.register_profile("fuzz-slow", max_examples=5000, deadline=None, derandomize=False, database=None,
+                          suppress_health_check=[HealthCheck.too_slow])

@@ -7,8 +7,13 @@ difference at all is a bug, not round-off.
 
 from __future__ import annotations
 
+import dataclasses
+import errno
 import json
+import os
 import re
+import struct
+import subprocess
 import warnings
 from pathlib import Path
 
@@ -20,10 +25,12 @@ from mcap_protobuf.decoder import DecoderFactory
 
 import momentid as mi
 from momentid.core.series import Experiment, RunData
-from momentid.errors import RecordingError, TruncatedRecordingError
+from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
 from momentid.io.recording import (SCHEMA_DATA, SCHEMA_NAME, SENSOR_BLOCK_PROTO, RecordingWriter,
                                 SensorBlock, _encode_block, read_recording, write_experiment)
 from momentid.core.structure import Structure
+
+from bad_input.faults import fill_disk_at
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "recording-format.md"
 CHANNELS = ("zdd", "a1", "a2", "q1", "q2")
@@ -287,3 +294,146 @@ def test_same_scenario_and_seed_give_the_same_bytes(tmp_path):
     mi.run_experiment(scenario, first)
     mi.run_experiment(scenario, second, workers=2)
     assert first.read_bytes() == second.read_bytes()
+
+
+# ----------------------------------------------------------------------------- issue 12: faults
+
+def read_noting(path) -> Experiment:
+    """Read a damaged recording: its notes are checked, their warnings are not wanted here."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RecoveryWarning)
+        return read_recording(path)
+
+
+def _full_disk_after(monkeypatch, room: int) -> None:
+    """Every file the recording module opens sits on a disk with ``room`` bytes."""
+    import momentid.io.recording as recording
+
+    fill_disk_at(monkeypatch, recording, room)
+
+
+def _room_for_two_runs(tmp_path) -> int:
+    """Bytes a recording of ``experiment(3)`` holds after its second run (the writer's own sizes)."""
+    path = tmp_path / "sizes.mcap"
+    with RecordingWriter(path, structure=STRUCTURE, scenario=SCENARIO) as writer:
+        for run in experiment(3).runs[:2]:
+            writer.write_run(run)
+        size = path.stat().st_size
+    return size
+
+
+def test_a_full_disk_is_one_error_naming_the_runs_kept(tmp_path, monkeypatch):
+    """Issue 12: disk full while writing gave three chained OSErrors; now one RecordingError that says
+    which completed runs are on disk, and those read back with a note."""
+    room = _room_for_two_runs(tmp_path)
+    _full_disk_after(monkeypatch, room + 100)  # a little room: run r3 fails part-way
+    path = tmp_path / "full.mcap"
+    with pytest.raises(RecordingError) as info:
+        write_experiment(path, experiment(3))
+    message = str(info.value)
+    assert "\n" not in message and info.value.__suppress_context__  # no chained traceback
+    assert "cannot write run 'r3'" in message and "(r1, r2)" in message and os.strerror(errno.ENOSPC) in message
+    got = read_noting(path)
+    assert [r.name for r in got.runs] == ["r1", "r2"] and not got.complete and "truncated" in got.notes[0]
+
+
+def test_a_disk_full_before_the_header_keeps_nothing_and_says_so(tmp_path, monkeypatch):
+    _full_disk_after(monkeypatch, 0)
+    with pytest.raises(RecordingError, match="cannot write the header .* no run was completed"):
+        write_experiment(tmp_path / "full.mcap", experiment(1))
+
+
+@pytest.fixture
+def tiny_disk(tmp_path):
+    """A real 64 KiB tmpfs (root only; skipped elsewhere)."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mount)],
+                                           capture_output=True).returncode != 0:
+        pytest.skip("mounting a tmpfs needs root")
+    yield mount
+    subprocess.run(["umount", str(mount)], check=True)
+
+
+def test_a_real_full_disk_keeps_the_completed_runs(tiny_disk):
+    """The same on a real full file system (ENOSPC from the kernel, not a stand-in)."""
+    runs = tuple(make_run(i + 1, n=1000) for i in range(4))  # ~45 KB each: the 64 KiB disk fills in run 2
+    path = tiny_disk / "full.mcap"
+    with pytest.raises(RecordingError, match=r"cannot write run 'r2' .*the 1 completed run\(s\) \(r1\)"):
+        write_experiment(path, Experiment(runs, STRUCTURE, SCENARIO, SCENARIO_TEXT))
+    got = read_noting(path)
+    assert [r.name for r in got.runs] == ["r1"] and got.notes
+
+
+def _with_summary(tmp_path, mangle) -> Experiment:
+    path = tmp_path / "rec.mcap"
+    write_experiment(path, experiment(2))
+    data = bytearray(path.read_bytes())
+    mangle(data)
+    path.write_bytes(bytes(data))
+    return read_noting(path)
+
+
+FOOTER = 8 + 29  # the footer record and the closing magic, from the end of the file
+
+
+def _summary_start(data) -> int:
+    return struct.unpack_from("<Q", data, len(data) - FOOTER + 9)[0]
+
+
+def test_a_damaged_summary_crc_is_read_whole_with_a_note(tmp_path):
+    """docs/recording-format.md: damage only in the summary or footer returns all runs, complete, with
+    a note (issue 12: the note was missing)."""
+    def flip_crc(data):
+        data[len(data) - 8 - 4] ^= 0xFF
+
+    got = _with_summary(tmp_path, flip_crc)
+    assert got.complete and [r.name for r in got.runs] == ["r1", "r2"]
+    assert len(got.notes) == 1 and "summary CRC mismatch" in got.notes[0]
+
+
+@pytest.mark.parametrize("opcode, name", [(0x08, "ChunkIndex"), (0x0D, "MetadataIndex")])
+def test_an_index_pointing_astray_is_named_even_without_a_summary_crc(tmp_path, opcode, name):
+    """A writer may leave the summary CRC 0 (unchecked); an index whose offset points at no such
+    record is still reported."""
+    def misdirect(data):
+        struct.pack_into("<I", data, len(data) - 8 - 4, 0)  # summary CRC 0: not checked
+        at = _summary_start(data)
+        while data[at] != opcode:
+            at += 9 + struct.unpack_from("<Q", data, at + 1)[0]
+        offset_field = at + 9 + (16 if opcode == 0x08 else 0)  # chunk_start_offset / offset
+        struct.pack_into("<Q", data, offset_field, 1)
+
+    got = _with_summary(tmp_path, misdirect)
+    assert got.complete and len(got.runs) == 2
+    assert len(got.notes) == 1 and f"{name} points at byte 1" in got.notes[0]
+
+
+def test_notes_name_the_planned_runs_a_truncated_file_lost(tmp_path):
+    """The scenario text stored in the file lists the runs planned: a truncated file's note names the
+    ones that never arrived (issue 12: 'must say which runs were lost')."""
+    text = SCENARIO_TEXT + "".join(f'[[runs]]\nname = "r{i}"\n' for i in (1, 2, 3))
+    exp = dataclasses.replace(experiment(3), scenario_text=text)
+    path = tmp_path / "rec.mcap"
+    with RecordingWriter(path, structure=STRUCTURE, scenario=SCENARIO, scenario_text=text) as writer:
+        writer.write_run(exp.runs[0])
+        cut = path.stat().st_size
+        writer.write_run(exp.runs[1])
+    path.write_bytes(path.read_bytes()[:cut])
+    got = read_noting(path)
+    assert [r.name for r in got.runs] == ["r1"]
+    assert "lost 2 of the 3 planned runs (r2, r3)" in got.notes[0]
+
+
+def test_a_huge_length_field_inside_a_record_is_damage_not_memory_error(tmp_path):
+    """Fuzzing found it: a chunk whose inner data-length field claims 2**57 bytes made the stock reader
+    allocate them (MemoryError); reading now stops there as at any damage."""
+    path = tmp_path / "rec.mcap"
+    write_experiment(path, experiment(2))
+    data = bytearray(path.read_bytes())
+    chunk = data.index(b"\x06", 8 + 9 + 4)  # the first chunk record after the header
+    # chunk body: start(8) end(8) uncompressed_size(8) crc(4) compression "" (4 + 0) then data length (8)
+    struct.pack_into("<Q", data, chunk + 9 + 8 + 8 + 8 + 4 + 4, 2**57)
+    path.write_bytes(bytes(data))
+    with pytest.raises(RecordingError, match="no completed run to recover"):
+        read_noting(path)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import os
 import re
-import struct
+import tomllib
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,13 +25,14 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool
 from google.protobuf.message import DecodeError
 from google.protobuf.message_factory import GetMessageClass
-from mcap.exceptions import McapError, RecordLengthLimitExceeded
+from mcap.exceptions import RecordLengthLimitExceeded
 from mcap.records import Attachment, Channel, DataEnd, Footer, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
 from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
-from momentid.errors import RecordingError, TruncatedRecordingError
+from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
+from momentid.io.mcap_check import DAMAGE, MCAP_MAGIC, Bounded, summary_damage
 from momentid.core.structure import LabStatement, Structure
 
 __all__ = [
@@ -58,7 +59,6 @@ SCHEMA_NAME = "momentid.SensorBlock"
 EXPERIMENT_RECORD = "momentid.experiment"
 RUN_RECORD = "momentid.run"
 ABORTED_RECORD = "momentid.aborted"
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 #: The schema as .proto text (documentation; the file embeds the descriptor).
 SENSOR_BLOCK_PROTO = """\
@@ -221,22 +221,46 @@ class RecordingWriter:
             self._schema_id = self._writer.register_schema(SCHEMA_NAME, "protobuf", SCHEMA_DATA)
             self._writer.add_metadata(EXPERIMENT_RECORD, meta)
             self._sync()
+        except OSError as e:
+            self._abandon()
+            raise self._disk_error(e, "the header") from None
         except BaseException:
-            self._closed = True
-            self._file.close()
+            self._abandon()
             raise
 
     def __enter__(self) -> "RecordingWriter":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc is None:
+            self.close()
+            return False
         try:
-            if exc is not None and not self._closed:
+            if not self._closed:
                 self._writer.add_metadata(ABORTED_RECORD, {"error": f"{exc_type.__name__}: {exc}",
                                                            "runs_written": str(self._completed)})
-        finally:
             self.close()
+        except (OSError, RecordingError):
+            # The disk refused more bytes (it is full, say): the completed runs are already fsynced
+            # and read back as a truncated file; the error that got us here is the one to report.
+            self._abandon()
         return False
+
+    def _abandon(self) -> None:
+        """Close the file without writing more (after a write failed)."""
+        self._closed = True
+        try:
+            self._file.close()
+        except OSError:
+            pass  # the bytes it still held could not be written either; the recovery note says so
+
+    def _disk_error(self, exc: OSError, doing: str) -> RecordingError:
+        """A one-line error for a failed write that says what the file still holds."""
+        kept = self._runs[:self._completed]
+        runs = (f"the {len(kept)} completed run(s) ({', '.join(kept)}) are on disk and read back "
+                "with a note" if kept else "no run was completed")
+        return RecordingError(f"{self.path}: cannot write {doing} ({exc.strerror or exc}); {runs}; "
+                              "expected free space on the disk")
 
     def _sync(self) -> None:
         self._writer.flush()  # closes the open chunk
@@ -262,8 +286,15 @@ class RecordingWriter:
         ------
         RecordingError
             The writer is closed, the name is empty or already used, or the
-            data would not read back (bad times, channel names, added mass).
+            data would not read back (bad times, channel names, added mass), or
+            the disk refused the bytes (full: the message names the runs kept).
         """
+        try:
+            self._write_run(run, model_xml, block_size)
+        except OSError as e:  # a full disk, an I/O error
+            raise self._disk_error(e, f"run {run.name!r}") from None
+
+    def _write_run(self, run: RunData, model_xml: str | None, block_size: int) -> None:
         where = f"{self.path}: run {run.name!r}"
         if self._closed:
             raise RecordingError(f"{where}: the writer is closed; expected write_run before close()")
@@ -320,13 +351,15 @@ class RecordingWriter:
         """Write the summary and footer and close the file (idempotent)."""
         if self._closed:
             return
-        self._closed = True
         try:
             self._writer.finish()
             self._file.flush()
             os.fsync(self._file.fileno())
-        finally:
-            self._file.close()
+        except OSError as e:
+            self._abandon()
+            raise self._disk_error(e, "the summary and footer") from None
+        self._closed = True
+        self._file.close()
 
 
 def write_experiment(path, experiment: Experiment, *, model_xml: dict[str, str] | None = None) -> Path:
@@ -391,12 +424,6 @@ class _Scan:
     on_block: object = None  # streaming: called with each decoded block instead of keeping it
 
 
-_DAMAGE = (McapError, struct.error, ValueError, EOFError, RuntimeError, OverflowError)
-try:  # chunks compressed by other writers
-    import zstandard
-    _DAMAGE += (zstandard.ZstdError,)
-except ImportError:  # pragma: no cover
-    pass
 
 
 def read_recording(path) -> Experiment:
@@ -417,7 +444,7 @@ def read_recording(path) -> Experiment:
     Experiment
         Runs in index order; ``complete`` is False and ``notes`` say what
         was lost when the file was truncated, corrupted or aborted (a
-        ``warnings.warn`` repeats every note).
+        a :class:`~momentid.errors.RecoveryWarning` repeats every note).
 
     Raises
     ------
@@ -472,7 +499,7 @@ def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
         (complete if ok else notes).append(name if ok else f"{path}: run {name!r} is incomplete; left out")
     if scan.failure or not scan.data_end:
         notes.append(f"{path}: the recording ends early ({scan.failure or 'no end-of-data record'}); "
-                     f"only completed runs were used")
+                     f"only completed runs were used; {_lost_runs(scan.experiment, complete)}")
     return scan.experiment, complete, notes
 
 
@@ -494,13 +521,13 @@ def _scan(path: Path, on_block=None) -> _Scan:
                                  f"the MCAP magic {MCAP_MAGIC!r})")
         f.seek(0)
         scan = _Scan(on_block=on_block)
-        records = StreamReader(f, validate_crcs=True, record_size_limit=size).records
+        records = StreamReader(Bounded(f, size), validate_crcs=True, record_size_limit=size).records
         while True:
             try:
                 record = next(records)
             except StopIteration:
                 break
-            except _DAMAGE as e:
+            except DAMAGE as e:
                 if isinstance(e, CRCValidationError) and isinstance(e.record, DataEnd):
                     scan.data_end, scan.data_crc_bad = True, True
                 pos = f.tell()
@@ -515,6 +542,10 @@ def _scan(path: Path, on_block=None) -> _Scan:
                 scan.data_end = True
             elif not scan.data_end:  # the summary section only repeats what came before
                 _take(path, scan, record)
+        if scan.data_end and scan.failure is None:
+            damage = summary_damage(f, size)
+            if damage is not None:
+                scan.failure = f"({damage})"
     return scan
 
 
@@ -755,7 +786,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     if not scan.data_end:
         what = "truncated" if scan.at_end else "corrupted"
         after = f"after run {runs[-1].name!r}" if runs else "before any run completed"
-        notes.append(f"{path}: {what} {after}; {recovered}, later runs are lost; "
+        notes.append(f"{path}: {what} {after}; {recovered}, {_lost_runs(exp, runs)}; "
                      f"reading stopped {scan.failure}")
     elif scan.data_crc_bad:
         notes.append(f"{path}: data section CRC mismatch ({scan.failure}): a record outside the "
@@ -769,10 +800,25 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     if not complete and not runs:  # notes say why
         raise TruncatedRecordingError(f"{notes[0]}; no completed run to recover")
     for note in notes:
-        warnings.warn(note, stacklevel=3)
+        warnings.warn(note, RecoveryWarning, stacklevel=3)  # points at the caller of read_recording
     return Experiment(runs=runs, structure=structure, scenario=scenario,
                       scenario_text=exp.get("scenario_text", ""), source=str(path),
                       complete=complete, notes=tuple(notes), statement=statement)
+
+
+def _lost_runs(experiment: dict, kept) -> str:
+    """Which runs a damaged file lost: the ``[[runs]]`` of the stored scenario (or experiment.toml)
+    text that are not in ``kept`` (RunData or names), or "later runs are lost" when it names none."""
+    kept = {getattr(r, "name", r) for r in kept}
+    try:
+        tables = tomllib.loads(experiment.get("scenario_text", "")).get("runs", [])
+        planned = [t["name"] for t in tables]
+    except (tomllib.TOMLDecodeError, AttributeError, KeyError, TypeError):
+        planned = []
+    if not planned or not all(isinstance(n, str) for n in planned):
+        return "later runs are lost"
+    lost = [n for n in planned if n not in kept]
+    return f"lost {len(lost)} of the {len(planned)} planned runs ({', '.join(lost) or 'none'})"
 
 
 def _statement_dict(statement: LabStatement | None) -> dict | None:

@@ -39,6 +39,7 @@ Entity paths::
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -621,17 +622,36 @@ def write_rrd(experiment, path, **options) -> Path:
 
     scene = experiment if isinstance(experiment, Scene) else prepare(experiment, **options)
     path = Path(path)
+    # Logged to memory and written here, not by rerun's own file sink: that one writes from a
+    # background thread and drops a write error (a full disk) silently, leaving a truncated file.
+    rec = rr.RecordingStream(APPLICATION_ID)
+    stream = rec.binary_stream()
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        rec = rr.RecordingStream(APPLICATION_ID)
-        rec.save(path, default_blueprint=blueprint(scene))
-    except (OSError, RuntimeError) as exc:
-        raise ViewerError(f"{path}: cannot write the rerun recording ({exc})") from None
-    try:
+        rec.send_blueprint(blueprint(scene), make_active=False, make_default=True)
         log_scene(rec, scene)
+        data = stream.read(flush=True) or b""
     finally:
         rec.disconnect()
+    _write_file(path, data)
     return path
+
+
+def _write_file(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` whole or not at all (a temporary file renamed into place)."""
+    partial = path.with_name(path.name + ".partial")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(partial, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(partial, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):
+            partial.unlink(missing_ok=True)
+        raise ViewerError(f"{path}: cannot write the rerun recording ({exc.strerror or exc}); "
+                          f"expected a writable path with {len(data) / 1e6:.3g} MB free; nothing was written"
+                          ) from None
 
 
 def _listening(port: int) -> bool:

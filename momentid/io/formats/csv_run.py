@@ -20,7 +20,7 @@ import numpy as np
 
 from momentid.core.series import channel_unit
 from momentid.errors import SensorDataError
-from momentid.io.formats import ExportFormat, Layout, read_text, register
+from momentid.io.formats.base import MAX_ABS_SAMPLE, ExportFormat, Layout, first_absurd, read_text, register
 
 __all__ = ["read_csv_run", "csv_error", "TIME_TOLERANCE", "MIN_SAMPLES"]
 
@@ -170,7 +170,8 @@ def read_csv_run(path, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.nd
         The header's columns in file order, without ``t``.
     values : ndarray, shape (n, c)
         The samples; ``nan`` cells (explicit missing samples) are kept for
-        identification to repair or refuse.
+        identification to repair or refuse.  An infinite cell or one larger
+        than :data:`~momentid.io.formats.MAX_ABS_SAMPLE` is refused.
 
     Raises
     ------
@@ -190,13 +191,14 @@ def read_csv_run(path, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.nd
     data = _parse(path, body, names)
     k = names.index("t")
     time = _uniform_time(path, data[:, k])
-    inf = np.argwhere(np.isinf(data))
-    if inf.size:
-        i, j = (int(x) for x in inf[0])
-        raise csv_error(path, i + 2, f"'{names[j]}'", f"{float(data[i, j])!r}; expected a finite number "
-                                                       f"(or nan for a missing sample)")
     channels = names[:k] + names[k + 1:]
     values = np.ascontiguousarray(np.delete(data, k, axis=1))
+    absurd = first_absurd(values)
+    if absurd is not None:
+        i, j = absurd
+        raise csv_error(path, i + 2, f"'{channels[j]}'",
+                        f"{float(values[i, j])!r} {channel_unit(channels[j])}; expected a finite number "
+                        f"of magnitude at most {MAX_ABS_SAMPLE:g} in SI units (or nan for a missing sample)")
     return time, channels, values
 
 

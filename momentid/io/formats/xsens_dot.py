@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from momentid.errors import SensorDataError
-from momentid.io.formats import ExportFormat, Layout, SensorRecord, read_text, register
+from momentid.io.formats.base import MAX_ABS_SAMPLE, ExportFormat, Layout, SensorRecord, first_absurd, read_text, register
 
 __all__ = ["read_xsens_dot", "CLOCK_COLUMN", "ACC_COLUMNS"]
 
@@ -45,6 +45,10 @@ MAX_PREAMBLE_LINES = 20
 STEP_TOLERANCE = 0.05
 #: Fewest samples a sensor file must hold.
 MIN_SAMPLES = 3
+#: Largest ratio of the clock's span (in samples) to the rows present: a file whose clock says it
+#: lost more samples than it holds is refused (the lost ones would be nan, and a jump of the clock to
+#: a wild value would otherwise allocate billions of them).
+MAX_SPAN_PER_ROW = 2
 #: Cells read as a missing sample.
 MISSING_CELLS = ("", "nan", "NaN", "NAN")
 
@@ -104,10 +108,12 @@ def _parse(path: Path, body: str, names: tuple[str, ...], first_row: int) -> np.
 
 def _grid(path: Path, ticks: np.ndarray, first_row: int) -> tuple[np.ndarray, float, float]:
     """Sample index of each row on the device's uniform clock, the first tick and the interval (ticks)."""
-    bad = np.flatnonzero(~np.isfinite(ticks))
+    bad = np.flatnonzero(~((ticks >= 0) & (ticks < CLOCK_WRAP)))  # nan too
     if bad.size:
-        raise _error(path, first_row + int(bad[0]), f"'{CLOCK_COLUMN}'",
-                     "missing; expected the device clock (us) on every row")
+        i = int(bad[0])
+        raise _error(path, first_row + i, f"'{CLOCK_COLUMN}'",
+                     f"{float(ticks[i])!r}; expected the device clock (us, a uint32 counter from 0 to "
+                     f"{CLOCK_WRAP - 1}) on every row")
     step_all = np.diff(ticks)
     step_all[step_all < -CLOCK_WRAP / 2] += CLOCK_WRAP  # the uint32 counter wrapped
     ticks = ticks[0] + np.concatenate([[0.0], np.cumsum(step_all)])
@@ -121,7 +127,14 @@ def _grid(path: Path, ticks: np.ndarray, first_row: int) -> tuple[np.ndarray, fl
         raise _error(path, first_row + i, f"'{CLOCK_COLUMN}'",
                      f"{ticks[i]:.0f} us is {step_all[i - 1]:.0f} us after the row before; expected a "
                      f"whole number of sample intervals ({step:.0f} us): the clock went back or jittered")
-    return np.round((ticks - ticks[0]) / step).astype(np.int64), ticks[0], step
+    index = np.round((ticks - ticks[0]) / step).astype(np.int64)
+    if index[-1] + 1 > MAX_SPAN_PER_ROW * index.size:
+        i = int(np.argmax(step_all)) + 1
+        raise _error(path, first_row + i, f"'{CLOCK_COLUMN}'",
+                     f"{ticks[i]:.0f} us is {step_all[i - 1]:.0f} us ({step_all[i - 1] / step:.0f} sample "
+                     f"intervals) after the row before; expected at most {MAX_SPAN_PER_ROW - 1} lost samples "
+                     f"per recorded one: the file lost more than it holds")
+    return index, ticks[0], step
 
 
 def read_xsens_dot(path) -> SensorRecord:
@@ -160,6 +173,12 @@ def read_xsens_dot(path) -> SensorRecord:
                      f"{len(lines) - h - 1} data rows; expected at least {MIN_SAMPLES} samples")
     data = _parse(path, body, names, first_row)
     acc = data[:, [names.index(c) for c in ACC_COLUMNS]]
+    absurd = first_absurd(acc)
+    if absurd is not None:
+        i, j = absurd
+        raise _error(path, first_row + i, f"'{ACC_COLUMNS[j]}'",
+                     f"{float(acc[i, j])!r} m/s^2; expected a finite acceleration of magnitude at most "
+                     f"{MAX_ABS_SAMPLE:g} m/s^2 (or an empty cell for a lost sample)")
     ticks = data[:, names.index(CLOCK_COLUMN)]
     if np.all(acc[0] == 0.0):  # written before the device measures
         acc, ticks, first_row = acc[1:], ticks[1:], first_row + 1

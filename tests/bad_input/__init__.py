@@ -1,0 +1,16 @@
+"""The bad-input suite (issue 12): every case is a row of a table, grouped by entry point.
+
+``python -m tests.bad_input --summary`` runs every case and prints the count per entry point and
+outcome class (the figures of docs/reliability.md); ``pytest tests/bad_input`` runs them as tests.
+"""
+
+from __future__ import annotations
+
+from . import at2, cli, csv_import, imu_import, recording, scenario
+from ._core import Case, Group, Observed, Outcome, check, observe
+
+__all__ = ["CASES", "Case", "Group", "Observed", "Outcome", "check", "observe"]
+
+#: Every case, grouped by entry point in the order of :class:`Group`.
+CASES: list[Case] = [*scenario.CASES, *at2.CASES, *csv_import.CASES, *imu_import.CASES, *recording.CASES,
+                     *cli.CASES]

@@ -17,7 +17,7 @@ import warnings
 from pathlib import Path
 
 from momentid.core.series import json_safe
-from momentid.errors import MomentidError
+from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
 
 __all__ = ["main"]
 
@@ -40,6 +40,16 @@ def _positive_float(text: str) -> float:
         value = float("nan")
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number")
+    return value
+
+
+def _finite_time(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a finite time in seconds, at least 0")
     return value
 
 
@@ -127,7 +137,13 @@ def _report(experiment, args) -> int:
 
     times = args.time if args.time else None
     runs = args.runs.split(",") if args.runs else None
-    result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
+    try:
+        result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
+    except IdentificationError as exc:
+        if times is not None and str(exc).startswith("times = "):  # the API's name -> the option's
+            raise IdentificationError("--time " + " --time ".join(f"{x:g}" for x in times)
+                                      + str(exc)[str(exc).index(":"):]) from None
+        raise
 
     if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
         payload, text = result.to_dict(), result.table()
@@ -139,8 +155,8 @@ def _report(experiment, args) -> int:
         payload = result.to_dict()
         payload["analytic"] = None
         text = "\n".join(f"{k}: {v}" for k, v in payload.items())
-    for note in experiment.notes:
-        print(f"note: {note}", file=sys.stderr)
+    if experiment.notes:  # what was recovered or repaired reading the file (also on stderr)
+        payload["notes"] = list(experiment.notes)
     if args.json:
         print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
     else:
@@ -178,8 +194,12 @@ def _cmd_identify(args) -> int:
         from momentid.estimation.identification import identify_stream
         result, meta = identify_stream(args.recording, mass=args.mass, return_structure=True)
         payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
-        print(json.dumps(json_safe(payload), indent=2) if args.json
-              else (compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload))))
+        if args.json:
+            print(json.dumps(json_safe(payload), indent=2))
+            return 0
+        print(compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload)))
+        for note in result.notes:   # they name runs a damaged file lost
+            print(f"note: {note}", file=sys.stderr)
         return 0
     experiment = read_recording(args.recording)
     runs = args.runs.split(",") if args.runs else None
@@ -326,7 +346,7 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
                         "by sensor noise, with standard errors")
     p.add_argument("--mass", choices=("diagonal", "full"), default="diagonal",
                    help="identify a diagonal (default) or full symmetric mass matrix")
-    p.add_argument("--time", type=float, action="append", metavar="T",
+    p.add_argument("--time", type=_finite_time, action="append", metavar="T",
                    help="use only the sample nearest time T (s); repeat for several instants "
                         "(e.g. --estimator difference --time 5 reproduces the paper's system)")
     p.add_argument("--runs", metavar="NAMES", help="comma-separated run names to use (default: all)")
@@ -468,6 +488,7 @@ def main(argv=None) -> int:
     try:
         with _only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
+            warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
             return args.func(args)
     except MomentidError as exc:
         print(f"error: {exc}", file=sys.stderr)

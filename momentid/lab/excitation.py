@@ -49,6 +49,11 @@ __all__ = ["GroundMotion", "ground_motion", "read_at2", "STANDARD_GRAVITY", "BAS
 #: Standard gravity (m/s^2) used to convert records given in g.
 STANDARD_GRAVITY = 9.80665
 
+#: Largest acceleration magnitude (g) a record may hold. The strongest ground motions recorded
+#: reach a few g; 100 g leaves room for any shake-table or scaled record while refusing values
+#: that only a unit mistake or a damaged file produces.
+MAX_RECORD_G = 100.0
+
 #: Order of the Butterworth high-pass; applied forward and backward
 #: (``sosfiltfilt``), so the magnitude response is squared: -6 dB at the corner.
 HIGHPASS_ORDER = 4
@@ -499,7 +504,11 @@ def read_at2(path) -> tuple[float, np.ndarray]:
         if tokens:
             last = lineno
         for tok in tokens:
-            values.append(_at2_number(path, lineno, tok, "an acceleration value (g)"))
+            value = _at2_number(path, lineno, tok, "an acceleration value (g)")
+            if abs(value) > MAX_RECORD_G:
+                raise ScenarioError(f"{path}: line {lineno}: acceleration {tok!r} g: expected at most "
+                                    f"{MAX_RECORD_G:g} g in magnitude (a record in other units?)")
+            values.append(value)
     if len(values) != npts:
         raise ScenarioError(
             f"{path}: line {head + 1}: NPTS = {npts} but the file holds {len(values)} values "

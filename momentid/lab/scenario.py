@@ -9,6 +9,7 @@ README ("Scenario format") and by the shipped files in ``scenarios/``.
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import asdict, dataclass, field
 from importlib import resources
@@ -416,6 +417,9 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
     sim.finish()
     top.finish()
 
+    if not math.isfinite(duration * sample_rate):
+        raise ScenarioError(f"{source}: key 'scenario.duration' = {duration!r}: expected a duration whose "
+                            f"sample count at sample_rate {sample_rate} Hz is a finite number")
     n = int(round(duration * sample_rate))
     if abs(n - duration * sample_rate) > 1e-6 * max(1.0, n):
         raise ScenarioError(

@@ -130,6 +130,16 @@ def _os_error(exc: OSError) -> str:
     return f"cannot write or read {where}: {exc.strerror or exc}"
 
 
+def _refuse_implausible(experiment, result) -> None:
+    """No answer is printed that the data contradict (units, swapped columns, masses in grams)."""
+    from momentid.diagnosis.plausibility import implausible
+
+    reasons = implausible(experiment, result)
+    if reasons:
+        raise IdentificationError(f"{experiment.source}: refused: the data contradict the identified model: "
+                                  + "; ".join(reasons) + "; `momentid diagnose` locates a mismatch")
+
+
 def _report(experiment, args) -> int:
     from momentid.estimation.comparison import compare
     from momentid.estimation.identification import identify
@@ -144,6 +154,7 @@ def _report(experiment, args) -> int:
             raise IdentificationError("--time " + " --time ".join(f"{x:g}" for x in times)
                                       + str(exc)[str(exc).index(":"):]) from None
         raise
+    _refuse_implausible(experiment, result)
 
     if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
         payload, text = result.to_dict(), result.table()

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from momentid.core.series import RunData
+from momentid.estimation.noise import band_level, windowed_dft
 from momentid.diagnosis.thresholds import EXCESS
 
 __all__ = ["SensorFit", "KinematicCheck", "kinematic_check", "noise_sigma"]
@@ -77,18 +78,19 @@ class KinematicCheck:
 
 
 
+#: Band (fractions of the sample rate) of the diagnosis's noise estimate: far above the modes of
+#: the rigs it checks at 1 kHz, below the anti-alias roll-off near the Nyquist frequency.
+NOISE_BAND = (0.25, 0.45)
+
+
 def noise_sigma(run: RunData) -> dict[str, float]:
-    """White-noise RMS of every channel from the top of its spectrum (0.25-0.45 of the
-    sample rate, Hann window), where a structure's response has died out."""
+    """White-noise RMS of every channel from the top of its spectrum (``NOISE_BAND`` of the
+    sample rate, open at both edges), where a structure's response has died out; the estimator
+    is :func:`momentid.estimation.noise.band_level` of the Hann-windowed DFT."""
     fs = run.sample_rate
-    n = run.n_samples
-    w = np.hanning(n)
-    gain = np.sqrt(np.sum(w ** 2))
-    X = np.fft.rfft(run.values * w[:, None], axis=0) / gain
-    f = np.fft.rfftfreq(n, 1 / fs)
-    band = (f > 0.25 * fs) & (f < 0.45 * fs)
-    level = np.sqrt(np.median(np.abs(X[band]) ** 2, axis=0) / np.log(2))
-    return dict(zip(run.channels, level))
+    f = np.fft.rfftfreq(run.n_samples, 1 / fs)
+    band = (f > NOISE_BAND[0] * fs) & (f < NOISE_BAND[1] * fs)
+    return dict(zip(run.channels, band_level(windowed_dft(run.values), band)))
 
 
 def _spectra(run: RunData, d: int, band: tuple[float, float]):

@@ -21,7 +21,8 @@ from momentid import mechanisms
 from momentid.core.analytic import shear_stiffness
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
-from momentid.diagnosis.residuals import (LinearModel, band_filter, band_signals, nrmse, replay_noise)
+from momentid.diagnosis.residuals import LinearModel, band_signals, nrmse, replay_noise
+from momentid.estimation.reconstruct import band_filter
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
 from momentid.estimation.reconstruct import Prefilter

@@ -24,10 +24,10 @@ from momentid.errors import IdentificationError
 from momentid.estimation.identification import identify
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
-from momentid.estimation.reconstruct import _filter as band_filter
+from momentid.estimation.reconstruct import band_filter
 
 __all__ = ["LinearModel", "ResidualRow", "EquationResiduals", "fit_linear_model", "equation_residuals",
-           "band_filter", "band_signals", "blocks", "replay_outputs", "replay_noise", "nrmse"]
+           "band_signals", "blocks", "replay_outputs", "replay_noise", "nrmse"]
 
 #: Band of the diagnosis (noisy data): at least this multiple of the top natural frequency, so the
 #: band reaches well above the modes, where a nonlinear storey force puts its harmonics ...

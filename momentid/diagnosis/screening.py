@@ -20,8 +20,8 @@ import numpy as np
 import scipy.optimize
 
 from momentid import mechanisms
-from momentid.diagnosis.residuals import (ResidualRow, band_filter, blocks, replay_noise,
-                                          replay_outputs)
+from momentid.diagnosis.residuals import (ResidualRow, blocks, replay_noise, replay_outputs)
+from momentid.estimation.reconstruct import band_filter
 from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
 from momentid.estimation.identification import damping_models
 from momentid.estimation.linear import discretize, outputs, simulate_linear

@@ -32,7 +32,7 @@ import numpy as np
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 
-__all__ = ["NoiseSource", "NoiseEstimate", "estimate_noise", "band_level", "quiet_lead_in",
+__all__ = ["NoiseSource", "NoiseEstimate", "estimate_noise", "band_level", "windowed_dft", "quiet_lead_in",
            "high_band_noise", "HIGH_BAND_FACTOR"]
 
 
@@ -106,7 +106,7 @@ def band_level(X: np.ndarray, band) -> np.ndarray:
     return np.sqrt(np.median(power, axis=0) / np.log(2.0))
 
 
-def _windowed_dft(values: np.ndarray) -> np.ndarray:
+def windowed_dft(values: np.ndarray) -> np.ndarray:
     """Hann-windowed DFT normalised to the noise standard deviation, shape (bins, columns).
 
     The window keeps the leakage of a segment that does not end at rest out of the noise bins.
@@ -122,7 +122,7 @@ def high_band_noise(run: RunData, low: float, high: float) -> dict | None:
     band = (freq >= low) & (freq < high)
     if np.count_nonzero(band) < MIN_BINS:
         return None
-    level = band_level(_windowed_dft(run.values), band)
+    level = band_level(windowed_dft(run.values), band)
     return dict(zip(run.channels, map(float, level)))
 
 
@@ -183,7 +183,7 @@ def estimate_noise(run: RunData, *, f_max: float | None = None, stated=None,
     if noise_floor is None:
         n_quiet = quiet_lead_in(run)
         if n_quiet:
-            X = _windowed_dft(run.values[:n_quiet] - np.mean(run.values[:n_quiet], axis=0))
+            X = windowed_dft(run.values[:n_quiet] - np.mean(run.values[:n_quiet], axis=0))
             freq = np.fft.rfftfreq(n_quiet, 1.0 / fs)
             # Skip the lowest bins: drift and the mean removed there are not white noise.
             band = freq > 2.0 * fs / n_quiet

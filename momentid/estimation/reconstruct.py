@@ -34,7 +34,7 @@ from scipy.interpolate import CubicSpline
 from momentid.core.series import RunData
 from momentid.errors import SensorDataError
 
-__all__ = ["Prefilter", "prepare_run", "suggest_band"]
+__all__ = ["Prefilter", "prepare_run", "suggest_band", "band_filter"]
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,20 @@ def suggest_band(run: RunData, d: int, *, fraction: float = 0.995, margin: float
     return float(min(max(margin * f_keep, 1.0), 0.4 * run.sample_rate))
 
 
-def _filter(x: np.ndarray, fs: float, band: Prefilter) -> np.ndarray:
+def band_filter(x: np.ndarray, fs: float, band: Prefilter) -> np.ndarray:
+    """``x`` filtered zero-phase to ``band`` (Butterworth of ``band.order``, forward and backward).
+
+    The one band filter of momentid: identification prefilters and diagnosis replays use it.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n_samples, ...)
+        Time-first samples.
+    fs : float
+        Sample rate (Hz).
+    band : Prefilter
+        ``low``/``high`` corners (Hz; 0 or None: open) and ``order``; an inactive band returns ``x``.
+    """
     if not band.active:
         return x
     if band.low and band.high:
@@ -132,17 +145,17 @@ def prepare_run(run: RunData, d: int, band: Prefilter) -> dict[str, np.ndarray]:
     has_q, has_v = run.has("q1"), run.has("v1")
     if has_q:
         q = run.group("q", d)
-        qf = _filter(q, fs, band)
+        qf = band_filter(q, fs, band)
         if has_v:
-            vf = _filter(run.group("v", d), fs, band)
+            vf = band_filter(run.group("v", d), fs, band)
         else:
             vf = CubicSpline(run.time, qf, axis=0).derivative()(run.time)
-        af = _filter(a, fs, band)
+        af = band_filter(a, fs, band)
     else:
         if zdd is None:
             raise SensorDataError(f"run {run.name!r}: without displacements the base acceleration zdd is needed")
         return weak_form(run.time, a, zdd, band.high or suggest_band(run, d))
     out = {"a": af, "v": vf, "q": qf}
     if zdd is not None:
-        out["zdd"] = _filter(zdd[:, None], fs, band)[:, 0]
+        out["zdd"] = band_filter(zdd[:, None], fs, band)[:, 0]
     return out

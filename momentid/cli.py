@@ -253,7 +253,7 @@ def _cmd_diagnose(args) -> int:
 
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
-    diag = diagnose(experiment)
+    diag = diagnose(experiment, hold_out=args.hold_out)
     write_report(diag, out)
     for note in experiment.notes:
         print(f"note: {note}", file=sys.stderr)
@@ -416,6 +416,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="DIR",
                    help="report folder (default: out/<recording>_diagnosis)")
     p.add_argument("--json", action="store_true", help="print report.json to stdout")
+    p.add_argument("--hold-out", metavar="RUN", default=None,
+                   help="recordings without added mass: the run to hold out for the before/after check "
+                        "(default: the last run)")
     p.set_defaults(func=_cmd_diagnose)
 
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",

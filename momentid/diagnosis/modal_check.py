@@ -238,21 +238,27 @@ def _line(x, y, s):
     return coef, float(np.sqrt(cov[1, 1] * scale))
 
 
-def amplitude_model(experiment: Experiment, names) -> AmplitudeModel:
-    """Fit every training run on its own and regress its modes on its response amplitude.
+def amplitude_model(fits) -> AmplitudeModel:
+    """Regress each mode's frequency and damping ratio on the response amplitude over per-run fits.
+
+    Parameters
+    ----------
+    fits : sequence of RunsFit
+        One fit per training run (:func:`fit_runs` with one run each).
 
     Raises
     ------
     IdentificationError
         Fewer than two runs, or runs of (nearly) one amplitude: no trend to fit.
     """
-    fits = tuple(fit_runs(experiment, [n]) for n in names)
+    fits = tuple(fits)
     x = np.array([f.amplitude[0] for f in fits])
     if len(fits) < 2 or np.ptp(x) <= MIN_AMPLITUDE_SPREAD * np.max(x):
-        raise IdentificationError(f"runs {list(names)}: amplitudes {x.tolist()} m/s^2: an amplitude trend needs "
-                                  f"at least two training runs whose amplitudes differ by over 10 %")
+        raise IdentificationError(f"runs {[f.runs[0] for f in fits]}: amplitudes {x.tolist()} m/s^2: an amplitude "
+                                  f"trend needs at least two training runs whose amplitudes differ by over "
+                                  f"{100 * MIN_AMPLITUDE_SPREAD:.0f} %")
     f_coef, z_coef, f_std, z_std = [], [], [], []
-    for i in range(experiment.storeys):
+    for i in range(fits[0].omega.size):
         c, s = _line(x, np.array([f.frequency[i] for f in fits]),
                      np.maximum([f.frequency_std[i] for f in fits], 1e-12))
         f_coef.append(c)

@@ -27,6 +27,8 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 from __future__ import annotations
 
 import json
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -45,6 +47,9 @@ AMPLITUDE_DEPENDENCE = "amplitude_dependence"
 #: A floor sensor's fitted clock offset beyond this fraction of a sample is reported as a finding
 #: (the fit resolves offsets far below a sample; half a sample is what sample-level alignment misses).
 LATE_SAMPLES = 0.5
+#: Processes for the modal fits (the joint training fit and one per training run): the 2 cores a
+#: lab laptop has; each fit is single-threaded.
+WORKERS = 2
 #: Floor sensor gains fitted on the training runs that differ by more than this between runs are
 #: reported: a real accelerometer's gain is constant to well below 1 %, so a 2 % spread is the
 #: model absorbing something else (an amplitude-dependent response at low frequency, a loose mount).
@@ -162,11 +167,28 @@ def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Mo
         return _diagnose(experiment, hold_out)
 
 
+def _single_threaded() -> None:
+    """Worker start: one BLAS thread (see :func:`diagnose_modal`)."""
+    threadpool_limits(limits=1, user_api="blas")
+
+
+def _fits(experiment: Experiment, train, held_out: bool):
+    """The joint fit of the training runs and, with two or more held-out-checked training runs, one fit per
+    run (amplitude candidate): on :data:`WORKERS` processes, the joint fit first (the longest)."""
+    if not held_out or len(train) < 2:
+        return mc.fit_runs(experiment, train), []
+    jobs = [list(train)] + [[n] for n in train]
+    with ProcessPoolExecutor(max_workers=WORKERS, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_single_threaded) as pool:
+        fits = list(pool.map(mc.fit_runs, [experiment] * len(jobs), jobs))
+    return fits[0], fits[1:]
+
+
 def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     held, train = _split(experiment, hold_out)
     run = experiment.run(held)
     dt, d = 1.0 / run.sample_rate, experiment.storeys
-    linear = mc.fit_runs(experiment, train)
+    linear, per_run = _fits(experiment, train, held not in train)
     gain, offset = linear.gain.mean(axis=0), linear.offset.mean(axis=0)
     start = mc.active_start(run)
     measured = run.group("a", d)[start:]
@@ -175,9 +197,9 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     noise = mc.noise_nrmse(linear.omega, linear.zeta, linear.residues, gain, run, experiment)
     amplitude = float(response_amplitude(run, d, start))
     candidate, after_full, trend = {}, before_full, None
-    if len(train) >= 2 and held not in train:
+    if per_run:
         try:
-            trend = mc.amplitude_model(experiment, train)
+            trend = mc.amplitude_model(per_run)
         except IdentificationError as err:
             candidate = {"mechanism": AMPLITUDE_DEPENDENCE, "not_fitted": str(err)}
     if trend is not None:

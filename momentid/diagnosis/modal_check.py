@@ -32,7 +32,7 @@ from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import pick_resonances, response_amplitude
 
 __all__ = ["RunsFit", "AmplitudeModel", "fit_runs", "replay", "nrmse", "noise_nrmse", "amplitude_model",
-           "active_start"]
+           "active_start", "pooled"]
 
 #: Training amplitudes must spread by at least this fraction of the largest for a trend to be fitted.
 MIN_AMPLITUDE_SPREAD = 0.1
@@ -119,6 +119,34 @@ def fit_runs(experiment: Experiment, names) -> RunsFit:
                    offset=np.array([t for _, t in sensors]),
                    amplitude=np.array([response_amplitude(r, d, active_start(r)) for r in runs]),
                    scale=fit.scale, noise=fit.noise_sources)
+
+
+def pooled(fits) -> RunsFit:
+    """One amplitude-independent linear model from per-run fits.
+
+    Each mode's frequency and damping ratio: the inverse-variance weighted mean over the runs (the
+    intercept-only version of :func:`amplitude_model`'s lines, so that the two models are nested);
+    residues: the runs' mean; sensor gains, clock offsets and amplitudes: kept per run.
+
+    Parameters
+    ----------
+    fits : sequence of RunsFit
+        One fit per run, each from :func:`fit_runs` with one run.
+    """
+    fits = tuple(fits)
+
+    def mean(values, std):
+        w = 1.0 / np.maximum(np.asarray(std), 1e-12) ** 2
+        return np.sum(w * np.asarray(values), axis=0) / np.sum(w, axis=0), 1.0 / np.sqrt(np.sum(w, axis=0))
+
+    frequency, frequency_std = mean([f.frequency for f in fits], [f.frequency_std for f in fits])
+    zeta, zeta_std = mean([f.zeta for f in fits], [f.zeta_std for f in fits])
+    return RunsFit(runs=tuple(n for f in fits for n in f.runs), omega=2 * np.pi * frequency, zeta=zeta,
+                   zeta_std=zeta_std, frequency_std=frequency_std,
+                   residues=np.mean([f.residues for f in fits], axis=0),
+                   gain=np.vstack([f.gain for f in fits]), offset=np.vstack([f.offset for f in fits]),
+                   amplitude=np.concatenate([f.amplitude for f in fits]), scale=max(f.scale for f in fits),
+                   noise=tuple(n for f in fits for n in f.noise))
 
 
 def active_start(run: RunData) -> int:

@@ -6,13 +6,15 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 1. **Hold-out**: the run the user names, else the last run of the recording (as on the added-mass
    path); the others train.  With a single run there is nothing to hold out: it is checked in-sample
    and the report says so.
-2. **Linear model**: the modal model fitted on the training runs together
-   (:func:`~momentid.diagnosis.modal_check.fit_runs`), replayed on the held-out run's measured table
+2. **Linear model**: the modal model fitted on each training run
+   (:func:`~momentid.diagnosis.modal_check.fit_runs`) and pooled into one amplitude-independent model
+   (:func:`~momentid.diagnosis.modal_check.pooled`: weighted mean modes, mean residues; a joint fit of
+   runs whose modes differ lets the sensor gains absorb the difference, 15 % on a simulated rig), replayed on the held-out run's measured table
    acceleration with the training runs' mean sensor gains and clock offsets: ``nrmse_before``.
 3. **Noise baseline**: what sensor noise alone leaves on the held-out run
    (:func:`~momentid.diagnosis.modal_check.noise_nrmse`; levels from the lab's statement, the quiet
    lead-in or a high band, valid at any rate).
-4. **Amplitude dependence** (the candidate the data can test): one fit per training run, each mode's
+4. **Amplitude dependence** (the candidate the data can test): from the same per-run fits, each mode's
    frequency and damping ratio regressed on the run's response amplitude; the held-out run's modes
    predicted at *its* amplitude (measured: the RMS top-floor acceleration relative to the table, the
    only use of the held-out run's outputs), residues and sensors as in stage 2: ``nrmse_after``.
@@ -47,7 +49,7 @@ AMPLITUDE_DEPENDENCE = "amplitude_dependence"
 #: A floor sensor's fitted clock offset beyond this fraction of a sample is reported as a finding
 #: (the fit resolves offsets far below a sample; half a sample is what sample-level alignment misses).
 LATE_SAMPLES = 0.5
-#: Processes for the modal fits (the joint training fit and one per training run): the 2 cores a
+#: Processes for the modal fits (one per training run): the 2 cores a
 #: lab laptop has; each fit is single-threaded.
 WORKERS = 2
 #: Floor sensor gains fitted on the training runs that differ by more than this between runs are
@@ -172,23 +174,21 @@ def _single_threaded() -> None:
     threadpool_limits(limits=1, user_api="blas")
 
 
-def _fits(experiment: Experiment, train, held_out: bool):
-    """The joint fit of the training runs and, with two or more held-out-checked training runs, one fit per
-    run (amplitude candidate): on :data:`WORKERS` processes, the joint fit first (the longest)."""
-    if not held_out or len(train) < 2:
-        return mc.fit_runs(experiment, train), []
-    jobs = [list(train)] + [[n] for n in train]
-    with ProcessPoolExecutor(max_workers=WORKERS, mp_context=multiprocessing.get_context("spawn"),
+def _fits(experiment: Experiment, train):
+    """One modal fit per training run, on :data:`WORKERS` processes when there are several."""
+    if len(train) < 2:
+        return [mc.fit_runs(experiment, train)]
+    with ProcessPoolExecutor(max_workers=WORKERS, mp_context=multiprocessing.get_context("fork"),
                              initializer=_single_threaded) as pool:
-        fits = list(pool.map(mc.fit_runs, [experiment] * len(jobs), jobs))
-    return fits[0], fits[1:]
+        return list(pool.map(mc.fit_runs, [experiment] * len(train), [[n] for n in train]))
 
 
 def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     held, train = _split(experiment, hold_out)
     run = experiment.run(held)
     dt, d = 1.0 / run.sample_rate, experiment.storeys
-    linear, per_run = _fits(experiment, train, held not in train)
+    per_run = _fits(experiment, train)
+    linear = mc.pooled(per_run)
     gain, offset = linear.gain.mean(axis=0), linear.offset.mean(axis=0)
     start = mc.active_start(run)
     measured = run.group("a", d)[start:]
@@ -197,7 +197,7 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     noise = mc.noise_nrmse(linear.omega, linear.zeta, linear.residues, gain, run, experiment)
     amplitude = float(response_amplitude(run, d, start))
     candidate, after_full, trend = {}, before_full, None
-    if per_run:
+    if held not in train and len(per_run) >= 2:
         try:
             trend = mc.amplitude_model(per_run)
         except IdentificationError as err:

@@ -239,6 +239,12 @@ class AmplitudeModel:
     frequency_slope_std: np.ndarray
     damping_slope_std: np.ndarray
 
+    @property
+    def amplitude_range(self) -> tuple:
+        """Smallest and largest training amplitude (m/s^2)."""
+        x = [float(r.amplitude[0]) for r in self.runs]
+        return min(x), max(x)
+
     def predict(self, amplitude: float):
         """Angular frequencies (rad/s) and damping ratios at response amplitude ``amplitude`` (m/s^2)."""
         f = self.frequency_coef[:, 0] + self.frequency_coef[:, 1] * amplitude

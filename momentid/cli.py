@@ -411,7 +411,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "one stored in it) with the recordings, locate the mismatch, test candidate "
                                    "mechanisms (Coulomb friction, cubic stiffness, extra damper, P-Delta, flexible "
                                    "added mass, sensor delay/gain/bias), add the best one to the MuJoCo model and "
-                                   "replay a held-out run before and after.")
+                                   "replay a held-out run before and after. Recordings without added mass (accelerometers "
+                                   "only): the modal model fitted on the other runs is checked on a held-out run "
+                                   "against the noise level, and amplitude dependence is tested.")
     p.add_argument("recording", help="MCAP recording (momentid run or momentid import)")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="report folder (default: out/<recording>_diagnosis)")

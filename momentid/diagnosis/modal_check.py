@@ -210,9 +210,9 @@ def noise_nrmse(fit_omega, fit_zeta, residues, gain, run: RunData, experiment: E
 
     Expected power of the floor sensors' noise (``sigma_aj^2``) plus the table sensor's white noise
     pushed through the model (``sigma_zdd^2 sum_k h_jk^2``, ``h`` the model's impulse response over
-    :data:`DECAY_TIME_CONSTANTS` time constants of its slowest mode): what a perfect model still
-    misses.  The expectation, not one noise draw: through a lightly damped mode one 20 s draw scatters
-    by ~20 %.
+    :data:`DECAY_TIME_CONSTANTS` time constants of its slowest mode, built up from the replay's start at
+    rest): what a perfect model still misses.  The expectation, not one noise draw: through a lightly
+    damped mode one 20 s draw scatters by ~20 %.
     """
     d = experiment.storeys
     sigma = estimate_noise(run, stated=_stated_noise(experiment)).sigma
@@ -224,7 +224,12 @@ def noise_nrmse(fit_omega, fit_zeta, residues, gain, run: RunData, experiment: E
     impulse = np.zeros(length)
     impulse[1] = 1.0      # not at sample 0: the replay starts at rest there, so u_0 enters only half its hold
     h = replay(fit_omega, fit_zeta, residues, gain, np.zeros(d), impulse, dt)
-    power = n * (sum(sigma[f"a{j + 1}"] ** 2 for j in range(d)) + sigma["zdd"] ** 2 * float(np.sum(h ** 2)))
+    # Sample k of the replay (at rest at sample 0) holds the table noise of samples 1..k: its expected
+    # power is the impulse response's energy up to lag k-1, which builds up over the first time constants.
+    built_up = np.cumsum(np.sum(h[1:] ** 2, axis=1))
+    lags = np.minimum(np.arange(start, run.n_samples), built_up.size) - 1
+    table = float(np.sum(built_up[lags[lags >= 0]]))
+    power = n * sum(sigma[f"a{j + 1}"] ** 2 for j in range(d)) + sigma["zdd"] ** 2 * table
     measured = run.group("a", d)[start:]
     return float(np.sqrt(power / np.sum((measured - measured.mean(axis=0)) ** 2)))
 

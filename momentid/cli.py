@@ -262,7 +262,8 @@ def _cmd_diagnose(args) -> int:
     else:
         print(diag.summary)
         print(f"\nreport written to {out}/ (report.json, summary.txt"
-              + (", model_augmented.xml, replay.png, diagnosis.rrd" if diag.augmented_xml else "")
+              + (", model_augmented.xml" if diag.augmented_xml else "")
+              + (", replay.png, diagnosis.rrd" if diag.curves else "")
               + (", locate.png" if diag.localisation else "") + ")")
     return 0
 

@@ -129,3 +129,11 @@ def test_shipped_real_recordings(tmp_path, capsys):
     elif out["mechanism"] == AMPLITUDE_DEPENDENCE:
         assert out["candidate"]["explained"] >= EXPLAINED
     assert (tmp_path / "rep" / "report.json").exists()
+
+
+def test_single_run_is_checked_in_sample():
+    diag = diagnose(lab(run("only", 0.4, 5)))
+    consistent(diag)
+    assert "no run held out" in diag.held_out
+    assert "not tested" in diag.summary                          # one run: no amplitude trend to fit
+    assert diag.nrmse_after == diag.nrmse_before

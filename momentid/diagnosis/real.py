@@ -193,6 +193,28 @@ def _fits(experiment: Experiment, train):
         return list(pool.map(mc.fit_runs, [experiment] * len(train), [[n] for n in train]))
 
 
+def _candidate(per_run, run, start: int, linear: mc.RunsFit, gain, offset):
+    """The amplitude model and its replay of the held-out run (``None, None, dict`` when not fitted)."""
+    dt, d = 1.0 / run.sample_rate, linear.omega.size
+    try:
+        trend = mc.amplitude_model(per_run)
+    except IdentificationError as err:
+        return None, None, {"mechanism": AMPLITUDE_DEPENDENCE, "not_fitted": str(err)}
+    amplitude = float(response_amplitude(run, d, start))
+    omega, zeta = trend.predict(amplitude)
+    replayed = mc.replay(omega, zeta, linear.residues, gain, offset, run["zdd"], dt)
+    return trend, replayed, {"mechanism": AMPLITUDE_DEPENDENCE, "held_out_amplitude_m_s2": amplitude,
+                             "predicted_frequency_hz": (omega / (2 * np.pi)).tolist(),
+                             "predicted_damping_ratio": zeta.tolist(), **trend.to_dict()}
+
+
+def _verdict(before: float, after: float, noise: float, tested: bool) -> str:
+    """``none`` within :data:`EXCESS` x noise; the candidate if it removes :data:`EXPLAINED` of the rest."""
+    if before <= EXCESS * noise:
+        return "none"
+    return AMPLITUDE_DEPENDENCE if tested and _explained(before, after, noise) >= EXPLAINED else "unexplained"
+
+
 def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     held, train = _split(experiment, hold_out)
     run = experiment.run(held)
@@ -203,30 +225,13 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     start = mc.active_start(run)
     measured = run.group("a", d)[start:]
     before_full = mc.replay(linear.omega, linear.zeta, linear.residues, gain, offset, run["zdd"], dt)
-    before = mc.nrmse(measured, before_full[start:])
     noise = mc.noise_nrmse(linear.omega, linear.zeta, linear.residues, gain, run, experiment)
-    amplitude = float(response_amplitude(run, d, start))
-    candidate, after_full, trend = {}, before_full, None
-    if held not in train and len(per_run) >= 2:
-        try:
-            trend = mc.amplitude_model(per_run)
-        except IdentificationError as err:
-            candidate = {"mechanism": AMPLITUDE_DEPENDENCE, "not_fitted": str(err)}
-    if trend is not None:
-        omega, zeta = trend.predict(amplitude)
-        after_full = mc.replay(omega, zeta, linear.residues, gain, offset, run["zdd"], dt)
-        candidate = {"mechanism": AMPLITUDE_DEPENDENCE, "held_out_amplitude_m_s2": amplitude,
-                     "predicted_frequency_hz": (omega / (2 * np.pi)).tolist(), "predicted_damping_ratio": zeta.tolist(),
-                     **trend.to_dict()}
-    after = mc.nrmse(measured, after_full[start:])
-    explained = _explained(before, after, noise)
-    candidate["explained"] = explained
-    if before <= EXCESS * noise:
-        mech = "none"
-    elif trend is not None and explained >= EXPLAINED:
-        mech = AMPLITUDE_DEPENDENCE
-    else:
-        mech = "unexplained"
+    trend, after_full, candidate = (_candidate(per_run, run, start, linear, gain, offset)
+                                    if held not in train else (None, None, {}))
+    after_full = before_full if after_full is None else after_full
+    before, after = mc.nrmse(measured, before_full[start:]), mc.nrmse(measured, after_full[start:])
+    candidate["explained"] = _explained(before, after, noise)
+    mech = _verdict(before, after, noise, trend is not None)
     best = after_full if mech == AMPLITUDE_DEPENDENCE else before_full
     location = {} if mech == "none" else _location(measured, best[start:], linear, dt, float(run.time[start]))
     parameters, std = ({"df_dA_hz_per_m_s2": trend.frequency_coef[:, 1].tolist(),
@@ -240,9 +245,9 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
                 "residual_variance_factor": linear.scale, "sensor_gain": linear.gain.tolist(),
                 "sensor_offset_s": linear.offset.tolist(), "noise": list(linear.noise)}
     held_name = held if held not in train else f"{held} (no run held out: checked on its own training data)"
-    text = _summary(mech, location, held_name, before, after, noise, explained, trend, amplitude, findings)
-    t = run.time[start:]
-    curves = {"time": t, "measured": {"a": measured}, "linear": {"a": before_full[start:]},
+    text = _summary(mech, location, held_name, before, after, noise, candidate["explained"], trend,
+                    candidate.get("held_out_amplitude_m_s2"), findings)
+    curves = {"time": run.time[start:], "measured": {"a": measured}, "linear": {"a": before_full[start:]},
               "augmented": {"a": after_full[start:]}}
     return ModalDiagnosis(mechanism=mech, location=location, parameters=parameters, std=std, held_out=held_name,
                           nrmse_before=before, nrmse_after=after, noise_nrmse=noise, channel_nrmse=per,

@@ -40,8 +40,10 @@ __all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "verdicts", "EX
 
 
 def verdicts() -> tuple[str, ...]:
-    """Every verdict :func:`diagnose` can give: ``none``, ``unexplained`` or a mechanism of the library."""
-    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library())
+    """Every verdict :func:`diagnose` can give: ``none``, ``unexplained``, a mechanism of the library, or
+    (recordings without added mass) ``amplitude_dependence``."""
+    from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE
+    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library()) + (AMPLITUDE_DEPENDENCE,)
 
 #: Candidates listed in the report, best first.
 REPORTED_CANDIDATES = 8

@@ -86,6 +86,8 @@ def test_linear_rig_no_mechanism():
     assert diag.mechanism == "none", diag.summary
     # A linear rig: the linear model's held-out misfit is the noise's (the rule's EXCESS margin).
     assert diag.nrmse_before <= EXCESS * diag.noise_nrmse
+    # Ideal simulated sensors: no clock offset or gain difference to report.
+    assert not any(f.startswith("sensor") for f in diag.findings), diag.findings
 
 
 def test_amplitude_dependent_rig_named():

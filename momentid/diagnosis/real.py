@@ -22,8 +22,8 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
    x noise; ``amplitude_dependence`` when the candidate removes at least
    :data:`~momentid.diagnosis.thresholds.EXPLAINED` of the held-out misfit above noise; otherwise
    ``unexplained``, located on the floor sensor and the modal band that carry the held-out misfit.
-   Sensor clock offsets beyond :data:`LATE_SAMPLES` of a sample in every run are findings; rocking/out-of-plane motion is a stated limit
-   (the recording holds the shaking axis only).
+   Sensor clock offsets beyond :data:`LATE_SAMPLES` of a sample in every run are findings;
+   rocking/out-of-plane motion is a stated limit (the recording holds the shaking axis only).
 """
 
 from __future__ import annotations

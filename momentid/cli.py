@@ -294,14 +294,15 @@ def _cmd_diagnose(args) -> int:
 
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
-    diag = diagnose(experiment)
+    diag = diagnose(experiment, hold_out=args.hold_out)
     write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
         print(diag.summary)
         print(f"\nreport written to {out}/ (report.json, summary.txt"
-              + (", model_augmented.xml, replay.png, diagnosis.rrd" if diag.augmented_xml else "")
+              + (", model_augmented.xml" if diag.augmented_xml else "")
+              + (", replay.png, diagnosis.rrd" if diag.curves else "")
               + (", locate.png" if diag.localisation else "") + ")")
     return 0
 
@@ -450,11 +451,16 @@ def build_parser() -> argparse.ArgumentParser:
                                    "one stored in it) with the recordings, locate the mismatch, test candidate "
                                    "mechanisms (Coulomb friction, cubic stiffness, extra damper, P-Delta, flexible "
                                    "added mass, sensor delay/gain/bias), add the best one to the MuJoCo model and "
-                                   "replay a held-out run before and after.")
+                                   "replay a held-out run before and after. Recordings without added mass (accelerometers "
+                                   "only): the modal model fitted on the other runs is checked on a held-out run "
+                                   "against the noise level, and amplitude dependence is tested.")
     p.add_argument("recording", help="MCAP recording (momentid run or momentid import)")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="report folder (default: out/<recording>_diagnosis)")
     p.add_argument("--json", action="store_true", help="print report.json to stdout")
+    p.add_argument("--hold-out", metavar="RUN", default=None,
+                   help="recordings without added mass: the run to hold out for the before/after check "
+                        "(default: the last run)")
     p.set_defaults(func=_cmd_diagnose)
 
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",

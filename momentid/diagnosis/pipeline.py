@@ -22,6 +22,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+
 from momentid import mechanisms
 from momentid.core.series import Experiment
 from momentid.diagnosis.locate import locate
@@ -32,19 +34,22 @@ from momentid.diagnosis.screening import Candidate
 from momentid.diagnosis.selection import choose, screen, select
 from momentid.diagnosis.sensor_check import check_sensors
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
+from momentid.errors import MomentidError
 
 __all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "verdicts", "EXCESS", "EXPLAINED", "ACCEPTED"]
 
 
 def verdicts() -> tuple[str, ...]:
-    """Every verdict :func:`diagnose` can give: ``none``, ``unexplained`` or a mechanism of the library."""
-    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library())
+    """Every verdict :func:`diagnose` can give: ``none``, ``unexplained``, a mechanism of the library, or
+    (recordings without added mass) ``amplitude_dependence``."""
+    from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE
+    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library()) + (AMPLITUDE_DEPENDENCE,)
 
 #: Candidates listed in the report, best first.
 REPORTED_CANDIDATES = 8
 
 
-def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
+def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | None = None):
     """Find, name and model the physics the linear shear model leaves out.
 
     Parameters
@@ -56,10 +61,20 @@ def diagnose(experiment: Experiment, *, replay: bool = True) -> Diagnosis:
         Replay the held-out run through the linear and augmented MuJoCo models
         (the NRMSE figures); off only for quick screening.
 
+    hold_out : str, optional
+        Runs without added mass only: the run to hold out (default: the last).
+
     Returns
     -------
-    Diagnosis
+    Diagnosis, or ModalDiagnosis when no run adds mass (accelerometer-only labs:
+    :func:`momentid.diagnosis.real.diagnose_modal`)
     """
+    if not any(np.any(run.added_mass) for run in experiment.runs):
+        from momentid.diagnosis.real import diagnose_modal
+        return diagnose_modal(experiment, hold_out=hold_out)
+    if hold_out is not None:
+        raise MomentidError(f"{experiment.source}: hold_out = {hold_out!r}: choosing the held-out run works for "
+                            f"runs without added mass only; this experiment adds mass (its last run is held out)")
     model = fit_linear_model(experiment)
     residuals = equation_residuals(model)
     sensors = check_sensors(model)

@@ -30,6 +30,7 @@ from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.estimation.modal import ModalFit, ModalModel, fit_modal
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import pick_resonances, response_amplitude
+from momentid.estimation.scaled import weighted_line
 
 __all__ = ["RunsFit", "AmplitudeModel", "fit_runs", "replay", "nrmse", "noise_nrmse", "amplitude_model",
            "active_start", "pooled"]
@@ -277,16 +278,6 @@ class AmplitudeModel:
                 "dzeta_dA_std": self.damping_slope_std.tolist()}
 
 
-def _line(x, y, s):
-    """Weighted least-squares line ``y = c0 + c1 x`` (weights 1/s^2): coefficients, slope std."""
-    A = np.column_stack([np.ones_like(x), x]) / s[:, None]
-    cov = np.linalg.inv(A.T @ A)
-    coef = cov @ A.T @ (y / s)
-    resid = (y - coef[0] - coef[1] * x) / s
-    scale = max(float(resid @ resid) / max(x.size - 2, 1), 1.0)   # scatter beyond the errors widens it
-    return coef, float(np.sqrt(cov[1, 1] * scale))
-
-
 def amplitude_model(fits) -> AmplitudeModel:
     """Regress each mode's frequency and damping ratio on the response amplitude over per-run fits.
 
@@ -308,11 +299,11 @@ def amplitude_model(fits) -> AmplitudeModel:
                                   f"{100 * MIN_AMPLITUDE_SPREAD:.0f} %")
     f_coef, z_coef, f_std, z_std = [], [], [], []
     for i in range(fits[0].omega.size):
-        c, s = _line(x, np.array([f.frequency[i] for f in fits]),
+        c, s = weighted_line(x, np.array([f.frequency[i] for f in fits]),
                      np.maximum([f.frequency_std[i] for f in fits], 1e-12))
         f_coef.append(c)
         f_std.append(s)
-        c, s = _line(x, np.array([f.zeta[i] for f in fits]), np.maximum([f.zeta_std[i] for f in fits], 1e-12))
+        c, s = weighted_line(x, np.array([f.zeta[i] for f in fits]), np.maximum([f.zeta_std[i] for f in fits], 1e-12))
         z_coef.append(c)
         z_std.append(s)
     return AmplitudeModel(fits, np.array(f_coef), np.array(z_coef), np.array(f_std), np.array(z_std))

@@ -268,6 +268,17 @@ def _check_times(selected, times) -> None:
                                       f"{run.name!r}, recorded from {lo:g} to {hi:g} s")
 
 
+def _rows(run: RunData, signals: dict, times) -> np.ndarray:
+    """Sample indices of ``run``'s equations in its prepared ``signals``: the chosen instants of a
+    measured run, or every bump position of a weak form (accelerometer-only data)."""
+    if signals["a"].shape[0] == run.n_samples:
+        return _sample_index(run, times)
+    if times is None:
+        return np.arange(signals["a"].shape[0])
+    raise IdentificationError(f"times = {list(times)}: chosen instants need measured displacements "
+                              f"(run {run.name!r} has accelerations only)")
+
+
 def _sample_index(run: RunData, times) -> np.ndarray:
     if times is None:
         return np.arange(run.n_samples)
@@ -592,13 +603,7 @@ def _equation_form(experiment, selected, layout, eq_name, times, band, names, no
     if eq_name == "equation":
         for run in selected:
             s = _prepared(run, d, band)
-            if s["a"].shape[0] == run.n_samples:
-                idx = _sample_index(run, times)
-            elif times is None:
-                idx = np.arange(s["a"].shape[0])   # weak form: one equation per bump position
-            else:
-                raise IdentificationError(f"times = {list(times)}: chosen instants need measured displacements "
-                                          f"(run {run.name!r} has accelerations only)")
+            idx = _rows(run, s, times)
             dm = run.added_mass
             a, v, q = s["a"][idx], s["v"][idx], s["q"][idx]
             acc.add(a, v, q, v * dm, -a * dm)
@@ -664,13 +669,7 @@ def _difference_rows(experiment: Experiment, selected, d: int, times, acc: _Accu
                 f"{ref.name!r} by {mismatch:.3g} m/s^2 (peak {peak:.3g}): the difference form needs the "
                 f"same table motion in every run; use estimator 'equation'"
             )
-        if si["a"].shape[0] == run.n_samples:
-            idx = _sample_index(run, times)
-        elif times is None:
-            idx = np.arange(si["a"].shape[0])   # weak form: one equation per bump position
-        else:
-            raise IdentificationError(f"times = {list(times)}: chosen instants need measured displacements "
-                                      f"(run {run.name!r} has accelerations only)")
+        idx = _rows(run, si, times)
         dm = run.added_mass
         rel_i = si["a"] - zi[:, None]
         rel_1 = s1["a"] - z1[:, None]

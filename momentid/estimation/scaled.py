@@ -33,7 +33,7 @@ from momentid.estimation.modal import ModalModel, fit_modal
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import pick_resonances, response_amplitude
 
-__all__ = ["ModalIdentification", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend"]
+__all__ = ["ModalIdentification", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend", "weighted_line"]
 
 #: A mode whose frequency is uncertain by more than this fraction, or whose
 #: damping ratio by more than half of itself, is reported as poorly determined.
@@ -410,14 +410,33 @@ def identify_per_run(experiment: Experiment, runs=None) -> tuple:
     return tuple(identify_modal(experiment, runs=[n]) for n in names)
 
 
-def _slope(x, y, s):
-    """Weighted least-squares slope of ``y`` on ``x`` (weights 1/s^2) and its standard error."""
+def weighted_line(x, y, s):
+    """Weighted least-squares line ``y = c0 + c1 x`` (weights ``1/s^2``).
+
+    Parameters
+    ----------
+    x, y, s : ndarray, shape (n,)
+        Abscissae, ordinates and the ordinates' standard errors.
+
+    Returns
+    -------
+    coef : ndarray, shape (2,)
+        ``(c0, c1)``.
+    slope_std : float
+        Standard error of ``c1``, widened by the scatter beyond the stated errors.
+    """
     A = np.column_stack([np.ones_like(x), x]) / s[:, None]
     cov = np.linalg.inv(A.T @ A)
     coef = cov @ A.T @ (y / s)
     resid = (y - coef[0] - coef[1] * x) / s
     scale = max(float(resid @ resid) / max(x.size - 2, 1), 1.0)   # scatter beyond the errors widens it
-    return float(coef[1]), float(np.sqrt(cov[1, 1] * scale))
+    return coef, float(np.sqrt(cov[1, 1] * scale))
+
+
+def _slope(x, y, s):
+    """Slope of :func:`weighted_line` and its standard error."""
+    coef, std = weighted_line(x, y, s)
+    return float(coef[1]), std
 
 
 def amplitude_trend(results) -> AmplitudeTrend:

@@ -28,7 +28,7 @@ _EPILOG = """examples:
   momentid identify out/paper_harmonic.mcap --json    # machine-readable result
   momentid view out/paper_harmonic.mcap               # the rerun viewer (--save out.rrd: a file)
   momentid plan scenarios/lab_noisy.toml              # runs and masses for a target accuracy (CRLB)
-  momentid import lab_data/ -o lab.mcap               # a real rig's CSV files -> recording
+  momentid import lab_data/ -o lab.mcap               # a real rig's exports (CSV, Xsens DOT) -> recording
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
 """
 
@@ -414,7 +414,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "damping change with the response amplitude across runs (a linear rig shows no trend)")
     p.set_defaults(func=_cmd_identify)
 
-    p = sub.add_parser("import", help="turn a lab's raw exports (CSV files) into a recording",
+    p = sub.add_parser("import", help="turn a lab's raw exports (CSV per run, Xsens DOT IMU files) into a recording",
                        description="Write DIR (experiment.toml: [structure] as the lab states it, "
                                    "[sensors] format, [[runs]] with their files and optional added_mass) "
                                    "as a recording.  format = \"csv\" (default): one CSV per run with t, "

@@ -201,17 +201,7 @@ def _cmd_identify(args) -> int:
     from momentid.io.recording import read_recording
 
     if args.stream:
-        from momentid.estimation.comparison import compare
-        from momentid.estimation.identification import identify_stream
-        result, meta = identify_stream(args.recording, mass=args.mass, return_structure=True)
-        payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
-        if args.json:
-            print(json.dumps(json_safe(payload), indent=2))
-            return 0
-        print(compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload)))
-        for note in result.notes:   # they name runs a damaged file lost
-            print(f"note: {note}", file=sys.stderr)
-        return 0
+        return _identify_stream(args)
     experiment = read_recording(args.recording)
     runs = args.runs.split(",") if args.runs else None
     if args.per_run:
@@ -230,6 +220,36 @@ def _cmd_identify(args) -> int:
             _warn(r.warnings, r.runs[0])
         return 0
     return _report(experiment, args)
+
+
+def _identify_stream(args) -> int:
+    """``identify --stream``: the equation form read block by block (flat memory)."""
+    from momentid.estimation.comparison import compare
+    from momentid.estimation.identification import identify_stream
+
+    # The stream reads each block once and keeps only the equation form's triangular factor, so the
+    # options that need the whole record (or choose among runs and instants) cannot apply: refuse them
+    # rather than silently compute something else.
+    ignored = [f"--estimator {args.estimator}" if args.estimator not in ("auto", "equation") else "",
+               "--runs" if args.runs else "", "--time" if args.time else "",
+               "--per-run" if args.per_run else ""]
+    ignored = [o for o in ignored if o]
+    if ignored:
+        raise IdentificationError(f"{args.recording}: --stream computes the equation form over every sample of every "
+                         f"run, block by block; it cannot honour {', '.join(ignored)}: drop --stream (which "
+                         f"reads the whole record into memory) or drop {', '.join(ignored)}")
+    result, meta = identify_stream(args.recording, mass=args.mass, return_structure=True)
+    payload = compare(result, meta).to_dict() if meta is not None else result.to_dict()
+    if result.notes:   # they name runs a damaged file lost
+        payload["notes"] = list(result.notes)
+    if args.json:
+        print(json.dumps(json_safe(payload), indent=2))
+    else:
+        print(compare(result, meta).table() if meta is not None else json.dumps(json_safe(payload)))
+    for note in result.notes:
+        print(f"note: {note}", file=sys.stderr)
+    _warn(result.warnings)
+    return 0
 
 
 def _warn(warnings, run: str | None = None) -> None:

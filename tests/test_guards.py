@@ -62,3 +62,49 @@ def test_names_that_would_leave_their_folder_are_refused(tmp_path, key, value):
     path = _write(tmp_path, **{key: value})
     with pytest.raises(ScenarioError, match=r"key '(scenario|runs\[0\])\.name' = .*expected a plain name"):
         mi.load_scenario(path)
+
+
+def _tall(tmp_path, storeys: int):
+    """A tall, uniform building: one reference run and one with a mass on the top floor."""
+    text = _SCENARIO.format(name="tall", duration=1.0, rate=200.0, run="reference")
+    text = text.replace("masses = [1.0, 1.0]", f"masses = {[1.0] * storeys}")
+    text = text.replace("storey_stiffness = [100.0, 100.0]", f"storey_stiffness = {[1e4] * storeys}")
+    text = text.replace("added_mass = [0.0, 0.0]", f"added_mass = {[0.0] * storeys}")
+    text += f'\n[[runs]]\nname = "top"\nadded_mass = {[0.0] * (storeys - 1) + [0.5]}\n'
+    path = tmp_path / "tall.toml"
+    path.write_text(text)
+    return path
+
+
+def test_identifying_200_storeys_is_refused_with_its_size_before_the_solve(tmp_path, monkeypatch):
+    """Issue 12: a 200-storey recording was written, then identification grew to 24 GB and was killed."""
+    from momentid.estimation.identification import Layout, equation_form_bytes
+
+    # 200 storeys: 40,401 unknowns; the solve's p x p arrays alone are tens of GB (d^4 growth).  A 64 GB
+    # machine, so that the figures in the message do not depend on this one's memory.
+    monkeypatch.setattr(resources, "available_memory", lambda: 64e9)
+    experiment = mi.simulate(mi.load_scenario(_tall(tmp_path, 200)))
+    with pytest.raises(ResourceError, match=r"identification of 200 storeys \(40401 unknowns.*"
+                                            r"refused before starting.*about \d+ storeys fit") as info:
+        mi.identify(experiment, estimator="equation")
+    assert info.value.needed == equation_form_bytes(Layout(200)) > info.value.available == 32e9
+
+
+def test_identification_of_a_normal_building_passes_the_guard(tmp_path):
+    result = mi.identify(mi.simulate(mi.load_scenario(_tall(tmp_path, 4))), estimator="equation")
+    assert result.M.shape == (4, 4)
+
+
+def test_an_eiv_fit_too_large_for_the_machine_is_refused(tmp_path, monkeypatch):
+    # 200 KB "available" (100 KB to plan with): the 4-storey equation form (about 50 KB) fits, the
+    # errors-in-variables fit's three dense Jacobians (20 s of noisy data: some MB) do not, so the
+    # refusal comes from that stage, before its least squares start.
+    text = _tall(tmp_path, 4).read_text().replace("duration = 1.0", "duration = 20.0").replace("10000.0", "100.0")
+    text += "[sensors.accelerometer]\nrelative_noise = 0.01\n[sensors.displacement]\nrelative_noise = 0.01\n"
+    path = tmp_path / "noisy.toml"
+    path.write_text(text)
+    experiment = mi.simulate(mi.load_scenario(path))
+    monkeypatch.setattr(resources, "available_memory", lambda: 2e5)
+    with pytest.raises(ResourceError, match=r"errors-in-variables fit of 25 unknowns .* refused before starting; "
+                                            r"use estimator 'equation'"):
+        mi.identify(experiment, estimator="eiv")

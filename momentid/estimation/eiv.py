@@ -304,6 +304,23 @@ def _rescaled_start(layout, problem, theta0):
     return scaled(factors[best]) if np.isfinite(costs[best]) else theta0
 
 
+#: Dense Jacobians (residuals x parameters) the fit holds at its peak: scipy's trust-region solver
+#: keeps the Jacobian and a scaled working copy, and the covariance step forms one more.
+_JACOBIAN_COPIES = 3
+
+
+def _require_memory(spectra_list, n_theta: int, runs) -> None:
+    """Refuse, before the fit starts, one whose Jacobians cannot fit in memory."""
+    from momentid.core.resources import require_memory
+
+    n_residuals = sum(2 * sp.Y.shape[0] * sp.Y.shape[1] for sp in spectra_list)
+    needed = 8.0 * (_JACOBIAN_COPIES * n_residuals * n_theta + 4.0 * n_theta * n_theta)
+    require_memory(needed, f"errors-in-variables fit of {n_theta} unknowns to {n_residuals} residuals "
+                   f"({len(spectra_list)} runs)",
+                   "use estimator 'equation' (memory independent of the record's length), or fewer "
+                   f"runs ({', '.join(r.name for r in runs)}) or a shorter record")
+
+
 def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
             max_nfev: int = 60, forces=None, stated=None) -> EivFit:
     """Refine ``theta0`` by the errors-in-variables ML over ``runs``.
@@ -330,6 +347,7 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
     spectra_list = [spectra(r, layout.d, f_max, sigma=sigma, stated=stated) for r in runs]
     if forces is not None:
         spectra_list = [_with_forces(sp, r, f) for sp, r, f in zip(spectra_list, runs, forces)]
+    _require_memory(spectra_list, len(theta0), runs)
     problem = _Problem(layout, spectra_list)
     theta0 = _rescaled_start(layout, problem, np.asarray(theta0, float))
     scale = _scales(layout, theta0)

@@ -52,7 +52,7 @@ from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
 from momentid.lab.sensors import check_run
 
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
-           "MAX_CONDITION", "Layout"]
+           "MAX_CONDITION", "Layout", "equation_form_bytes", "require_equation_memory"]
 
 ESTIMATORS = ("auto", "equation", "difference", "eiv", "modal")
 #: Column-scaled condition numbers above this are refused: the data cannot
@@ -116,6 +116,44 @@ class Layout:
                 theta[idx] = X
         theta[self.mu] = mu
         return theta
+
+
+#: Float arrays of ``p x p`` (``p`` unknowns) the equation form's solve holds at its peak: the
+#: triangular factor, its column-scaled copy, the SVD's workspace, its inverse, and the covariance.
+_SQUARE_ARRAYS = 6
+
+
+def equation_form_bytes(layout: Layout) -> float:
+    """Peak memory (bytes) of the equation form's solve for ``layout``, however long the record.
+
+    The per-floor triangular factors are stacked (``d (s + 1)`` rows of ``p + 1`` columns, ``s`` the
+    unknowns one floor's equation involves), factored again (a second copy) and then inverted and
+    decomposed (:data:`_SQUARE_ARRAYS` square arrays of ``p x p``).  It grows as ``d^4``: 16 unknowns
+    for 3 storeys, 40,401 (and tens of GB) for 200.
+    """
+    p = layout.p
+    rows = sum(len(layout.floor_columns(j)) + 1 for j in range(layout.d))
+    return 8.0 * (2.0 * rows * (p + 1) + _SQUARE_ARRAYS * p * p)
+
+
+def require_equation_memory(layout: Layout, source) -> None:
+    """Refuse, before any work, an identification whose equation form cannot fit in memory.
+
+    Raises
+    ------
+    ResourceError
+        Naming the storeys, the unknowns, the estimate and the largest number of storeys that fits.
+    """
+    from momentid.core.resources import MEMORY_SHARE, available_memory, require_memory
+
+    needed = equation_form_bytes(layout)
+    fits = layout.d
+    while fits > 1 and equation_form_bytes(Layout(fits, layout.mass)) > available_memory() * MEMORY_SHARE:
+        fits = max(1, int(fits * 0.9))
+    require_memory(needed, f"{source}: identification of {layout.d} storeys ({layout.p} unknowns, "
+                   f"{layout.mass} mass matrix)",
+                   f"its memory grows as the storeys^4: about {fits} storeys fit on this machine; "
+                   f"identify a substructure (fewer floors) or a condensed model")
 
 
 @dataclass(frozen=True)
@@ -598,6 +636,7 @@ def _force_scale(result: Identification, runs) -> float:
 
 
 def _equation_form(experiment, selected, layout, eq_name, times, band, names, notes) -> Identification:
+    require_equation_memory(layout, experiment.source)
     d = layout.d
     acc = _Accumulator(layout)
     if eq_name == "equation":
@@ -773,6 +812,7 @@ def identify_stream(path, *, mass: str = "diagonal", return_structure: bool = Fa
                 raise SensorDataError(f"{path}: run {name!r} lacks channels {', '.join(missing)}: streaming "
                                       f"identification needs a, v, q of every floor; use identify()")
             state["layout"] = Layout(d, mass)
+            require_equation_memory(state["layout"], path)
             state["index"] = [np.array([channels.index(f"{g}{i + 1}") for i in range(d)]) for g in "avq"]
         if name not in per_run:
             per_run[name] = (_Accumulator(state["layout"]), np.asarray(added, float))

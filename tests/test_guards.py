@@ -108,3 +108,46 @@ def test_an_eiv_fit_too_large_for_the_machine_is_refused(tmp_path, monkeypatch):
     with pytest.raises(ResourceError, match=r"errors-in-variables fit of 25 unknowns .* refused before starting; "
                                             r"use estimator 'equation'"):
         mi.identify(experiment, estimator="eiv")
+
+
+@pytest.mark.parametrize("K, what", [(-1e12, "mode with"), (float("nan"), "non-finite"), (1e300, "mode with")])
+def test_an_absurd_trial_model_is_rejected_with_a_reason_before_expm(K, what):
+    """Issue 12: a trial model that is unstable or absurd overflowed in expm and LAPACK (DLASCL lines on
+    stdout, overflow warnings); it is now rejected where it arises, without a floating-point warning."""
+    import warnings
+
+    import numpy as np
+
+    from momentid.errors import IdentificationError
+    from momentid.estimation.linear import discretize
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")   # any RuntimeWarning (overflow, invalid) fails the test
+        with pytest.raises(IdentificationError, match=what):
+            discretize(np.eye(2), np.zeros((2, 2)), np.array([[K, 0.0], [0.0, 1.0]]), 1e-3)
+
+
+def test_the_eiv_fit_steps_back_from_an_absurd_trial_model_without_warnings():
+    import warnings
+
+    import numpy as np
+
+    from momentid.errors import IdentificationError
+    from momentid.estimation.eiv import spectra, whitened_residual
+    from momentid.estimation.identification import Layout
+
+    experiment = mi.simulate(mi.load_scenario(mi.default_scenario_path()))
+    run = experiment.runs[0]
+    d = run.added_mass.shape[0]
+    layout = Layout(d)
+    s = experiment.structure
+    good = layout.pack(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix(), s.rayleigh_mu)
+    sp = spectra(run, d, 40.0, sigma={c: 1e-3 for c in run.channels})
+    bad = good.copy()
+    bad[layout.k[0, 0]] = -1e15     # a storey with a huge negative stiffness: unstable far beyond Nyquist
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        r_good, _ = whitened_residual(layout, good, sp)
+        assert np.all(np.isfinite(r_good))
+        with pytest.raises(IdentificationError, match="far faster than the sample rate"):
+            whitened_residual(layout, bad, sp)

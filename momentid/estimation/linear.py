@@ -22,7 +22,7 @@ import scipy.signal
 
 from momentid.errors import IdentificationError
 
-__all__ = ["LinearModel", "discretize", "simulate_linear", "free_response"]
+__all__ = ["LinearModel", "discretize", "simulate_linear", "free_response", "MAX_EIGENVALUE_STEP"]
 
 
 @dataclass(frozen=True)
@@ -41,10 +41,19 @@ class LinearModel:
     G2: np.ndarray       # (2d,) input matrix of the slope (u_(k+1) - u_k) / h
 
 
-def discretize(M, C, K, h: float) -> LinearModel:
-    """Discretise ``M q'' + C q' + K q = -M 1 u`` with step ``h`` (s)."""
-    M, C, K = (np.asarray(X, float) for X in (M, C, K))
+#: Largest ``|lambda| h`` (a continuous eigenvalue times the step) of a model worth discretising: a
+#: mode 50 / (2 pi) ~ 8 times faster than the sample rate is no model of sampled data, and an
+#: unstable one that fast overflows ``exp(A h)`` to inf (then NaN, then LAPACK errors downstream).
+MAX_EIGENVALUE_STEP = 50.0
+
+
+def _state_matrix(M, C, K, h: float):
+    """``(M^-1, A)`` of ``x' = A x`` (x = [q, q']), or :class:`IdentificationError` for a model that is
+    absurd (non-finite, singular mass, or a mode far beyond the sample rate): a trial step of an
+    optimiser is rejected here, with a reason, before it reaches ``expm`` or LAPACK."""
     d = M.shape[0]
+    if not (np.all(np.isfinite(M)) and np.all(np.isfinite(C)) and np.all(np.isfinite(K))):
+        raise IdentificationError("model has non-finite entries in M, C or K: cannot simulate it")
     try:
         Minv = np.linalg.inv(M)
     except np.linalg.LinAlgError:
@@ -53,11 +62,39 @@ def discretize(M, C, K, h: float) -> LinearModel:
     A[:d, d:] = np.eye(d)
     A[d:, :d] = -Minv @ K
     A[d:, d:] = -Minv @ C
+    if not np.all(np.isfinite(A)):
+        raise IdentificationError("mass matrix is nearly singular (M^-1 K or M^-1 C overflows): cannot "
+                                  "simulate the model")
+    fastest = float(np.max(np.abs(np.linalg.eigvals(A)))) * h
+    if not fastest <= MAX_EIGENVALUE_STEP:
+        raise IdentificationError(f"model has a mode with |lambda| h = {fastest:.3g} (above "
+                                  f"{MAX_EIGENVALUE_STEP:g}): far faster than the sample rate, so it is no "
+                                  f"model of these data")
+    return Minv, A
+
+
+def _expm(Zh: np.ndarray) -> np.ndarray:
+    """``exp(Zh)``, or :class:`IdentificationError` when it overflows (a model unstable over one step)."""
+    with np.errstate(over="raise", invalid="raise"):
+        try:
+            E = scipy.linalg.expm(Zh)
+        except FloatingPointError:
+            E = np.full_like(Zh, np.inf)
+    if not np.all(np.isfinite(E)):
+        raise IdentificationError("model overflows over one sample step (unstable): cannot simulate it")
+    return E
+
+
+def discretize(M, C, K, h: float) -> LinearModel:
+    """Discretise ``M q'' + C q' + K q = -M 1 u`` with step ``h`` (s)."""
+    M, C, K = (np.asarray(X, float) for X in (M, C, K))
+    d = M.shape[0]
+    Minv, A = _state_matrix(M, C, K, h)
     Z = np.zeros((2 * d + 2, 2 * d + 2))
     Z[:2 * d, :2 * d] = A
     Z[d:2 * d, 2 * d] = -1.0
     Z[2 * d, 2 * d + 1] = 1.0
-    E = scipy.linalg.expm(Z * h)
+    E = _expm(Z * h)
     Phi, G1, G2 = E[:2 * d, :2 * d], E[:2 * d, 2 * d], E[:2 * d, 2 * d + 1]
     lam, V = np.linalg.eig(Phi)
     if np.linalg.cond(V) > 1e10:
@@ -76,19 +113,15 @@ def force_response(M, C, K, h: float, forces: np.ndarray, H_rows, z: np.ndarray,
     """
     M, C, K = (np.asarray(X, float) for X in (M, C, K))
     d = M.shape[0]
-    Minv = np.linalg.inv(M)
+    Minv, A = _state_matrix(M, C, K, h)
     m = forces.shape[1]
-    A = np.zeros((2 * d, 2 * d))
-    A[:d, d:] = np.eye(d)
-    A[d:, :d] = -Minv @ K
-    A[d:, d:] = -Minv @ C
     Bf = np.zeros((2 * d, m))
     Bf[d:] = Minv @ forces
     Z = np.zeros((2 * d + 2 * m, 2 * d + 2 * m))
     Z[:2 * d, :2 * d] = A
     Z[:2 * d, 2 * d:2 * d + m] = Bf
     Z[2 * d:2 * d + m, 2 * d + m:] = np.eye(m)
-    E = scipy.linalg.expm(Z * h)
+    E = _expm(Z * h)
     Phi, G1, G2 = E[:2 * d, :2 * d], E[:2 * d, 2 * d:2 * d + m], E[:2 * d, 2 * d + m:]
     B = Phi @ G2 / h + G1 - G2 / h
     # Acceleration rows of H include the direct force term M^-1 f: D = H G2 / h covers the FOH part;

@@ -22,6 +22,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from momentid import mechanisms
@@ -71,7 +73,7 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
     """
     if not any(np.any(run.added_mass) for run in experiment.runs):
         from momentid.diagnosis.real import diagnose_modal
-        return diagnose_modal(experiment, hold_out=hold_out)
+        return replace(diagnose_modal(experiment, hold_out=hold_out), notes=tuple(experiment.notes))
     if hold_out is not None:
         raise MomentidError(f"{experiment.source}: hold_out = {hold_out!r}: choosing the held-out run works for "
                             f"runs without added mass only; this experiment adds mass (its last run is held out)")
@@ -97,4 +99,5 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
                      candidates=tuple(sorted(screening.candidates, key=lambda c: -c.explained)[:REPORTED_CANDIDATES]),
                      summary=text, holdout=run if held_out else f"{run} (no run held out)",
                      parameter_pattern=screening.pattern_info, sensor_check=sensors.to_dict(),
-                     selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves)
+                     selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves,
+                     notes=tuple(experiment.notes))

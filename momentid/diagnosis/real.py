@@ -86,6 +86,8 @@ class ModalDiagnosis:
     summary : str
     curves : dict
         ``time``, and ``measured``/``linear``/``augmented`` each ``{"a": (n, d)}`` (plots).
+    notes : tuple of str
+        What reading the recording recovered or repaired (runs a damaged file lost).
     """
 
     mechanism: str
@@ -104,6 +106,7 @@ class ModalDiagnosis:
     curves: dict = field(default_factory=dict, repr=False)
     augmented_xml: str = ""
     localisation: dict = field(default_factory=dict)
+    notes: tuple = ()
 
     def to_dict(self) -> dict:
         return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
@@ -111,7 +114,7 @@ class ModalDiagnosis:
                 "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
                 "noise_nrmse": self.noise_nrmse, "channel_nrmse": self.channel_nrmse,
                 "training": self.training, "candidate": self.candidate, "findings": list(self.findings),
-                "path": "modal (no added mass)"}
+                "path": "modal (no added mass)", "notes": list(self.notes)}
 
 
 def _split(experiment: Experiment, hold_out: str | None):

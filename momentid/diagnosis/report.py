@@ -38,6 +38,7 @@ class Diagnosis:
     localisation: dict = field(default_factory=dict)   # storey, runs, time windows, amplitude, bands, shape
     augmented_xml: str = ""
     curves: dict = field(default_factory=dict, repr=False)
+    notes: tuple[str, ...] = ()                        # what reading the recording recovered (lost runs)
 
     def to_dict(self) -> dict:
         return {
@@ -48,6 +49,7 @@ class Diagnosis:
             "parameter_pattern": self.parameter_pattern, "sensor_check": self.sensor_check,
             "selection": self.selection, "localisation": self.localisation,
             "candidates": [asdict(c) for c in self.candidates],
+            "notes": list(self.notes),
         }
 
 

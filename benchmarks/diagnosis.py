@@ -1,6 +1,6 @@
 """Blind-diagnosis validation matrix and diagnosis time.
 
-    python -m benchmarks.diagnosis [--quick] [--workers N]
+    python -m benchmarks.diagnosis [--quick] [--workers N] [--alone-only]
 
 Every mechanism of the library at two locations and two magnitudes, under 1 % and 2 % sensor noise,
 plus clean rigs (no hidden physics) and rigs with physics outside the library (answer:
@@ -117,10 +117,16 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="1 %% noise only")
     p.add_argument("--workers", type=int, default=2)
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
+    p.add_argument("--alone-only", action="store_true",
+                   help="re-time only the cases timed alone (on a quiet machine), keeping the matrix of "
+                        "OUT/diagnosis.json")
     args = p.parse_args(argv)
     noises = [0.01] if args.quick else [0.01, 0.02]
     jobs = [(m, s, loc, n) for n in noises for m, s, loc in MATRIX]
-    rows = run_cases(jobs, args.workers)
+    if args.alone_only:
+        rows = json.loads((args.out / "diagnosis.json").read_text())["matrix"]
+    else:
+        rows = run_cases(jobs, args.workers)
     found = [r for r in rows if r["truth"] not in ("none", "unexplained")]
     clean = [r for r in rows if r["truth"] == "none"]
     outside = [r for r in rows if r["truth"] == "unexplained"]

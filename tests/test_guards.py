@@ -151,3 +151,29 @@ def test_the_eiv_fit_steps_back_from_an_absurd_trial_model_without_warnings():
         assert np.all(np.isfinite(r_good))
         with pytest.raises(IdentificationError, match="far faster than the sample rate"):
             whitened_residual(layout, bad, sp)
+
+
+def _noisy_tall(tmp_path):
+    """4 storeys under 20 s of band-limited random table motion, recorded with 1 % sensor noise."""
+    text = _tall(tmp_path, 4).read_text().replace("duration = 1.0", "duration = 20.0").replace("10000.0", "100.0")
+    text = text.replace('type = "harmonic"\namplitude = 0.002\nfrequency = 1.0',
+                        'type = "noise"\nrms = 0.5\nband = [0.2, 10.0]')
+    text += "[sensors.accelerometer]\nrelative_noise = 0.01\n[sensors.displacement]\nrelative_noise = 0.01\n"
+    path = tmp_path / "noisy.toml"
+    path.write_text(text)
+    return mi.simulate(mi.load_scenario(path))
+
+
+def test_a_wrong_added_mass_pattern_is_not_printed_as_an_answer_without_a_warning(tmp_path):
+    """Issue 12: a wrong added-mass pattern gave plausible masses with a residual 3e5 x the noise, silently."""
+    import dataclasses
+
+    import numpy as np
+
+    experiment = _noisy_tall(tmp_path)
+    right = mi.identify(experiment, estimator="eiv")
+    # the true pattern fits to the noise level: no warning (the threshold's margin is for this scatter)
+    assert not any("noise level" in w for w in right.warnings)
+    runs = tuple(dataclasses.replace(r, added_mass=np.roll(r.added_mass, 1)) for r in experiment.runs)
+    wrong = mi.identify(dataclasses.replace(experiment, runs=runs), estimator="eiv")
+    assert any("x the sensor noise level" in w and "added-mass pattern" in w for w in wrong.warnings)

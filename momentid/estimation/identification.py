@@ -52,7 +52,7 @@ from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
 from momentid.lab.sensors import check_run
 
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
-           "MAX_CONDITION", "Layout", "equation_form_bytes", "require_equation_memory"]
+           "MAX_CONDITION", "MAX_NOISE_EXCESS", "Layout", "equation_form_bytes", "require_equation_memory"]
 
 ESTIMATORS = ("auto", "equation", "difference", "eiv", "modal")
 #: Column-scaled condition numbers above this are refused: the data cannot
@@ -410,6 +410,13 @@ def _ideal(experiment: Experiment) -> bool:
     return bool(sensors and sensors.get("ideal"))
 
 
+#: An errors-in-variables residual above this multiple of the noise level (its RMS, whitened: 1 when
+#: the model explains the data down to the sensor noise) is a contradiction, printed with a WARNING.
+#: A right model gives 1 to about 2.5 (noise levels estimated from a high band, a fit stopped at its
+#: evaluation cap); a missing physics or a wrong added-mass pattern gives tens to millions.
+MAX_NOISE_EXCESS = 5.0
+
+
 def _result(layout, theta, estimator, rows, rank, condition, residual_rms, names, cov, notes, capped=False):
     M, C, K, mu = layout.unpack(theta)
     kappa = _kappa(layout, theta)
@@ -418,8 +425,17 @@ def _result(layout, theta, estimator, rows, rank, condition, residual_rms, names
         M=M, C=C, K=K, mu=mu, kappa=kappa, damping_misfit=misfit, estimator=estimator,
         n_equations=rows, n_unknowns=layout.p, rank=rank, condition=condition,
         residual_rms=residual_rms, runs=names, covariance=cov, mass=layout.mass, notes=tuple(notes),
-        warnings=tuple(_warnings(M, C, K, capped)),
+        warnings=tuple(_warnings(M, C, K, capped) + _misfit_warning(estimator, residual_rms)),
     )
+
+
+def _misfit_warning(estimator: str, excess: float) -> list[str]:
+    """A residual far above the noise (errors-in-variables: ``residual_rms`` is in noise units)."""
+    if estimator != "eiv" or excess <= MAX_NOISE_EXCESS:
+        return []
+    return [f"the residual is {excess:.3g} x the sensor noise level (above {MAX_NOISE_EXCESS:g}): the linear "
+            f"model does not explain these data (a wrong added-mass pattern, a sensor fault, or physics the "
+            f"model leaves out); `momentid diagnose` locates the mismatch"]
 
 
 def _warnings(M, C, K, capped: bool) -> list[str]:

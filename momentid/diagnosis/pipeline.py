@@ -92,11 +92,12 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
         before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure,
                                                   found.mechanism, found.location, found.parameters, found.records)
     discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
+    location = discovered.location if discovered is not None else found.location
     run, held_out = model.evaluation_run.name, model.holdout is not None
-    text = summary(found.mechanism, found.location, found.parameters, found.std, residuals.excess,
+    text = summary(found.mechanism, location, found.parameters, found.std, residuals.excess,
                    screening.replay.excess, before, after, run, held_out, sensors.to_dict(), found.selection,
                    where.words, discovered)
-    return Diagnosis(mechanism=found.mechanism, location=discovered.location if discovered else found.location, parameters=found.parameters,
+    return Diagnosis(mechanism=found.mechanism, location=location, parameters=found.parameters,
                      std=found.std, nrmse_before=before, nrmse_after=after, excess_equation=residuals.excess,
                      excess_replay=screening.replay.excess,
                      candidates=tuple(sorted(screening.candidates, key=lambda c: -c.explained)[:REPORTED_CANDIDATES]),

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.optimize
+from threadpoolctl import threadpool_limits
 
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
@@ -184,7 +185,8 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
         bases.append((residuals.nominal_rows, model.nominal))
     trials = []
     for rows, structure in bases:
-        got = _search(rows, residuals.noise_floor, model.storeys)
+        with threadpool_limits(limits=1, user_api="blas"):   # tall, thin products: threads only add waiting
+            got = _search(rows, residuals.noise_floor, model.storeys)
         if got is not None:
             trials.append((_misfit(refitter, structure, _record(got)), structure, got))
     if not trials:

@@ -290,8 +290,9 @@ def plot_discovered(discovery: Discovery, path) -> None:
     p = discovery.plot
     (kind, index), = discovery.location.items()
     fig, ax = plt.subplots(figsize=(7, 5))
-    ax.plot(1e3 * p["x"], p["measured"], ".", color="0.6", ms=2, label="residual force of the linear model")
-    ax.plot(1e3 * p["x"], p["law"], ".", color="C3", ms=2, label="discovered force")
+    ax.plot(1e3 * p["x"], p["measured"], ".", color="0.5", ms=3, label="residual force of the linear model "
+            "(training runs)")
+    ax.plot(1e3 * p["x"], p["law"], ".", color="C3", ms=1, label="discovered force")
     ax.set_xlabel(f"{'drift of storey' if kind == 'storey' else 'displacement vs. table of floor'} {index} (mm)")
     ax.set_ylabel("force resisting it (N)")
     ax.set_title(f"{kind} {index}: held-out NRMSE {100 * discovery.nrmse_before:.2f} % -> "

@@ -18,6 +18,9 @@
    replay the training runs; the best is sized, and kept only if it removes most of the misfit.
 7. **Report** (:mod:`~momentid.diagnosis.report`): the held-out run replayed through the linear and
    augmented models (NRMSE before/after), the summary and the report folder.
+8. **Open search** (:func:`~momentid.diagnosis.discovery.discover`), on an ``unexplained`` verdict only:
+   a sparse force from a function library, located, put into the MuJoCo model and replayed on the
+   held-out run (``discovered``; the verdict stays ``unexplained``, at the discovered place).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ import numpy as np
 
 from momentid import mechanisms
 from momentid.core.series import Experiment
+from momentid.diagnosis.discovery import discover
 from momentid.diagnosis.locate import locate
 from momentid.diagnosis.refit import Refitter, replay_check
 from momentid.diagnosis.report import Diagnosis, summary, write_report
@@ -89,15 +93,18 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
     if replay:
         before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure,
                                                   found.mechanism, found.location, found.parameters, found.records)
+    discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
+    location = discovered.location if discovered is not None else found.location
     run, held_out = model.evaluation_run.name, model.holdout is not None
-    text = summary(found.mechanism, found.location, found.parameters, found.std, residuals.excess,
+    text = summary(found.mechanism, location, found.parameters, found.std, residuals.excess,
                    screening.replay.excess, before, after, run, held_out, sensors.to_dict(), found.selection,
-                   where.words)
-    return Diagnosis(mechanism=found.mechanism, location=found.location, parameters=found.parameters,
+                   where.words, discovered)
+    return Diagnosis(mechanism=found.mechanism, location=location, parameters=found.parameters,
                      std=found.std, nrmse_before=before, nrmse_after=after, excess_equation=residuals.excess,
                      excess_replay=screening.replay.excess,
                      candidates=tuple(sorted(screening.candidates, key=lambda c: -c.explained)[:REPORTED_CANDIDATES]),
                      summary=text, holdout=run if held_out else f"{run} (no run held out)",
                      parameter_pattern=screening.pattern_info, sensor_check=sensors.to_dict(),
                      selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves,
-                     notes=tuple(experiment.notes))
+                     notes=tuple(experiment.notes),
+                     discovered=discovered)

@@ -11,6 +11,7 @@ import numpy as np
 
 from momentid.core.series import json_safe
 from momentid import mechanisms
+from momentid.diagnosis.discovery import Discovery, plot_discovered
 from momentid.diagnosis.screening import Candidate
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 
@@ -39,6 +40,7 @@ class Diagnosis:
     augmented_xml: str = ""
     curves: dict = field(default_factory=dict, repr=False)
     notes: tuple[str, ...] = ()                        # what reading the recording recovered (lost runs)
+    discovered: Discovery | None = None              # the open search's force (verdict "unexplained")
 
     def to_dict(self) -> dict:
         return {
@@ -50,12 +52,14 @@ class Diagnosis:
             "selection": self.selection, "localisation": self.localisation,
             "candidates": [asdict(c) for c in self.candidates],
             "notes": list(self.notes),
+            "discovered": self.discovered.to_dict() if self.discovered is not None else None,
         }
 
 
 def summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, held_out, sensor_check,
-            selection, where) -> str:
-    """The report's text: residuals vs. noise, where, the sensor check, the verdict, the replay."""
+            selection, where, discovered: Discovery | None = None) -> str:
+    """The report's text: residuals vs. noise, where, the sensor check, the verdict, the replay, and
+    the open search's discovered force."""
     worst = max(excess_eq, key=excess_eq.get)
     lines = ["Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
              "Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
@@ -83,12 +87,18 @@ def summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_na
     if math.isfinite(before):
         which = f"held-out run {run_name}" if held_out else f"run {run_name}"
         lines.append(f"{which} NRMSE {100 * before:.2f} % -> {100 * after:.2f} %.")
+    if discovered is not None:
+        lines.append(f"{discovered.description} With it, {which} NRMSE {100 * discovered.nrmse_before:.2f} % -> "
+                     f"{100 * discovered.nrmse_after:.2f} % (a data-driven model, not a named mechanism).")
+    elif mech == "unexplained" and math.isfinite(before):
+        lines.append("Open search: no force from the function library lowers the held-out misfit enough to report.")
     return "\n".join(lines)
 
 
 def write_report(diag: Diagnosis, folder) -> Path:
     """``report.json``, ``summary.txt``, ``model_augmented.xml``, ``diagnosis.rrd`` and the PNG plots
-    ``replay.png`` (recorded vs. linear vs. augmented) and ``locate.png`` (where the mismatch is)."""
+    ``replay.png`` (recorded vs. linear vs. augmented), ``locate.png`` (where the mismatch is) and, when
+    the open search found a force, ``discovered.png`` (its force against the drift or displacement)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))
@@ -101,6 +111,8 @@ def write_report(diag: Diagnosis, folder) -> Path:
     if diag.localisation:
         from momentid.diagnosis.locate import plot_localisation
         plot_localisation(diag.localisation, folder / "locate.png")
+    if diag.discovered is not None:
+        plot_discovered(diag.discovered, folder / "discovered.png")
     return folder
 
 

@@ -33,7 +33,8 @@ from momentid.mechanisms.base import drifts, storey_to_floor
 from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
-           "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS"]
+           "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS",
+           "stateful", "state_actuator"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -61,6 +62,20 @@ def needs_callback(mechanisms) -> bool:
     return any(registry.get(m.type).callback for m in mechanisms)
 
 
+#: Length of an actuator's ``gainprm`` (all zero on a state actuator: it exerts no force).
+_GAIN_PARAMETERS = 10
+
+
+def stateful(mechanisms) -> tuple:
+    """The ``mechanisms`` whose force has an internal state (in order): each gets a state actuator."""
+    return tuple(m for m in mechanisms if registry.get(m.type).has_state(dict(m.parameters)))
+
+
+def state_actuator(k: int) -> str:
+    """Name of the actuator holding the internal state of the ``k``-th (0-based) stateful mechanism."""
+    return f"state{k + 1}"
+
+
 def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
                name: str = "shear_building", mechanisms=()) -> mujoco.MjSpec:
     """Build the MJCF specification of the rig for one run.
@@ -82,7 +97,9 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         damping, e.g. ``extra_damper``, ``p_delta``; ``added_mass_body``: the
         added mass's body, e.g. ``flexible_added_mass``); the ``callback``
         kinds' storey forces are applied by the simulator in a control
-        callback (:func:`storey_forces`, :func:`needs_callback`).
+        callback (:func:`storey_forces`, :func:`needs_callback`), floor kinds'
+        floor forces too; a force with memory (``has_state``) keeps its state in
+        the activation of a force-free actuator (:func:`state_actuator`).
 
     Returns
     -------
@@ -163,6 +180,13 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
                       gear=[table.armature + structure.base_mass, 0, 0, 0, 0, 0],
                       ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
                       actlimited=mujoco.mjtLimited.mjLIMITED_FALSE)
+    # A force with memory keeps its internal state in the activation of a force-free actuator whose
+    # rate the simulator's act_dyn callback returns (RK4 integrates it with the motion).
+    for k, mech in enumerate(stateful(mechanisms)):
+        spec.add_actuator(name=state_actuator(k), target=f"q{mech.location}", trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                          dyntype=mujoco.mjtDyn.mjDYN_USER, gainprm=[0.0] * _GAIN_PARAMETERS,
+                          ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
+                          actlimited=mujoco.mjtLimited.mjLIMITED_FALSE)
 
     def sensor(kind, name, target, objtype):
         spec.add_sensor(name=name, type=kind, objname=target, objtype=objtype)
@@ -184,8 +208,8 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
 
 def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, time: float = 0.0,
                   structure: Structure | None = None) -> np.ndarray:
-    """Storey shear forces (N) the MJCF cannot express: those of the ``callback`` kinds
-    (:data:`CALLBACK_MECHANISMS`), each by its registered law.
+    """Storey shear forces (N) the MJCF cannot express: those of the ``callback`` storey kinds
+    (:data:`CALLBACK_MECHANISMS`) without memory, each by its registered law.
 
     Parameters
     ----------
@@ -204,8 +228,11 @@ def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, tim
     f = np.zeros(np.broadcast(drift, drift_velocity).shape)
     for mech in mechanisms:
         kind = registry.get(mech.type)
-        if not kind.callback:
+        if not kind.callback or kind.target is not registry.Target.STOREY:
             continue
+        if kind.has_state(dict(mech.parameters)):
+            raise ModelError(f"{mech.type} at storey {mech.location} has memory: its force depends on the "
+                             f"history of the drift, expected a simulation (momentid.lab.simulation)")
         s = mech.location - 1
         if kind.needs_stiffness and structure is None:
             raise ModelError(f"{mech.type} needs the structure's storey stiffnesses")

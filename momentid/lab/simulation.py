@@ -38,14 +38,18 @@ _CHUNK_STEPS = 50_000   # steps per rollout call: bounded memory, progress betwe
 
 
 @contextlib.contextmanager
-def _control_callback(callback) -> Iterator[None]:
-    """Install a global MuJoCo control callback and restore the old one."""
-    previous = mujoco.get_mjcb_control()
+def _control_callback(callback, act_dyn=None) -> Iterator[None]:
+    """Install global MuJoCo control (and, if given, actuator dynamics) callbacks; restore the old ones."""
+    previous, previous_dyn = mujoco.get_mjcb_control(), mujoco.get_mjcb_act_dyn()
     mujoco.set_mjcb_control(callback)
+    if act_dyn is not None:
+        mujoco.set_mjcb_act_dyn(act_dyn)
     try:
         yield
     finally:
         mujoco.set_mjcb_control(previous)
+        if act_dyn is not None:
+            mujoco.set_mjcb_act_dyn(previous_dyn)
 
 
 @contextlib.contextmanager
@@ -66,13 +70,17 @@ def ground_motion_of(scenario: Scenario) -> GroundMotion:
 
 
 class _StoreyForces:
-    """Control callback applying the storey forces of ``mechanisms`` that the MJCF cannot
-    express (:func:`momentid.lab.rig.storey_forces`) to the floor joints at every RK4 stage.
+    """Control callback applying the storey and floor forces of ``mechanisms`` that the MJCF cannot
+    express (:func:`momentid.lab.rig.storey_forces`) to the floor joints at every RK4 stage, and
+    act_dyn callback returning the rates of their internal states (:meth:`state_rate`).
 
     Called about 4 times a step, so it works on floats: each mechanism's storey is read from
     two joints and pushes on two, with its kind's registered law
     (:meth:`~momentid.mechanisms.base.MechanismKind.storey_force`, the same that
-    :func:`~momentid.lab.rig.storey_forces` applies to arrays)."""
+    :func:`~momentid.lab.rig.storey_forces` applies to arrays); a floor force
+    (:meth:`~momentid.mechanisms.base.MechanismKind.floor_force`) reads its floor against the table and
+    pushes on it alone.  A force with memory reads its state from its actuator's activation
+    (:func:`momentid.lab.rig.state_actuator`), the trial value of the RK4 stage."""
 
     def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
         self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
@@ -80,25 +88,39 @@ class _StoreyForces:
         dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
         self.floor_dofs = np.array(dofs)
         self.terms = []
+        self.rates: dict[int, tuple] = {}   # state actuator id -> (rate law, top, below, params, act address)
         for m in self.mechanisms:
             kind = mechanisms_registry.get(m.type)
             s = m.location - 1
-            below = dofs[s - 1] if s > 0 else -1
+            floor = kind.target is mechanisms_registry.Target.FLOOR
+            below = dofs[s - 1] if s > 0 and not floor else -1   # a floor force: against the table
             k = structure.storey_stiffness[s] if structure is not None and kind.needs_stiffness else None
             if kind.needs_stiffness and k is None:
                 raise SimulationError(f"{m.type} needs the structure's storey stiffnesses")
-            self.terms.append((kind.storey_force, dofs[s], below, dict(m.parameters), k))
+            law, p, adr = (kind.floor_force if floor else kind.storey_force), dict(m.parameters), -1
+            if kind.has_state(p):
+                act = model.actuator(rig.state_actuator(len(self.rates)))
+                adr = int(model.actuator_actadr[act.id])
+                self.rates[act.id] = (kind.state_rate, dofs[s], below, p, adr)
+            self.terms.append((law, dofs[s], below, p, k, adr))
 
     def __call__(self, model, data) -> None:
         qpos, qvel, out = data.qpos, data.qvel, data.qfrc_applied
         out[self.floor_dofs] = 0.0
-        for law, top, below, p, k in self.terms:
+        for law, top, below, p, k, adr in self.terms:
             x = qpos[top] - (qpos[below] if below >= 0 else 0.0)
             v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
-            f = law(p, x, v, data.time, k)
+            f = law(p, x, v, data.time, k) if adr < 0 else law(p, x, v, data.time, k, state=float(data.act[adr]))
             out[top] -= f               # the storey resists its drift on the floor above it
             if below >= 0:
                 out[below] += f
+
+    def state_rate(self, model, data, actuator: int) -> float:
+        """``mjcb_act_dyn``: the rate of a state actuator's activation (a force's internal state)."""
+        rate, top, below, p, adr = self.rates[actuator]
+        x = data.qpos[top] - (data.qpos[below] if below >= 0 else 0.0)
+        v = data.qvel[top] - (data.qvel[below] if below >= 0 else 0.0)
+        return float(rate(p, float(data.act[adr]), float(x), float(v)))
 
 
 def _initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np.ndarray:
@@ -144,11 +166,14 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     data = mujoco.MjData(model)
     chunk = every * max(1, _CHUNK_STEPS // every)
     callback = _StoreyForces(model, mechanisms, structure) if rig.needs_callback(mechanisms) else None
+    act_dyn = callback.state_rate if callback is not None and callback.rates else None
+    # the table's jerk drives actuator 0; state actuators (forces with memory) take no control
+    control = jerk[:, None] if model.nu == 1 else np.column_stack([jerk] + [np.zeros(n_steps)] * (model.nu - 1))
     warnings: dict[str, int] = {}
-    with _control_callback(callback):
+    with _control_callback(callback, act_dyn):
         for start in range(0, n_steps, chunk):
             stop = min(n_steps, start + chunk)
-            states, sensors = _rollout.rollout(model, data, state[None], jerk[None, start:stop, None])
+            states, sensors = _rollout.rollout(model, data, state[None], control[None, start:stop])
             out[start // every:stop // every] = sensors[0, ::every][:, index]
             state = states[0, -1]
             for i, w in enumerate(data.warning):

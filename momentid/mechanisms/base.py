@@ -7,8 +7,11 @@ It declares, in one place, everything the rest of the project needs to know abou
 - its **name**, **target** (a storey, a floor or a sensor channel), **parameters** with their
   SI units and physical bounds (a scenario's ``[truth]`` record is validated against them);
 - how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
-  :meth:`MechanismKind.added_mass_body`), or the **storey force** the simulator applies in its
-  control callback (:meth:`MechanismKind.storey_force`), or the **sensor model**
+  :meth:`MechanismKind.added_mass_body`), or the **storey force** or **floor force** (a floor
+  against the table) the simulator applies in its control callback
+  (:meth:`MechanismKind.storey_force`, :meth:`MechanismKind.floor_force`), with an internal
+  state the simulator integrates when the force has memory (:meth:`MechanismKind.has_state`,
+  :meth:`MechanismKind.state_rate`), or the **sensor model**
   (:meth:`MechanismKind.distort` / :meth:`MechanismKind.correct`);
 - its **screening signature**: the columns of the equation residual it would explain
   (:meth:`MechanismKind.screen_equation`), and for the table channel the replay residual
@@ -212,7 +215,8 @@ class MechanismKind:
     fitted: ClassVar[Param | None] = None
     #: Built into rigs but outside the diagnosis library (its answer is "unexplained").
     truth_only: ClassVar[bool] = False
-    #: A storey force the MJCF cannot express, applied by the simulator's control callback.
+    #: A storey force (``Target.STOREY``) or floor force (``Target.FLOOR``) the MJCF cannot express,
+    #: applied by the simulator's control callback.
     callback: ClassVar[bool] = False
     #: Its storey force takes a fraction of the storey's own stiffness (the callback needs it).
     needs_stiffness: ClassVar[bool] = False
@@ -266,6 +270,26 @@ class MechanismKind:
         ``needs_stiffness``.
         """
         raise NotImplementedError(f"{self.name} is not a callback storey force")
+
+    def floor_force(self, params: dict, displacement, velocity, time: float, stiffness: float | None):
+        """Force (N) a ``callback`` kind on ``Target.FLOOR`` exerts between its floor and the table
+        (positive resists the floor's ``displacement`` relative to the table); floats or arrays.
+
+        The arguments are those of :meth:`storey_force`, with the floor's displacement (m) and
+        velocity (m/s) relative to the table in place of a storey's drift; ``stiffness`` is None.
+        """
+        raise NotImplementedError(f"{self.name} is not a callback floor force")
+
+    def has_state(self, params: dict) -> bool:
+        """True when the force has memory: one internal state the simulator integrates with the
+        motion (a MuJoCo actuator's activation, see :mod:`momentid.lab.rig`), passed to
+        :meth:`storey_force` / :meth:`floor_force` as the keyword ``state``."""
+        return False
+
+    def state_rate(self, params: dict, state: float, displacement: float, velocity: float) -> float:
+        """Time derivative of the internal state (:meth:`has_state`) at the storey drift or floor
+        displacement ``displacement`` (m) moving at ``velocity`` (m/s)."""
+        raise NotImplementedError(f"{self.name} has no internal state")
 
     def distort(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
         """A sensor fault: the reading (n,) of a channel whose true signal is ``x`` (n,)."""

@@ -1,0 +1,149 @@
+"""A force discovered from the data: a sparse sum of terms of one storey's drift, or of one floor's
+displacement against the table (the diagnosis's open search, :mod:`momentid.diagnosis.discovery`).
+
+The force (N, positive resists ``x``) is ``sum_i c_i phi_i(x, v, t, z)`` over the terms of
+:data:`TERMS`, with ``x`` the storey drift or floor displacement (m), ``v`` its rate (m/s), ``t``
+the time since the run started (s) and ``z`` a Bouc-Wen hysteretic state driven by ``v`` (m; the
+simulator integrates it, :meth:`~momentid.mechanisms.base.MechanismKind.has_state`).  A record
+carries every term's coefficient ``c_<term>`` (0: absent) and shape parameters, so the same law
+is evaluated on arrays by the function library and on floats by the simulator's callback.
+
+Truth only: the diagnosis builds these records itself, it never names them as a verdict.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.bouc_wen import bouc_wen_rate
+from momentid.mechanisms.registry import register
+
+__all__ = ["Term", "TERMS", "HYSTERETIC_BETA", "term_signal", "law", "DataDrivenStorey", "DataDrivenFloor"]
+
+#: The hysteretic term's Bouc-Wen ``beta`` (``gamma = 1 - beta``): symmetric loops that soften with
+#: the amplitude (the shape the open search tries; yield drift and exponent are searched on a grid).
+HYSTERETIC_BETA = 0.5
+
+
+@dataclass(frozen=True)
+class Term:
+    """One term of the function library: its name, the unit of its coefficient, the signal in words,
+    and its shape parameters (a gap, a yield drift, a switch time)."""
+
+    name: str
+    unit: str
+    meaning: str
+    shapes: tuple[Param, ...] = ()
+
+    @property
+    def coefficient(self) -> str:
+        """The record's parameter holding this term's coefficient."""
+        return f"c_{self.name}"
+
+
+def _shape(name: str, unit: str, meaning: str, example: float, low: float = 0.0, low_open: bool = True) -> Param:
+    return Param(name, unit, meaning, low=low, low_open=low_open, example=example)
+
+
+#: The terms a discovered force may combine.
+TERMS = (
+    Term("x", "N/m", "x (a linear spring)"),
+    Term("v", "N s/m", "v (a linear dashpot)"),
+    Term("x_abs_x", "N/m^2", "x |x| (quadratic stiffening or softening)"),
+    Term("x3", "N/m^3", "x^3 (cubic stiffening or softening)"),
+    Term("v_abs_v", "N s^2/m^2", "v |v| (quadratic damping)"),
+    Term("sign_v", "N", "tanh(v / v_s) (friction)",
+         (_shape("sign_v_scale", "m/s", "velocity scale of the smoothed sign", 1e-3),)),
+    Term("dead_zone", "N/m", "sign(x) max(|x| - delta, 0) (a two-sided gap)",
+         (_shape("dead_zone_delta", "m", "half-width of the gap", 1e-3, low_open=False),)),
+    Term("gap_pos", "N/m", "max(x - delta, 0) (a stop on the + side)",
+         (_shape("gap_pos_delta", "m", "distance to the stop", 1e-3, low_open=False),)),
+    Term("gap_neg", "N/m", "min(x + delta, 0) (a stop on the - side)",
+         (_shape("gap_neg_delta", "m", "distance to the stop", 1e-3, low_open=False),)),
+    Term("hysteretic", "N/m", "z, a Bouc-Wen hysteretic drift (hysteresis)",
+         (_shape("hysteretic_yield", "m", "yield drift where z saturates", 1e-3),
+          Param("hysteretic_exponent", "1", "sharpness of the yield", low=1.0, high=10.0, example=2.0))),
+    Term("switch", "N/m", "x H(t - t0) (a stiffness change at t0)",
+         (_shape("switch_time", "s", "time of the change, from the start of each run", 5.0, low_open=False),)),
+)
+
+_BY_NAME = {t.name: t for t in TERMS}
+
+#: Example coefficients (the registry's tests build a record of examples): a cubic stiffening of the
+#: size ``cubic_stiffness``'s example, every other term absent.
+_EXAMPLES = {"x3": 3.5e7}
+
+
+def term_signal(name: str, params: dict, x, v, time, state=0.0):
+    """The signal of term ``name`` (its force per unit coefficient) at ``x`` (m), ``v`` (m/s), ``time``
+    (s) and hysteretic state ``state`` (m), with the record's shape parameters; floats or arrays."""
+    if name == "x":
+        return x
+    if name == "v":
+        return v
+    if name == "x_abs_x":
+        return x * abs(x)
+    if name == "x3":
+        return x ** 3
+    if name == "v_abs_v":
+        return v * abs(v)
+    if name == "sign_v":
+        return np.tanh(v / params["sign_v_scale"])
+    if name == "dead_zone":
+        return np.sign(x) * np.maximum(abs(x) - params["dead_zone_delta"], 0.0)
+    if name == "gap_pos":
+        return np.maximum(x - params["gap_pos_delta"], 0.0)
+    if name == "gap_neg":
+        return np.minimum(x + params["gap_neg_delta"], 0.0)
+    if name == "hysteretic":
+        return state
+    if name == "switch":
+        return x * (np.asarray(time) >= params["switch_time"])
+    raise KeyError(f"unknown term {name!r}: expected one of {', '.join(_BY_NAME)}")
+
+
+def law(params: dict, x, v, time, state=0.0):
+    """The discovered force (N, positive resists ``x``): the sum of the record's terms; floats or arrays."""
+    total = 0.0 * x
+    for term in TERMS:
+        c = params[term.coefficient]
+        if c != 0.0:
+            total = total + c * term_signal(term.name, params, x, v, time, state)
+    return float(total) if isinstance(x, float) else total
+
+
+class _DataDriven(MechanismKind):
+    params = tuple(p for t in TERMS for p in (Param(t.coefficient, t.unit, f"coefficient of {t.meaning}",
+                                                    example=_EXAMPLES.get(t.name, 0.0)),) + t.shapes)
+    truth_only = True
+    callback = True
+
+    def has_state(self, params):
+        return params["c_hysteretic"] != 0.0
+
+    def state_rate(self, params, state, displacement, velocity):
+        return bouc_wen_rate(state, velocity, params["hysteretic_yield"], params["hysteretic_exponent"],
+                             HYSTERETIC_BETA)
+
+    def storey_force(self, params, drift, drift_velocity, time, stiffness, state=0.0):
+        return law(params, drift, drift_velocity, time, state)
+
+    def floor_force(self, params, displacement, velocity, time, stiffness, state=0.0):
+        return law(params, displacement, velocity, time, state)
+
+
+@register
+class DataDrivenStorey(_DataDriven):
+    name = "data_driven_storey"
+    target = Target.STOREY
+    summary = "a discovered storey force: sum of terms of the drift x, its rate v, time and a hysteretic state"
+
+
+@register
+class DataDrivenFloor(_DataDriven):
+    name = "data_driven_floor"
+    target = Target.FLOOR
+    summary = "a discovered force between a floor and the table: sum of terms of its displacement x, v, ..."

@@ -16,6 +16,8 @@
 6. **Refit by re-simulation and selection** (:func:`~momentid.diagnosis.selection.select`,
    :class:`~momentid.diagnosis.refit.Refitter`): the plausible candidates' augmented MuJoCo models
    replay the training runs; the best is sized, and kept only if it removes most of the misfit.
+   Then (:func:`~momentid.diagnosis.compound.extend`) what it leaves is screened again: every further
+   mechanism that earns its place is named, and all are refitted jointly in one model.
 7. **Report** (:mod:`~momentid.diagnosis.report`): the held-out run replayed through the linear and
    augmented models (NRMSE before/after), the summary and the report folder.
 """
@@ -26,13 +28,11 @@ import numpy as np
 
 from momentid import mechanisms
 from momentid.core.series import Experiment
-from momentid.diagnosis.locate import locate
-from momentid.diagnosis.refit import Refitter, replay_check
+from momentid.diagnosis.compound import extend
+from momentid.diagnosis.refit import replay_check
 from momentid.diagnosis.report import Diagnosis, summary, write_report
-from momentid.diagnosis.residuals import equation_residuals, fit_linear_model
 from momentid.diagnosis.screening import Candidate
-from momentid.diagnosis.selection import choose, screen, select
-from momentid.diagnosis.sensor_check import check_sensors
+from momentid.diagnosis.stages import run_stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.errors import MomentidError
 
@@ -75,26 +75,25 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
     if hold_out is not None:
         raise MomentidError(f"{experiment.source}: hold_out = {hold_out!r}: choosing the held-out run works for "
                             f"runs without added mass only; this experiment adds mass (its last run is held out)")
-    model = fit_linear_model(experiment)
-    residuals = equation_residuals(model)
-    sensors = check_sensors(model)
-    where = locate(residuals.located_rows, model.storeys, (model.f_low, model.f_top))
-    screening = screen(model, residuals, sensors)
-    refitter = Refitter(model, screening.pattern)
-    found = select(model, choose(screening, residuals, where), screening, refitter, where, replay=replay)
+    stages = run_stages(experiment, replay=replay)
+    model, residuals, sensors, where = stages.model, stages.residuals, stages.sensors, stages.where
+    screening, refitter = stages.screening, stages.refitter
+    joint = extend(stages, replay=replay)
+    found = joint.finding
     before = after = float("nan")
     curves, xml = {}, ""
     if replay:
-        before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure,
-                                                  found.mechanism, found.location, found.parameters, found.records)
+        before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, joint.entries,
+                                                  found.records)
     run, held_out = model.evaluation_run.name, model.holdout is not None
     text = summary(found.mechanism, found.location, found.parameters, found.std, residuals.excess,
                    screening.replay.excess, before, after, run, held_out, sensors.to_dict(), found.selection,
-                   where.words)
+                   where.words, joint.mechanisms)
     return Diagnosis(mechanism=found.mechanism, location=found.location, parameters=found.parameters,
                      std=found.std, nrmse_before=before, nrmse_after=after, excess_equation=residuals.excess,
                      excess_replay=screening.replay.excess,
                      candidates=tuple(sorted(screening.candidates, key=lambda c: -c.explained)[:REPORTED_CANDIDATES]),
                      summary=text, holdout=run if held_out else f"{run} (no run held out)",
                      parameter_pattern=screening.pattern_info, sensor_check=sensors.to_dict(),
-                     selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves)
+                     selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves,
+                     mechanisms=joint.mechanisms)

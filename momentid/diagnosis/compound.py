@@ -210,10 +210,12 @@ def _shortlist(candidates: list[Candidate]) -> list[Candidate]:
 
 
 def _joint(stages: Stages, entries, stds, *, newcomer: bool):
-    """The joint model of ``entries`` ((kind, location, parameters) each): the linear part and every
-    size refitted together.  With ``newcomer``, the last entry is new: it starts from the joint
-    regression and its size is searched over the full range; the others' around their values.
+    """The joint model of ``entries`` ((kind, location, parameters) each): the linear part refitted
+    with every storey force, and sizes searched by re-simulation with the others in the model.
 
+    With ``newcomer``, the last entry is new: it starts from the joint regression and only its size
+    is searched (over the full range); without, every size but the last is searched again around its
+    value (``JOINT_SPAN``: one pass of coordinate descent after a newcomer joined).
     Returns (structure, entries, stds), or None when a size comes out unphysical.
     """
     refitter, model = stages.refitter, stages.model
@@ -227,9 +229,10 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
             result, params, std = refit
             structure = identified_structure(result, model.nominal)
             for i, p, s in zip(forces, params, std):
-                if newcomer and i == last:   # the newcomer starts from the joint regression
+                if (i == last) == newcomer:   # to be searched: the refit's std, in quadrature below
+                    stds[i] = dict(s)
+                if newcomer and i == last:    # the newcomer starts from the joint regression
                     entries[i] = (entries[i][0], entries[i][1], p)
-                stds[i] = dict(s)
     for i, (kind, loc, params) in enumerate(entries):
         if kind.refit is Refit.DAMPING_PATTERN:
             _, (a, b, c) = storey_damper(result, loc["storey"] - 1)
@@ -240,9 +243,11 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
     if model.nominal is not None:
         structure = min((structure, model.nominal), key=lambda b: refitter.misfit(b, entries))
     for i in forces:
+        if (i == last) != newcomer:
+            continue
         kind, loc, params = entries[i]
-        span = SEARCH_RANGE if (newcomer and i == last) else JOINT_SPAN
-        params, sim_std = refitter.resimulate(structure, kind, loc, params, entries[:i] + entries[i + 1:], span)
+        params, sim_std = refitter.resimulate(structure, kind, loc, params, entries[:i] + entries[i + 1:],
+                                              SEARCH_RANGE if newcomer else JOINT_SPAN)
         entries[i] = (kind, loc, params)
         stds[i] = {k: float(math.hypot(v, stds[i].get(k, 0.0))) for k, v in sim_std.items()}
     return structure, entries, stds
@@ -278,7 +283,7 @@ def _physics(stages: Stages, start) -> Compound:
     if len(entries) == 1:   # stage 6's answer stands
         single = _single(replace(stages, found=replace(found, selection=dict(found.selection, compound=steps))))
         return replace(single, steps=steps)
-    if len(entries) > 2 or any(kind.refit is Refit.RESIMULATE for kind, _, _ in entries[:-1]):
+    if any(kind.refit is Refit.RESIMULATE for kind, _, _ in entries[:-1]):
         # the earlier sizes were searched before the last mechanism came in: refine them with it
         joint = _joint(stages, entries, stds, newcomer=False)
         if joint is not None:

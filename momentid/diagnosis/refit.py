@@ -85,21 +85,14 @@ def _measured(run: RunData, d: int) -> dict[str, np.ndarray]:
     return {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
 
 
-def augmented_replay(structure, kind, loc, params, records, run, d, static=True):
-    """Replay ``run`` through the augmented model: (simulated, measured-and-corrected) channels.
-
-    ``static``: whether ``structure`` already holds what the floors' own weight does to it (an
-    identified model does, a nominal one does not; see ``p_delta``).
-    """
-    return joint_replay(structure, [] if kind is None else [(kind, loc, params)], records, run, d, static)
-
-
 def joint_replay(structure, entries, records, run, d, static=True):
-    """Replay ``run`` through a model with several mechanisms: (simulated, measured-and-corrected).
+    """Replay ``run`` through an augmented model: (simulated, measured-and-corrected) channels.
 
     ``entries``: (kind, location, parameters) of each mechanism, applied in turn: its structure
     change (:meth:`~momentid.mechanisms.base.MechanismKind.replay_structure`), and for a sensor
-    fault the correction of the run.  ``records``: every mechanism's model records.
+    fault the correction of the run.  ``records``: every mechanism's model records.  ``static``:
+    whether ``structure`` already holds what the floors' own weight does to it (an identified model
+    does, a nominal one does not; see ``p_delta``).
     """
     from momentid.lab.simulation import replay
     measured = _measured(run, d)

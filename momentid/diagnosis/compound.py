@@ -30,9 +30,10 @@ import json
 import math
 from dataclasses import dataclass, replace
 
+from momentid import mechanisms
 from momentid.core.structure import Mechanism
-from momentid.diagnosis.refit import SEARCH_RANGE, identified_structure, kind_of, refit_eiv
-from momentid.diagnosis.screening import (Candidate, Domain, remaining_excess, screen_equation,
+from momentid.diagnosis.refit import SEARCH_RANGE, identified_structure, kind_of
+from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, remaining_excess, screen_equation,
                                           storey_damper)
 from momentid.diagnosis.selection import Finding, explained_share
 from momentid.diagnosis.stages import Stages, run_stages
@@ -178,7 +179,8 @@ def _candidates(stages: Stages, entries) -> list[Candidate]:
     in the domains (identified, nominal model) where an excess is left; best first."""
     model, residuals = stages.model, stages.residuals
     # A sensor fault is undone on the data, not fitted; an attachment's equation signature is a grid
-    # over frequencies, not a few columns: neither is carried as columns.
+    # over frequencies, not a few columns: neither is carried as columns, and an attachment is not
+    # screened again (its replay screening, stage 4, is its test; the grid would cost most of the time).
     found = [(kind, loc) for kind, loc, _ in entries
              if kind.target is not Target.CHANNEL and kind.refit is not Refit.ATTACHMENT]
     domains = [(model.result, residuals.rows, Domain.EQUATION)]
@@ -187,10 +189,13 @@ def _candidates(stages: Stages, entries) -> list[Candidate]:
     out = []
     for result, rows, domain in domains:
         if remaining_excess(result, rows, residuals.noise_floor, model.f_top, found).max() > EXCESS:
-            out += screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found)
+            out += screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found,
+                                   kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
     done = {(kind.name, json.dumps(loc, sort_keys=True)) for kind, loc, _ in entries}
-    pattern = stages.screening.pattern
-    if pattern is not None:   # a linear damper leaves no residual: the identified C's pattern shows it
+    # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the storey
+    # forces found (unmodelled, they distort the identified C).
+    pattern = damping_pattern(_elastic(stages, entries, _refitted(stages, entries)[0]), model.storeys)
+    if pattern is not None:
         out.append(pattern.candidate)
     out = [c for c in out if (c.mechanism, json.dumps(c.location, sort_keys=True)) not in done
            and kind_of(c.mechanism).physical(c.parameters) and kind_of(c.mechanism).refit is not Refit.CORRECT_DATA]
@@ -209,6 +214,26 @@ def _shortlist(candidates: list[Candidate]) -> list[Candidate]:
     return out[:STEP_SHORTLIST]
 
 
+def _refitted(stages: Stages, entries):
+    """The linear model refitted by errors-in-variables with the storey forces (``RESIMULATE`` kinds)
+    of ``entries`` as inputs: (result, [their parameters], [their std]); the identified model and
+    empty lists when there are none (or noise-free data, or runs the refit cannot use)."""
+    model = stages.model
+    forces = [e for e in entries if e[0].refit is Refit.RESIMULATE]
+    refit = stages.refitter.refit_forces(forces) if forces and not model.ideal else None
+    return refit if refit is not None else (model.result, [], [])
+
+
+def _elastic(stages: Stages, entries, result):
+    """``result`` with its stiffness matrix as the storeys' elastic one, the one Rayleigh damping is
+    proportional to: without what the mechanisms of ``entries`` take from it in the model (P-Delta's
+    loss to the floors' own weight, which an identified K holds)."""
+    structure = identified_structure(result, stages.model.nominal)
+    for kind, loc, params in entries:
+        structure = kind.replay_structure(structure, loc, params, True)
+    return replace(result, K=structure.stiffness_matrix())
+
+
 def _joint(stages: Stages, entries, stds, *, newcomer: bool):
     """The joint model of ``entries`` ((kind, location, parameters) each): the linear part refitted
     with every storey force, and sizes searched by re-simulation with the others in the model.
@@ -223,19 +248,18 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
     last = len(entries) - 1
     forces = [i for i, (kind, _, _) in enumerate(entries) if kind.refit is Refit.RESIMULATE]
     result, structure = model.result, refitter.linear_structure
-    if forces and not model.ideal:
-        refit = refit_eiv([entries[i] for i in forces], model.train.runs, model.result, model.band, model.f_top)
-        if refit is not None:
-            result, params, std = refit
-            structure = identified_structure(result, model.nominal)
-            for i, p, s in zip(forces, params, std):
-                if (i == last) == newcomer:   # to be searched: the refit's std, in quadrature below
-                    stds[i] = dict(s)
-                if newcomer and i == last:    # the newcomer starts from the joint regression
-                    entries[i] = (entries[i][0], entries[i][1], p)
+    refit = _refitted(stages, entries)
+    if refit[1]:
+        result, params, std = refit
+        structure = identified_structure(result, model.nominal)
+        for i, p, s in zip(forces, params, std):
+            if (i == last) == newcomer:   # to be searched: the refit's std, in quadrature below
+                stds[i] = dict(s)
+            if newcomer and i == last:    # the newcomer starts from the joint regression
+                entries[i] = (entries[i][0], entries[i][1], p)
     for i, (kind, loc, params) in enumerate(entries):
         if kind.refit is Refit.DAMPING_PATTERN:
-            _, (a, b, c) = storey_damper(result, loc["storey"] - 1)
+            _, (a, b, c) = storey_damper(_elastic(stages, entries, result), loc["storey"] - 1)
             structure = replace(structure, rayleigh_mu=max(a, 0.0), rayleigh_kappa=max(b, 0.0))
             entries[i] = (kind, loc, dict(params, **{kind.fitted.name: float(c)}))
     if not all(kind.physical(params) for kind, _, params in entries):

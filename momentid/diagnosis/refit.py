@@ -187,13 +187,31 @@ class Refitter:
             self._cache[key] = self._build(kind_of(mech), loc, params, std)
         return self._cache[key]
 
+    def memo(self, key, compute):
+        """``compute()``, once per ``key`` (a hashable; shared with the refitter's own memos)."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
+    def refit_forces(self, entries):
+        """:func:`refit_eiv` of the training runs with the storey forces of ``entries`` ((kind,
+        location, parameters) each), memoised by kind and place (a force's signal per unit of its
+        coefficient does not depend on its size).  Returns (result, [parameters], [std]) or None."""
+        model = self.model
+        out = self.memo(("eiv", json.dumps([(k.name, loc) for k, loc, _ in entries], sort_keys=True)),
+                        lambda: refit_eiv(entries, model.train.runs, self.result, model.band, model.f_top))
+        if out is None:
+            return None
+        result, params, std = out
+        return result, [dict(p0, **{k.fitted.name: p[k.fitted.name]}) for (k, _, p0), p in zip(entries, params)], std
+
     def _build(self, kind, loc, params, std) -> Augmented:
         model, nominal, runs = self.model, self.nominal, self.model.train.runs
         structure = self.linear_structure
         if kind is None:
             return Augmented(structure, params, std, ())
         if kind.refit is Refit.RESIMULATE and not model.ideal:
-            refit = refit_eiv([(kind, loc, params)], runs, self.result, model.band, model.f_top)
+            refit = self.refit_forces([(kind, loc, params)])
             if refit is not None:
                 refitted, (params,), (std,) = refit
                 structure = identified_structure(refitted, nominal)

@@ -189,12 +189,12 @@ def signature_columns(kind, signals: EquationSignals, location: dict) -> list[np
 
 
 def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
-                    domain: Domain, found=()) -> list[Candidate]:
+                    domain: Domain, found=(), kinds=None) -> list[Candidate]:
     """Candidates whose signature lives in the floor-force residual ``rows`` of the model ``result``.
 
     ``found``: (kind, location) of mechanisms already found; their columns are fitted with every
     candidate (:func:`signature_columns`), which is scored on what they leave, and they are not
-    candidates again.
+    candidates again.  ``kinds``: the kinds screened (default: the library).
     """
     fs = rows[0].run.sample_rate
     train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
@@ -204,7 +204,7 @@ def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarr
     signals = _equation_signals(result, rows, f_top)
     extra = [c for kind, loc in found for c in signature_columns(kind, signals, loc)]
     fit = _fitter(target, train, test, noise_rss, extra)
-    kinds = mechanisms.library()
+    kinds = mechanisms.library() if kinds is None else kinds
     done = {(kind.name, json.dumps(loc, sort_keys=True)) for kind, loc in found}
     out = []
     for targets in ((Target.STOREY,), (Target.FLOOR, Target.CHANNEL)):

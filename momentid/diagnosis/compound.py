@@ -155,7 +155,8 @@ def _after_correction(stages: Stages, start, corrections: int) -> Compound:
         return first
     experiment = stages.model.experiment
     fixed = replace(experiment, runs=tuple(kind.correct_run(r, loc, params) for r in experiment.runs))
-    again = _extend(run_stages(fixed, replay=True), True, corrections - 1)
+    known = refitter.identify_corrected(kind, loc, params)   # identified while the fault was sized
+    again = _extend(run_stages(fixed, replay=True, result=known), True, corrections - 1)
     if not again.mechanisms or any((n.mechanism, n.location) == (kind.name, loc) for n in again.mechanisms):
         return first   # nothing more (or the same fault again: its correction is all there is)
     entries = ((kind, loc, params),) + again.entries

@@ -205,6 +205,14 @@ class Refitter:
         result, params, std = out
         return result, [dict(p0, **{k.fitted.name: p[k.fitted.name]}) for (k, _, p0), p in zip(entries, params)], std
 
+    def identify_corrected(self, kind, loc: dict, params: dict):
+        """The linear model identified from the training runs with the sensor fault ``kind`` at ``loc``
+        undone (memoised)."""
+        train = self.model.train
+        fixed = replace(train, runs=tuple(kind.correct_run(r, loc, params) for r in train.runs))
+        return self.memo(("identify", kind.name, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True)),
+                         lambda: identify(fixed))
+
     def _build(self, kind, loc, params, std) -> Augmented:
         model, nominal, runs = self.model, self.nominal, self.model.train.runs
         structure = self.linear_structure
@@ -243,8 +251,7 @@ class Refitter:
             if nominal is not None:   # the lab's own model with the damper may replay better
                 structure = min((structure, nominal), key=lambda b: self._misfit(b, kind, loc, params))
         elif kind.refit is Refit.CORRECT_DATA:
-            fixed = replace(model.train, runs=tuple(kind.correct_run(r, loc, params) for r in runs))
-            structure = identified_structure(identify(fixed), nominal)
+            structure = identified_structure(self.identify_corrected(kind, loc, params), nominal)
             if nominal is not None:   # the corrected data may fit the lab's own model better
                 structure = min((structure, nominal), key=lambda b: self._misfit(b, kind, loc, params))
         return Augmented(structure, params, std, kind.as_records(loc, params))

@@ -31,9 +31,10 @@ class Stages:
     found: Finding
 
 
-def run_stages(experiment: Experiment, *, replay: bool) -> Stages:
-    """Stages 1-6 on ``experiment`` (runs with added mass); ``replay``: size and accept by re-simulation."""
-    model = fit_linear_model(experiment)
+def run_stages(experiment: Experiment, *, replay: bool, result=None) -> Stages:
+    """Stages 1-6 on ``experiment`` (runs with added mass); ``replay``: size and accept by re-simulation;
+    ``result``: the training runs' identification, when known (see :func:`fit_linear_model`)."""
+    model = fit_linear_model(experiment, result)
     residuals = equation_residuals(model)
     sensors = check_sensors(model)
     where = locate(residuals.located_rows, model.storeys, (model.f_low, model.f_top))

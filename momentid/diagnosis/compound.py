@@ -4,9 +4,9 @@ After stage 6 names one mechanism (a :class:`~momentid.diagnosis.selection.Findi
 :func:`extend` asks what is left with it in the model, and names every further mechanism that
 earns its place:
 
-* a **sensor fault** (a kind sized by ``Refit.CORRECT_DATA``) is undone on every run, and the
-  stages run again on the corrected experiment (the physics behind a faulty channel is found on
-  clean data);
+* a **sensor fault** (a kind sized by ``Refit.CORRECT_DATA``) is undone on every run, and unless the
+  corrected training replays are at the noise level (within ``EXCESS``), the stages run again on the
+  corrected experiment (the physics behind a faulty channel is found on clean data);
 * with a **physical mechanism** in the model, the library is screened again on what it leaves: its
   signature's columns are fitted with every candidate's (:func:`~momentid.diagnosis.screening.
   screen_equation` with ``found``), on the equation residual's alternate blocks.  A further
@@ -151,8 +151,9 @@ def _after_correction(stages: Stages, start, corrections: int) -> Compound:
     found, refitter = stages.found, stages.refitter
     (kind, loc, params), std, _ = start
     first = _single(stages)
-    if corrections == 0:
-        return first
+    left, noise = found.selection.get("training_nrmse_augmented"), found.selection.get("training_nrmse_noise")
+    if corrections == 0 or (found.mechanism != "unexplained" and left is not None and left <= EXCESS * noise):
+        return first   # the corrected recordings' replays are at the noise level: nothing more to find
     experiment = stages.model.experiment
     fixed = replace(experiment, runs=tuple(kind.correct_run(r, loc, params) for r in experiment.runs))
     known = refitter.identify_corrected(kind, loc, params)   # identified while the fault was sized

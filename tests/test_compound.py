@@ -51,8 +51,12 @@ def _check_pair(diag, case, tolerances: dict):
     for key, (name, tol) in tolerances.items():
         got, true = named[key].parameters[name], values[key][name]
         assert abs(got - true) <= tol * abs(true), (key, name, got, true, diag.summary)
-    # The joint model leaves the held-out run's misfit at least 3x lower (the single-mechanism target).
+    # The joint model leaves the held-out run's misfit at least 3x lower (the single-mechanism target)
+    # and near what sensor noise alone leaves in the training replays (within 3x: the held-out run has
+    # its own noise realisation and the largest added mass, where P-Delta matters most).
     assert diag.nrmse_after * 3 <= diag.nrmse_before, diag.summary
+    selection = diag.selection.get("after_correction", diag.selection)
+    assert diag.nrmse_after < 3 * selection["training_nrmse_noise"], diag.summary
     report = diag.to_dict()
     assert [m["mechanism"] for m in report["mechanisms"]] == [m.mechanism for m in diag.mechanisms]
     assert set(report["mechanisms"][0]) == {"mechanism", "location", "parameters", "std"}
@@ -60,13 +64,13 @@ def _check_pair(diag, case, tolerances: dict):
         assert m.mechanism.replace("_", " ") in diag.summary
 
 
+@pytest.mark.slow
 def test_friction_and_a_late_table_accelerometer(tmp_path):
     diag = _diagnosed(FRICTION_LATE_TABLE)
-    # Friction 0.3 N: the single-mechanism case comes within 2 %; corrected data carry the delay
-    # estimate's error into the drift velocities: 5 %.  The 10 ms delay read from the kinematic
-    # check (single case within 0.2 %): 2 %.
+    # Friction 0.3 N (observed within 0.1 %) on data corrected by the fitted delay: 2 %, as the
+    # single-mechanism case.  The 10 ms delay from the kinematic check (observed within 0.2 %): 2 %.
     _check_pair(diag, FRICTION_LATE_TABLE, {
-        ("coulomb_friction", json.dumps({"storey": 2})): ("force", 0.05),
+        ("coulomb_friction", json.dumps({"storey": 2})): ("force", 0.02),
         ("sensor_delay", json.dumps({"channel": "zdd"})): ("delay", 0.02)})
     write_report(diag, tmp_path)
     xml = (tmp_path / "model_augmented.xml").read_text()
@@ -78,21 +82,22 @@ def test_friction_and_a_late_table_accelerometer(tmp_path):
 @pytest.mark.slow
 def test_cubic_stiffness_and_a_floor_accelerometer_gain():
     diag = _diagnosed(CUBIC_FLOOR_GAIN)
-    # k3 3.5e7 N/m^3 (single case within 0.2 %) on data corrected by a fitted gain: 5 %.
-    # The gain 1.05 from the kinematic check: 0.5 % (a tenth of the fault).
+    # k3 3.5e7 N/m^3 on data corrected by the fitted gain (observed within 0.2 %): 2 %, as the
+    # single-mechanism case.  The gain 1.05 from the kinematic check (observed within 0.01 %): 0.5 %
+    # (a tenth of the fault).
     _check_pair(diag, CUBIC_FLOOR_GAIN, {
-        ("cubic_stiffness", json.dumps({"storey": 1})): ("k3", 0.05),
+        ("cubic_stiffness", json.dumps({"storey": 1})): ("k3", 0.02),
         ("sensor_gain", json.dumps({"channel": "a1"})): ("gain", 0.005)})
 
 
-@pytest.mark.slow
 def test_extra_damper_and_p_delta_in_another_storey(tmp_path):
     diag = _diagnosed(DAMPER_PDELTA)
-    # The damper 3 N s/m from the damping pattern of a C refitted with the P-Delta force (single case
-    # within 5 %): 10 %; P-Delta factor 1 from the added masses' weight: 10 %.
+    # The damper 3 N s/m from the damping pattern of a C refitted with the P-Delta force (observed
+    # within 1 %; the single case is tested to 5 %): 5 %.  P-Delta factor 1 (observed within 0.1 %,
+    # standard error 0.1 %): 2 %.
     _check_pair(diag, DAMPER_PDELTA, {
-        ("extra_damper", json.dumps({"storey": 3})): ("c", 0.10),
-        ("p_delta", json.dumps({"storey": 1})): ("factor", 0.10)})
+        ("extra_damper", json.dumps({"storey": 3})): ("c", 0.05),
+        ("p_delta", json.dumps({"storey": 1})): ("factor", 0.02)})
     write_report(diag, tmp_path)
     # One MuJoCo model carries both: storey tendons have damping kappa k_i (Rayleigh) but storey 3 adds
     # the damper (c / k_3 = 3 / 2100, 1.5x kappa = 9.5e-4 s) and storey 1 loses g x 4 kg / 0.3 m = 6 % of

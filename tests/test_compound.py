@@ -103,6 +103,6 @@ def test_extra_damper_and_p_delta_in_another_storey(tmp_path):
     # the damper (c / k_3 = 3 / 2100, 1.5x kappa = 9.5e-4 s) and storey 1 loses g x 4 kg / 0.3 m = 6 % of
     # its stiffness to the held-out run's weight (damping / stiffness up 6 %); storey 2 is plain Rayleigh.
     model = mujoco.MjModel.from_xml_string((tmp_path / "model_augmented.xml").read_text())
-    ratio = {i: model.tendon_damping[model.tendon(f"storey{i}").id][0] / model.tendon_stiffness[
-        model.tendon(f"storey{i}").id][0] for i in (1, 2, 3)}
+    ratio = {i: model.tendon_damping[model.tendon(f"storey{i}").id] / model.tendon_stiffness[
+        model.tendon(f"storey{i}").id] for i in (1, 2, 3)}
     assert ratio[3] > 2 * ratio[2] and ratio[1] > 1.03 * ratio[2], ratio

@@ -88,14 +88,22 @@ def _case(job):
             "excitation": (excitation[0] or {}).get("type", "record") if excitation else "record"}
 
 
-def run_cases(jobs, workers: int) -> list[dict]:
-    """Diagnose every case, ``workers`` at a time, printing each row as it comes."""
+def run_cases(jobs, workers: int, case=_case) -> list[dict]:
+    """Diagnose every case (``case(job) -> row``), ``workers`` at a time, printing each row as it comes."""
     with ProcessPoolExecutor(max_workers=workers) as pool:
         rows = []
-        for row in pool.map(_case, jobs):
+        for row in pool.map(case, jobs):
             rows.append(row)
             print(json.dumps(row), flush=True)
     return rows
+
+
+def save(out: Path, name: str, data, lines: list[str]) -> None:
+    """Write ``out/<name>.json`` (``data``) and ``out/<name>.md`` (``lines``), and print the table."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{name}.json").write_text(json.dumps(data, indent=1))
+    (out / f"{name}.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
 
 
 def table(rows, *, spec=False) -> list[str]:
@@ -146,10 +154,7 @@ def main(argv=None) -> int:
         print(json.dumps(alone[-1]), flush=True)
     lines += ["", "Diagnosis time alone (one experiment, 4 runs x 20 s at 1 kHz, 1 % noise, nothing else running): "
               + ", ".join(f"{r['truth']} {json.dumps(r['spec'])} {r['seconds']:.0f} s" for r in alone) + "."]
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "diagnosis.json").write_text(json.dumps({"matrix": rows, "alone": alone}, indent=1))
-    (args.out / "diagnosis.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    save(args.out, "diagnosis", {"matrix": rows, "alone": alone}, lines)
     return 0
 
 

@@ -11,10 +11,9 @@ verdict rules, cases chosen after the method was fixed.  Writes
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
-from benchmarks.diagnosis import run_cases, table
+from benchmarks.diagnosis import run_cases, save, table
 
 ROOT = Path(__file__).resolve().parents[1]
 NOISE = {"type": "noise", "rms": 0.3, "band": [0.5, 20.0]}
@@ -52,10 +51,7 @@ def main(argv=None) -> int:
     rows = run_cases(CASES, args.workers)
     lines = table(rows, spec=True)
     lines += ["", f"Right verdict and location: {sum(r['correct'] for r in rows)} of {len(rows)}."]
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "diagnosis_variants.json").write_text(json.dumps(rows, indent=1))
-    (args.out / "diagnosis_variants.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    save(args.out, "diagnosis_variants", rows, lines)
     return 0
 
 

@@ -102,7 +102,11 @@ def test_blind_diagnosis(recordings, diagnoses, name):
     assert (diag.mechanism, diag.location) == (mechanism, location), diag.summary
     if mechanism in ("none", "unexplained"):   # the model is left linear
         assert diag.nrmse_after == diag.nrmse_before
+        assert diag.mechanisms == () and diag.to_dict()["mechanisms"] == []
     else:
+        # One hidden mechanism: exactly one entry, the verdict itself (no spurious second one).
+        assert [(m.mechanism, m.location) for m in diag.mechanisms] == [(mechanism, location)], diag.summary
+        assert diag.to_dict()["mechanisms"][0]["parameters"] == diag.parameters
         # The target: held-out NRMSE at least 3x lower after augmentation.
         assert diag.nrmse_after * 3 <= diag.nrmse_before, diag.summary
 

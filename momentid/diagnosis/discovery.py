@@ -30,7 +30,7 @@ from momentid.diagnosis.function_library import (ALWAYS, Place, Selected, column
                                                  place_direction, refine, select)
 from momentid.diagnosis.refit import Refitter, _measured
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
-from momentid.diagnosis.selection import Finding, Verdict, _explained_share
+from momentid.diagnosis.selection import Finding, Verdict, explained_share
 from momentid.errors import ModelError, SimulationError
 from momentid.mechanisms.bouc_wen import bouc_wen_state
 from momentid.mechanisms.data_driven import HYSTERETIC_BETA, TERMS
@@ -144,7 +144,7 @@ def _record(found: _Found, scale: float = 1.0) -> Mechanism:
 def _misfit(refitter: Refitter, structure: Structure, record: Mechanism) -> float:
     """The refitter's replay misfit of its search run through ``structure`` with the force ``record``."""
     kind = mechanisms.get(record.type)
-    return refitter._misfit(structure, kind, {kind.target.value: record.location}, dict(record.parameters))
+    return refitter.misfit(structure, [(kind, {kind.target.value: record.location}, dict(record.parameters))])
 
 
 def _sized(refitter: Refitter, structure: Structure, found: _Found) -> tuple[float, float]:
@@ -195,7 +195,7 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     scale, _ = _sized(refitter, structure, got)
     record = _record(got, scale)
     after = _held_out(model, structure, record)
-    if _explained_share(before, after, refitter.noise_nrmse()) < ACCEPTED_SHARE:
+    if explained_share(before, after, refitter.noise_nrmse()) < ACCEPTED_SHARE:
         return None
     terms = _terms(got, scale)
     fitted = np.column_stack([c.signal for c in got.selected.columns]) @ np.array(

@@ -16,6 +16,8 @@
 6. **Refit by re-simulation and selection** (:func:`~momentid.diagnosis.selection.select`,
    :class:`~momentid.diagnosis.refit.Refitter`): the plausible candidates' augmented MuJoCo models
    replay the training runs; the best is sized, and kept only if it removes most of the misfit.
+   Then (:func:`~momentid.diagnosis.compound.extend`) what it leaves is screened again: every further
+   mechanism that earns its place is named, and all are refitted jointly in one model.
 7. **Report** (:mod:`~momentid.diagnosis.report`): the held-out run replayed through the linear and
    augmented models (NRMSE before/after), the summary and the report folder.
 8. **Open search** (:func:`~momentid.diagnosis.discovery.discover`), on an ``unexplained`` verdict only:
@@ -31,14 +33,12 @@ import numpy as np
 
 from momentid import mechanisms
 from momentid.core.series import Experiment
+from momentid.diagnosis.compound import extend
 from momentid.diagnosis.discovery import discover
-from momentid.diagnosis.locate import locate
-from momentid.diagnosis.refit import Refitter, replay_check
+from momentid.diagnosis.refit import replay_check
 from momentid.diagnosis.report import Diagnosis, summary, write_report
-from momentid.diagnosis.residuals import equation_residuals, fit_linear_model
 from momentid.diagnosis.screening import Candidate
-from momentid.diagnosis.selection import choose, screen, select
-from momentid.diagnosis.sensor_check import check_sensors
+from momentid.diagnosis.stages import run_stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.errors import MomentidError
 
@@ -81,24 +81,22 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
     if hold_out is not None:
         raise MomentidError(f"{experiment.source}: hold_out = {hold_out!r}: choosing the held-out run works for "
                             f"runs without added mass only; this experiment adds mass (its last run is held out)")
-    model = fit_linear_model(experiment)
-    residuals = equation_residuals(model)
-    sensors = check_sensors(model)
-    where = locate(residuals.located_rows, model.storeys, (model.f_low, model.f_top))
-    screening = screen(model, residuals, sensors)
-    refitter = Refitter(model, screening.pattern)
-    found = select(model, choose(screening, residuals, where), screening, refitter, where, replay=replay)
+    stages = run_stages(experiment, replay=replay)
+    model, residuals, sensors, where = stages.model, stages.residuals, stages.sensors, stages.where
+    screening, refitter = stages.screening, stages.refitter
+    joint = extend(stages, replay=replay)
+    found = joint.finding
     before = after = float("nan")
     curves, xml = {}, ""
     if replay:
-        before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure,
-                                                  found.mechanism, found.location, found.parameters, found.records)
+        before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, joint.entries,
+                                                  found.records)
     discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
     location = discovered.location if discovered is not None else found.location
     run, held_out = model.evaluation_run.name, model.holdout is not None
     text = summary(found.mechanism, location, found.parameters, found.std, residuals.excess,
                    screening.replay.excess, before, after, run, held_out, sensors.to_dict(), found.selection,
-                   where.words, discovered)
+                   where.words, joint.mechanisms, discovered)
     return Diagnosis(mechanism=found.mechanism, location=location, parameters=found.parameters,
                      std=found.std, nrmse_before=before, nrmse_after=after, excess_equation=residuals.excess,
                      excess_replay=screening.replay.excess,
@@ -106,5 +104,4 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
                      summary=text, holdout=run if held_out else f"{run} (no run held out)",
                      parameter_pattern=screening.pattern_info, sensor_check=sensors.to_dict(),
                      selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves,
-                     notes=tuple(experiment.notes),
-                     discovered=discovered)
+                     notes=tuple(experiment.notes), mechanisms=joint.mechanisms, discovered=discovered)

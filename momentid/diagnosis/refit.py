@@ -29,7 +29,7 @@ from momentid.estimation.reconstruct import Prefilter
 from momentid.lab import rig
 from momentid.mechanisms.base import MechanismKind, Refit, Target, drifts, storey_to_floor
 
-__all__ = ["Augmented", "Refitter", "identified_structure", "kind_of", "replay_check"]
+__all__ = ["Augmented", "Refitter", "identified_structure", "joint_replay", "kind_of", "refit_eiv", "replay_check"]
 
 #: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
 _UNSTABLE = 1e200
@@ -85,42 +85,45 @@ def _measured(run: RunData, d: int) -> dict[str, np.ndarray]:
     return {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
 
 
-def augmented_replay(structure, kind, loc, params, records, run, d, static=True):
-    """Replay ``run`` through the augmented model: (simulated, measured-and-corrected) channels.
+def joint_replay(structure, entries, records, run, d, static=True):
+    """Replay ``run`` through an augmented model: (simulated, measured-and-corrected) channels.
 
-    ``static``: whether ``structure`` already holds what the floors' own weight does to it (an
-    identified model does, a nominal one does not; see ``p_delta``).
+    ``entries``: (kind, location, parameters) of each mechanism, applied in turn: its structure
+    change (:meth:`~momentid.mechanisms.base.MechanismKind.replay_structure`), and for a sensor
+    fault the correction of the run.  ``records``: every mechanism's model records.  ``static``:
+    whether ``structure`` already holds what the floors' own weight does to it (an identified model
+    does, a nominal one does not; see ``p_delta``).
     """
     from momentid.lab.simulation import replay
     measured = _measured(run, d)
-    zdd = run["zdd"].copy()
-    if kind is not None:
+    for kind, loc, params in entries:
         structure = kind.replay_structure(structure, loc, params, static)
         if kind.target is Target.CHANNEL:
-            fixed = kind.correct_run(run, loc, params)
-            zdd = fixed["zdd"]
-            measured = {g: fixed.group(g, d) for g in measured}
-    return replay(structure, records, run, zdd), measured
+            run = kind.correct_run(run, loc, params)
+            measured = {g: run.group(g, d) for g in measured}
+    return replay(structure, records, run, run["zdd"]), measured
 
 
-def replay_check(model: LinearModel, linear_structure, structure, mech, loc, params, records):
+def replay_check(model: LinearModel, linear_structure, structure, entries, records):
     """NRMSE of the evaluation run: linear model vs. augmented model, both in MuJoCo.
 
+    ``entries``: (kind, location, parameters) of every mechanism of the augmented model (sensor
+    faults are undone on the run), as :func:`joint_replay` takes them; ``records`` their model records.
     Returns (before, after, curves, augmented MJCF text).
     """
     from momentid.lab.simulation import replay
     run, d, band = model.evaluation_run, model.storeys, model.band
-    kind, static = kind_of(mech), structure != model.nominal
+    static = structure != model.nominal
     fs = run.sample_rate
     measured = _measured(run, d)
     lin = replay(linear_structure, (), run, run["zdd"])
     before = nrmse(lin, measured, fs, band)
-    if records or (kind is not None and kind.target is Target.CHANNEL):
-        aug, corrected = augmented_replay(structure, kind, loc, params, records, run, d, static)
+    if records or any(kind.target is Target.CHANNEL for kind, _, _ in entries):
+        aug, corrected = joint_replay(structure, entries, records, run, d, static)
         after = nrmse(aug, corrected, fs, band)
     else:
         aug, after = lin, before
-    if kind is not None:
+    for kind, loc, params in entries:
         structure = kind.replay_structure(structure, loc, params, static)
     spec = rig.build_spec(structure, run.added_mass, timestep=1 / fs, name="augmented", mechanisms=records)
     spec.compiler.saveinertial = True
@@ -138,10 +141,12 @@ def _force_signature(kind, loc, params, run, signals, d):
     return storey_to_floor(e).T, signal[:, None]
 
 
-def _refit_eiv(kind, loc, params, runs, result, band, f_top):
-    """Errors-in-variables fit of the linear model together with the mechanism's force.
+def refit_eiv(entries, runs, result, band, f_top):
+    """Errors-in-variables fit of the linear model together with the mechanisms' forces.
 
-    Returns (refitted result, parameters, std) or None when the runs do not allow it.
+    ``entries``: (kind, location, parameters) of each storey force (``RESIMULATE`` kinds), fitted
+    jointly.  Returns (refitted result, [parameters], [std]) in the order of ``entries``, or None
+    when the runs do not allow it.
     """
     from momentid.estimation.eiv import fit_eiv
     d = result.storeys
@@ -152,15 +157,18 @@ def _refit_eiv(kind, loc, params, runs, result, band, f_top):
         s = band_signals(run, d, Prefilter(high=REFIT_BAND_OVER_TOP_MODE * f_top) if band.high else band)
         if s["a"].shape[0] != run.n_samples:
             return None
-        forces.append(_force_signature(kind, loc, params, run, s, d))
+        parts = [_force_signature(kind, loc, params, run, s, d) for kind, loc, params in entries]
+        forces.append((np.hstack([p[0] for p in parts]), np.hstack([p[1] for p in parts])))
     lay = result.layout
-    key = kind.fitted.name
-    theta0 = np.concatenate([result.theta, [params[key]]])
+    keys = [kind.fitted.name for kind, _, _ in entries]
+    theta0 = np.concatenate([result.theta, [params[key] for key, (_, _, params) in zip(keys, entries)]])
     fit = fit_eiv(lay, runs, theta0, f_max=REFIT_F_MAX_OVER_TOP_MODE * f_top, forces=forces)
     M, C, K, mu = lay.unpack(fit.theta[:lay.p])
     kappa = float(np.sum(K * (C - mu * M)) / np.sum(K * K))
     new = replace(result, M=M, C=C, K=K, mu=mu, kappa=kappa, covariance=fit.covariance[:lay.p, :lay.p])
-    return new, dict(params, **{key: float(fit.theta[lay.p])}), {key: float(np.sqrt(fit.covariance[lay.p, lay.p]))}
+    i = lay.p + np.arange(len(entries))
+    return (new, [dict(params, **{key: float(fit.theta[k])}) for key, (_, _, params), k in zip(keys, entries, i)],
+            [{key: float(np.sqrt(fit.covariance[k, k]))} for key, k in zip(keys, i)])
 
 
 class Refitter:
@@ -179,22 +187,48 @@ class Refitter:
             self._cache[key] = self._build(kind_of(mech), loc, params, std)
         return self._cache[key]
 
+    def memo(self, key, compute):
+        """``compute()``, once per ``key`` (a hashable; shared with the refitter's own memos)."""
+        if key not in self._cache:
+            self._cache[key] = compute()
+        return self._cache[key]
+
+    def refit_forces(self, entries):
+        """:func:`refit_eiv` of the training runs with the storey forces of ``entries`` ((kind,
+        location, parameters) each), memoised by kind and place (a force's signal per unit of its
+        coefficient does not depend on its size).  Returns (result, [parameters], [std]) or None."""
+        model = self.model
+        out = self.memo(("eiv", json.dumps([(k.name, loc) for k, loc, _ in entries], sort_keys=True)),
+                        lambda: refit_eiv(entries, model.train.runs, self.result, model.band, model.f_top))
+        if out is None:
+            return None
+        result, params, std = out
+        return result, [dict(p0, **{k.fitted.name: p[k.fitted.name]}) for (k, _, p0), p in zip(entries, params)], std
+
+    def identify_corrected(self, kind, loc: dict, params: dict):
+        """The linear model identified from the training runs with the sensor fault ``kind`` at ``loc``
+        undone (memoised)."""
+        train = self.model.train
+        fixed = replace(train, runs=tuple(kind.correct_run(r, loc, params) for r in train.runs))
+        return self.memo(("identify", kind.name, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True)),
+                         lambda: identify(fixed))
+
     def _build(self, kind, loc, params, std) -> Augmented:
         model, nominal, runs = self.model, self.nominal, self.model.train.runs
         structure = self.linear_structure
         if kind is None:
             return Augmented(structure, params, std, ())
         if kind.refit is Refit.RESIMULATE and not model.ideal:
-            refit = _refit_eiv(kind, loc, params, runs, self.result, model.band, model.f_top)
+            refit = self.refit_forces([(kind, loc, params)])
             if refit is not None:
-                refitted, params, std = refit
+                refitted, (params,), (std,) = refit
                 structure = identified_structure(refitted, nominal)
             # The force's size by re-simulation, on the refitted linear model and on the nominal one
             # (a friction that sticks a storey leaves the linear fit poorly determined); the pair that
             # replays best wins.
             bases = [structure] + ([nominal] if nominal is not None else [])
             structure = min(bases, key=lambda b: self._misfit(b, kind, loc, params))
-            params, sim_std = self._resimulate(structure, kind, loc, params)
+            params, sim_std = self.resimulate(structure, kind, loc, params)
             # the search's std is conditional on the linear model; the refit's marginal std carries
             # the linear model's own uncertainty: report both, in quadrature
             std = {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
@@ -217,8 +251,7 @@ class Refitter:
             if nominal is not None:   # the lab's own model with the damper may replay better
                 structure = min((structure, nominal), key=lambda b: self._misfit(b, kind, loc, params))
         elif kind.refit is Refit.CORRECT_DATA:
-            fixed = replace(model.train, runs=tuple(kind.correct_run(r, loc, params) for r in runs))
-            structure = identified_structure(identify(fixed), nominal)
+            structure = identified_structure(self.identify_corrected(kind, loc, params), nominal)
             if nominal is not None:   # the corrected data may fit the lab's own model better
                 structure = min((structure, nominal), key=lambda b: self._misfit(b, kind, loc, params))
         return Augmented(structure, params, std, kind.as_records(loc, params))
@@ -228,12 +261,17 @@ class Refitter:
         return max(self.model.train.runs, key=lambda r: float(np.sum(r.added_mass)))
 
     def _misfit(self, structure, kind, loc, params) -> float:
-        """Normalised sum of squares of the search run replayed through the augmented model:
-        sum over channels and samples of ((measured - simulated) / RMS(measured))^2."""
+        """:meth:`misfit` of one mechanism."""
+        return self.misfit(structure, [(kind, loc, params)])
+
+    def misfit(self, structure, entries) -> float:
+        """Normalised sum of squares of the search run replayed through the model with ``entries``
+        ((kind, location, parameters) each): sum over channels and samples of
+        ((measured - simulated) / RMS(measured))^2."""
         run = self._search_run()
+        records = tuple(r for kind, loc, params in entries for r in kind.as_records(loc, params))
         try:
-            sim, measured = augmented_replay(structure, kind, loc, params, kind.as_records(loc, params),
-                                             run, self.d, structure != self.nominal)
+            sim, measured = joint_replay(structure, entries, records, run, self.d, structure != self.nominal)
         except (SimulationError, ModelError):   # e.g. a storey made unstable: not a candidate fit
             return _UNSTABLE
         fs, band = run.sample_rate, self.model.band
@@ -243,7 +281,7 @@ class Refitter:
             q += float(np.sum(((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
         return q
 
-    def _resimulate(self, structure, kind, loc, params) -> tuple[dict, dict]:
+    def resimulate(self, structure, kind, loc, params, others=(), span=SEARCH_RANGE) -> tuple[dict, dict]:
         """Output-error refinement of a nonlinear storey force's size by re-simulation.
 
         The regression estimates it from measured drift velocities and drifts, whose noise
@@ -252,7 +290,8 @@ class Refitter:
         the regression's value, on a log scale) of :meth:`_misfit` on one training run.  The
         standard error comes from the misfit's curvature at the minimum, ``var = 2 s^2 / Q''`` with
         ``s^2`` the misfit per independent sample (band-limited channels), so it grows with any
-        misfit the model leaves.
+        misfit the model leaves.  ``others``: mechanisms ((kind, location, parameters) each) held
+        fixed in the model meanwhile; ``span``: the search range relative to the starting value.
 
         Returns
         -------
@@ -267,11 +306,11 @@ class Refitter:
         def cost(x):
             x = float(x)
             if x not in seen:
-                seen[x] = self._misfit(structure, kind, loc, dict(params, **{key: x}))
+                seen[x] = self.misfit(structure, [*others, (kind, loc, dict(params, **{key: x}))])
             return seen[x]
 
         sign = math.copysign(1.0, p0)
-        low, high = SEARCH_RANGE
+        low, high = span
         res = scipy.optimize.minimize_scalar(lambda u: cost(sign * math.exp(u)),
                                              bounds=(math.log(low * abs(p0)), math.log(high * abs(p0))),
                                              method="bounded",
@@ -293,14 +332,20 @@ class Refitter:
 
     def score(self, augmented: Augmented, mech: str, loc: dict) -> float:
         """Mean NRMSE of the training runs replayed through an augmented model (band-limited)."""
-        params, structure = augmented.parameters, augmented.structure
-        key = ("score", repr(structure), mech, json.dumps(loc, sort_keys=True), json.dumps(params, sort_keys=True))
+        kind = kind_of(mech)
+        return self.score_joint(augmented.structure, [] if kind is None else [(kind, loc, augmented.parameters)],
+                                augmented.records)
+
+    def score_joint(self, structure, entries, records) -> float:
+        """:meth:`score` of a model with several mechanisms ((kind, location, parameters) each,
+        applied as :func:`joint_replay` does) and their ``records`` (memoised)."""
+        key = ("score", repr(structure), json.dumps([(k.name, loc, p) for k, loc, p in entries], sort_keys=True),
+               repr(records))
         if key not in self._cache:
             out = []
             for run in self.model.train.runs:
                 try:
-                    sim, measured = augmented_replay(structure, kind_of(mech), loc, params, augmented.records,
-                                                     run, self.d, structure != self.nominal)
+                    sim, measured = joint_replay(structure, entries, records, run, self.d, structure != self.nominal)
                 except (SimulationError, ModelError):   # an unstable augmented model explains nothing
                     out.append(float("inf"))
                     break

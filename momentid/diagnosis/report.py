@@ -41,6 +41,9 @@ class Diagnosis:
     curves: dict = field(default_factory=dict, repr=False)
     notes: tuple[str, ...] = ()                        # what reading the recording recovered (lost runs)
     discovered: Discovery | None = None              # the open search's force (verdict "unexplained")
+    #: every named mechanism (:class:`~momentid.diagnosis.compound.Named`), primary first; empty for
+    #: ``none`` and ``unexplained``
+    mechanisms: tuple = ()
 
     def to_dict(self) -> dict:
         return {
@@ -53,13 +56,18 @@ class Diagnosis:
             "candidates": [asdict(c) for c in self.candidates],
             "notes": list(self.notes),
             "discovered": self.discovered.to_dict() if self.discovered is not None else None,
+            "mechanisms": [m.to_dict() for m in self.mechanisms],
         }
 
 
 def summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, held_out, sensor_check,
-            selection, where, discovered: Discovery | None = None) -> str:
+            selection, where, named=(), discovered: Discovery | None = None) -> str:
     """The report's text: residuals vs. noise, where, the sensor check, the verdict, the replay, and
-    the open search's discovered force."""
+    the open search's discovered force.
+
+    ``named``: every mechanism of a compound diagnosis (:class:`~momentid.diagnosis.compound.Named`),
+    one sentence each when there are several.
+    """
     worst = max(excess_eq, key=excess_eq.get)
     lines = ["Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
              "Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
@@ -82,6 +90,9 @@ def summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_na
     elif mech == "unexplained":
         lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
                      f"explains at least {int(EXPLAINED * 100)} % of it.")
+    elif len(named) > 1:
+        lines.append(f"{len(named)} mechanisms together, refitted jointly in one model (the primary first):")
+        lines += ["  " + mechanisms.get(n.mechanism).describe(n.location, n.parameters, n.std) for n in named]
     else:
         lines.append(mechanisms.get(mech).describe(loc, params, std))
     if math.isfinite(before):

@@ -160,14 +160,18 @@ def nominal_result(structure: Structure, like):
                    mu=structure.rayleigh_mu, kappa=structure.rayleigh_kappa, covariance=None)
 
 
-def fit_linear_model(experiment: Experiment) -> LinearModel:
-    """Stage 1: identify the linear model from the training runs; choose the band."""
+def fit_linear_model(experiment: Experiment, result=None) -> LinearModel:
+    """Stage 1: identify the linear model from the training runs; choose the band.
+
+    ``result``: the training runs' identification when it is already known (a compound diagnosis's
+    corrected recordings, identified while their correction was sized).
+    """
     runs, d = experiment.runs, experiment.storeys
     if len(runs) < 2:
         raise IdentificationError(f"{experiment.source}: diagnosis needs at least two runs, got {len(runs)}")
     hold = runs[-1] if len(runs) >= 3 else None
     train = replace(experiment, runs=tuple(r for r in runs if r is not hold))
-    result = identify(train)
+    result = identify(train) if result is None else result
     f_top = float(result.modes().frequency.max())
     nominal = experiment.structure
     if nominal is not None:   # a badly disturbed fit must not shrink the band

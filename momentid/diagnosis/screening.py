@@ -13,6 +13,7 @@ the identified matrices (:func:`damping_pattern`).
 from __future__ import annotations
 
 import enum
+import json
 import math
 from dataclasses import dataclass
 
@@ -23,12 +24,13 @@ from momentid import mechanisms
 from momentid.diagnosis.residuals import (ResidualRow, blocks, replay_noise, replay_outputs)
 from momentid.estimation.reconstruct import band_filter
 from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
+from momentid.errors import IdentificationError
 from momentid.estimation.identification import damping_models
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.mechanisms.base import EquationSignals, Refit, Screened, Target, drifts
 
 __all__ = ["Domain", "Candidate", "ReplayResiduals", "DampingPattern", "screen_equation", "screen_replay",
-           "screen_attachment", "damping_pattern"]
+           "screen_attachment", "damping_pattern", "signature_columns", "remaining_excess", "storey_damper"]
 
 #: Replay residual floor for noise-free data: this fraction of the replayed channels' RMS.
 REPLAY_ROUND_OFF = 1e-6
@@ -135,13 +137,19 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     return coef[:k] / scale[:k], np.sqrt(np.diag(cov)[:k]) / scale[:k], float(explained)
 
 
-def _fitter(target: np.ndarray, train: np.ndarray, test: np.ndarray, noise_rss: float):
-    """The :data:`~momentid.mechanisms.base.Fitter` of one residual (n, d) and its block masks (n,)."""
+def _fitter(target: np.ndarray, train: np.ndarray, test: np.ndarray, noise_rss: float, extra=()):
+    """The :data:`~momentid.mechanisms.base.Fitter` of one residual (n, d) and its block masks (n,).
+
+    ``extra``: columns (n, d) fitted with every signature as further confounds (the signatures of
+    mechanisms already found: each candidate is then scored on what they leave).
+    """
     d = target.shape[1]
     train_d, test_d, y = np.repeat(train, d), np.repeat(test, d), target.ravel()
+    extra = [c.ravel() for c in extra]
 
     def fit(columns, confounds, location, to_params) -> list[Screened]:
-        res = _fit([c.ravel() for c in columns], [c.ravel() for c in confounds], y, train_d, test_d, noise_rss)
+        res = _fit([c.ravel() for c in columns], [c.ravel() for c in confounds] + extra, y, train_d, test_d,
+                   noise_rss)
         if res is None:
             return []
         coef, std, explained = res
@@ -158,29 +166,78 @@ def _attachment_response(fs: float):
     return response
 
 
+def _equation_signals(result, rows: tuple[ResidualRow, ...], f_top: float) -> EquationSignals:
+    """The training rows' band-limited signals, stacked, with the model ``result``'s matrices."""
+    fs = rows[0].run.sample_rate
+    a, v, q = (np.concatenate([r.signals[g] for r in rows]) for g in ("a", "v", "q"))
+    dm = np.concatenate([np.broadcast_to(r.run.added_mass, r.signals["a"].shape) for r in rows])
+    return EquationSignals(a=a, v=v, q=q, added_mass=dm, drift=drifts(q), drift_velocity=drifts(v),
+                           jerk=np.gradient(a, 1 / fs, axis=0), masses=np.diag(result.M), C=result.C,
+                           K=result.K, sample_rate=fs, f_top=f_top, attachment_response=_attachment_response(fs))
+
+
+def signature_columns(kind, signals: EquationSignals, location: dict) -> list[np.ndarray]:
+    """The columns (n, d each) ``kind`` fits at ``location`` (a storey or floor): its signature and
+    the linear confounds it is fitted with, as its :meth:`screen_equation` passes them."""
+    taken: list[np.ndarray] = []
+
+    def capture(columns, confounds, where, to_params):
+        if where == location:
+            taken.extend(list(columns) + list(confounds))
+        return []
+    kind.screen_equation(signals, capture, location[kind.target.value] - 1)
+    return taken
+
+
 def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
-                    domain: Domain) -> list[Candidate]:
-    """Candidates whose signature lives in the floor-force residual ``rows`` of the model ``result``."""
+                    domain: Domain, found=(), kinds=None) -> list[Candidate]:
+    """Candidates whose signature lives in the floor-force residual ``rows`` of the model ``result``.
+
+    ``found``: (kind, location) of mechanisms already found; their columns are fitted with every
+    candidate (:func:`signature_columns`), which is scored on what they leave, and they are not
+    candidates again.  ``kinds``: the kinds screened (default: the library).
+    """
     fs = rows[0].run.sample_rate
     train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
     test = ~train
     target = np.concatenate([r.residual for r in rows])                     # (N, d)
     noise_rss = float(np.sum(noise_floor ** 2)) * int(test.sum())
-    a, v, q = (np.concatenate([r.signals[g] for r in rows]) for g in ("a", "v", "q"))
-    dm = np.concatenate([np.broadcast_to(r.run.added_mass, r.signals["a"].shape) for r in rows])
-    signals = EquationSignals(a=a, v=v, q=q, added_mass=dm, drift=drifts(q), drift_velocity=drifts(v),
-                              jerk=np.gradient(a, 1 / fs, axis=0), masses=np.diag(result.M), C=result.C,
-                              K=result.K, sample_rate=fs, f_top=f_top, attachment_response=_attachment_response(fs))
-    fit = _fitter(target, train, test, noise_rss)
-    kinds = mechanisms.library()
+    signals = _equation_signals(result, rows, f_top)
+    extra = [c for kind, loc in found for c in signature_columns(kind, signals, loc)]
+    fit = _fitter(target, train, test, noise_rss, extra)
+    kinds = mechanisms.library() if kinds is None else kinds
+    done = {(kind.name, json.dumps(loc, sort_keys=True)) for kind, loc in found}
     out = []
     for targets in ((Target.STOREY,), (Target.FLOOR, Target.CHANNEL)):
         for index in range(signals.storeys):
             for kind in kinds:
                 if kind.target in targets:
                     out += [Candidate(kind.name, s.location, s.parameters, s.std, s.explained, domain)
-                            for s in kind.screen_equation(signals, fit, index)]
+                            for s in kind.screen_equation(signals, fit, index)
+                            if (kind.name, json.dumps(s.location, sort_keys=True)) not in done]
     return out
+
+
+def remaining_excess(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
+                     found) -> np.ndarray:
+    """Per floor (d,): RMS of the residual ``rows`` on the held-out blocks once the columns of the
+    mechanisms ``found`` ((kind, location) each) are fitted on the others, over the noise-only RMS.
+
+    The equation residual's excess given what is already found: near 1 when nothing is left.
+    """
+    fs = rows[0].run.sample_rate
+    train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
+    target = np.concatenate([r.residual for r in rows])
+    signals = _equation_signals(result, rows, f_top)
+    columns = [c for kind, loc in found for c in signature_columns(kind, signals, loc)]
+    left = target[~train]
+    if columns:
+        X = np.stack(columns, axis=-1)                                        # (N, d, m)
+        scale = np.linalg.norm(X[train].reshape(-1, X.shape[-1]), axis=0)
+        X = X / np.where(scale > 0, scale, 1.0)
+        coef = np.linalg.lstsq(X[train].reshape(-1, X.shape[-1]), target[train].ravel(), rcond=None)[0]
+        left = left - X[~train] @ coef
+    return np.sqrt(np.mean(left ** 2, axis=0)) / noise_floor
 
 
 def screen_replay(result, runs, d: int, band) -> ReplayResiduals:
@@ -246,8 +303,11 @@ def screen_attachment(result, runs, d: int, band, f_top: float) -> list[Candidat
                 continue
 
             def rss(f_a, zeta, j=j, meas=meas, loaded=loaded):   # bound now: refined after the loop
-                return sum(float(np.sum((m - band_filter(_attachment_replay(kind, result, r, d, j, f_a, zeta), fs,
-                                                         band)) ** 2)) for m, r in zip(meas, loaded))
+                try:
+                    return sum(float(np.sum((m - band_filter(_attachment_replay(kind, result, r, d, j, f_a, zeta),
+                                                             fs, band)) ** 2)) for m, r in zip(meas, loaded))
+                except IdentificationError:   # a trial attachment no sampled model can hold (too fast)
+                    return math.inf
 
             grid = [(f_a, rss(f_a, ATTACHMENT_DAMPING_RATIO)) for f_a in np.geomspace(
                 ATTACHMENT_LOW_OVER_TOP_MODE * f_top,
@@ -319,23 +379,25 @@ def damping_pattern(result, d: int) -> DampingPattern | None:
     ray = fits["rayleigh"]
     if not kinds or not (ray.p_value < RAYLEIGH_P_VALUE and ray.misfit > RAYLEIGH_MISFIT):
         return None
-    iu = np.triu_indices(d)
-    c = result.C[iu]
-    best = None
-    for s in range(d):
-        e = np.zeros(d)
-        e[s] = 1.0
-        if s > 0:
-            e[s - 1] = -1.0
-        P = np.outer(e, e)[iu]
-        A = np.column_stack([result.M[iu], result.K[iu], P])
-        coef, *_ = np.linalg.lstsq(A, c, rcond=None)
-        mis = float(np.linalg.norm(c - A @ coef) / np.linalg.norm(c))
-        if best is None or mis < best[1]:
-            best = (s, mis, coef)
-    s, mis, coef = best
+    best = min((storey_damper(result, s) + (s,) for s in range(d)), key=lambda x: x[0])
+    mis, coef, s = best
     kind = kinds[0]
     cand = Candidate(kind.name, {"storey": s + 1}, {kind.fitted.name: float(coef[2])}, {},
                      float(1.0 - mis / ray.misfit), Domain.PARAMETERS)
     return DampingPattern(cand, {"rayleigh_misfit": ray.misfit, "rayleigh_p_value": ray.p_value,
                                  "with_damper_misfit": mis, "coefficients": [float(x) for x in coef]})
+
+
+def storey_damper(result, s: int) -> tuple[float, np.ndarray]:
+    """The identified C as ``a M + b K + c e_s e_s^T`` (storey ``s``, 0-based, ``e_s`` its drift
+    direction), least squares over the upper triangle.  Returns (relative misfit, (a, b, c))."""
+    d = result.storeys
+    iu = np.triu_indices(d)
+    c = result.C[iu]
+    e = np.zeros(d)
+    e[s] = 1.0
+    if s > 0:
+        e[s - 1] = -1.0
+    A = np.column_stack([result.M[iu], result.K[iu], np.outer(e, e)[iu]])
+    coef, *_ = np.linalg.lstsq(A, c, rcond=None)
+    return float(np.linalg.norm(c - A @ coef) / np.linalg.norm(c)), coef

@@ -21,7 +21,7 @@ from momentid.diagnosis.sensor_check import SensorCheck
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.mechanisms.base import Refit
 
-__all__ = ["Verdict", "Screening", "Choice", "Finding", "screen", "choose", "select"]
+__all__ = ["Verdict", "Screening", "Choice", "Finding", "screen", "choose", "select", "explained_share"]
 
 #: Re-simulated at most: the chosen candidate and the best of up to 3 other kinds of physics ...
 SHORTLIST_SIZE = 4
@@ -171,7 +171,7 @@ def _shortlist(pool, chosen: Candidate) -> list[Candidate]:
     return out
 
 
-def _explained_share(before: float, after: float, noise: float) -> float:
+def explained_share(before: float, after: float, noise: float) -> float:
     """Share of the misfit power above the noise that a model removes (NRMSEs in, 1 = all)."""
     excess = before ** 2 - noise ** 2
     if excess <= 0:
@@ -217,7 +217,7 @@ def select(model: LinearModel, choice: Choice, screening: Screening, refitter: R
         # Does the augmented model explain the mismatch?  Re-simulate the training runs: it must remove
         # at least ACCEPTED of the misfit above the noise, else the best candidate is only partial.
         linear, after, noise = refitter.linear_score(), refitter.score(augmented, mech, loc), refitter.noise_nrmse()
-        share = _explained_share(linear, after, noise)
+        share = explained_share(linear, after, noise)
         selection.update({"training_nrmse_linear": linear, "training_nrmse_augmented": after,
                           "training_nrmse_noise": noise, "explained": share, "accepted_above": ACCEPTED})
         if share < ACCEPTED:

@@ -323,7 +323,8 @@ def _cmd_diagnose(args) -> int:
         print(f"\nreport written to {out}/ (report.json, summary.txt"
               + (", model_augmented.xml" if diag.augmented_xml else "")
               + (", replay.png, diagnosis.rrd" if diag.curves else "")
-              + (", locate.png" if diag.localisation else "") + ")")
+              + (", locate.png" if diag.localisation else "")
+              + (", discovered.png" if getattr(diag, "discovered", None) is not None else "") + ")")
     return 0
 
 

@@ -28,7 +28,7 @@ from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.function_library import (ALWAYS, Place, Selected, columns, hysteretic_columns,
                                                  place_direction, refine, select)
-from momentid.diagnosis.refit import Refitter, _measured
+from momentid.diagnosis.refit import Refitter, measured_groups
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
 from momentid.diagnosis.selection import Finding, Verdict, explained_share
 from momentid.errors import ModelError, SimulationError
@@ -215,7 +215,7 @@ def _held_out(model: LinearModel, structure: Structure, record: Mechanism) -> fl
         sim = replay(structure, (record,), run, run["zdd"])
     except (SimulationError, ModelError):   # an unstable model explains nothing
         return float("inf")
-    return nrmse(sim, _measured(run, model.storeys), run.sample_rate, model.band)
+    return nrmse(sim, measured_groups(run, model.storeys), run.sample_rate, model.band)
 
 
 def _terms(found: _Found, scale: float) -> list[dict]:

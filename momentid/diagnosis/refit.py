@@ -29,7 +29,8 @@ from momentid.estimation.reconstruct import Prefilter
 from momentid.lab import rig
 from momentid.mechanisms.base import MechanismKind, Refit, Target, drifts, storey_to_floor
 
-__all__ = ["Augmented", "Refitter", "identified_structure", "joint_replay", "kind_of", "refit_eiv", "replay_check"]
+__all__ = ["Augmented", "Refitter", "identified_structure", "joint_replay", "kind_of", "measured_groups", "refit_eiv",
+           "replay_check"]
 
 #: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
 _UNSTABLE = 1e200
@@ -81,7 +82,8 @@ def identified_structure(result, nominal: Structure | None) -> Structure:
                      rayleigh_kappa=max(result.kappa, 0.0), base_mass=base)
 
 
-def _measured(run: RunData, d: int) -> dict[str, np.ndarray]:
+def measured_groups(run: RunData, d: int) -> dict[str, np.ndarray]:
+    """The floor channels a replay is compared with: ``{"a": (n, d), "q": (n, d)}``, those measured."""
     return {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
 
 
@@ -95,7 +97,7 @@ def joint_replay(structure, entries, records, run, d, static=True):
     does, a nominal one does not; see ``p_delta``).
     """
     from momentid.lab.simulation import replay
-    measured = _measured(run, d)
+    measured = measured_groups(run, d)
     for kind, loc, params in entries:
         structure = kind.replay_structure(structure, loc, params, static)
         if kind.target is Target.CHANNEL:
@@ -115,7 +117,7 @@ def replay_check(model: LinearModel, linear_structure, structure, entries, recor
     run, d, band = model.evaluation_run, model.storeys, model.band
     static = structure != model.nominal
     fs = run.sample_rate
-    measured = _measured(run, d)
+    measured = measured_groups(run, d)
     lin = replay(linear_structure, (), run, run["zdd"])
     before = nrmse(lin, measured, fs, band)
     if records or any(kind.target is Target.CHANNEL for kind, _, _ in entries):

@@ -14,14 +14,22 @@ import mujoco
 import pytest
 
 import momentid as mi
-from benchmarks.diagnosis_compound import expected, scenario
+from benchmarks.diagnosis_compound import FAULT_KINDS, expected, scenario
+from momentid.diagnosis.compound import STEP_SHORTLIST, _shortlist
 from momentid.diagnosis.pipeline import diagnose
+from momentid.diagnosis.screening import Candidate, Domain
+from momentid.diagnosis.selection import SHORTLIST_FLOOR
 from momentid.diagnosis.report import write_report
 
 FRICTION_LATE_TABLE = ([{"type": "coulomb_friction", "storey": 2, "force": 0.3}], {"zdd": {"clock_offset": 0.01}})
 CUBIC_FLOOR_GAIN = ([{"type": "cubic_stiffness", "storey": 1, "k3": 3.5e7}], {"a1": {"gain": 1.05}})
 DAMPER_PDELTA = ([{"type": "extra_damper", "storey": 3, "c": 3.0}, {"type": "p_delta", "storey": 1, "factor": 1.0}],
                  {})
+FRICTION_CUBIC_SAME_STOREY = ([{"type": "coulomb_friction", "storey": 2, "force": 0.2},
+                               {"type": "cubic_stiffness", "storey": 2, "k3": 4e7}], {})
+FRICTION_PDELTA = ([{"type": "coulomb_friction", "storey": 3, "force": 0.4}, {"type": "p_delta", "storey": 1,
+                                                                              "factor": 1.0}], {})
+DAMPER_BIASED_TRANSDUCER = ([{"type": "extra_damper", "storey": 2, "c": 3.0}], {"q3": {"bias": 0.001}})
 
 
 def _diagnosed(case):
@@ -46,8 +54,8 @@ def _check_pair(diag, case, tolerances: dict):
     values = {(m["type"], json.dumps({"storey": m["storey"]})): m for m in truth}
     for channel, fault in faults.items():
         for field, v in fault.items():
-            values[({"clock_offset": "sensor_delay", "gain": "sensor_gain"}[field],
-                    json.dumps({"channel": channel}))] = {{"clock_offset": "delay"}.get(field, field): v}
+            values[(FAULT_KINDS[field], json.dumps({"channel": channel}))] = {
+                {"clock_offset": "delay"}.get(field, field): v}
     for key, (name, tol) in tolerances.items():
         got, true = named[key].parameters[name], values[key][name]
         assert abs(got - true) <= tol * abs(true), (key, name, got, true, diag.summary)
@@ -106,3 +114,52 @@ def test_extra_damper_and_p_delta_in_another_storey(tmp_path):
     ratio = {i: model.tendon_damping[model.tendon(f"storey{i}").id] / model.tendon_stiffness[
         model.tendon(f"storey{i}").id] for i in (1, 2, 3)}
     assert ratio[3] > 2 * ratio[2] and ratio[1] > 1.03 * ratio[2], ratio
+
+
+def _candidate(mechanism, storey, explained, domain=Domain.EQUATION):
+    return Candidate(mechanism, {"storey": storey}, {}, {}, explained, domain)
+
+
+def test_compound_shortlist_takes_weak_kinds_and_frictions_beside_a_pattern_damper():
+    # What a found mechanism leaves is partly its own misfit, so a second mechanism may explain well
+    # under half of it: the best of each kind above the floor goes to the replay, one per kind.
+    ranked = [_candidate("extra_damper", 3, 0.9, Domain.PARAMETERS), _candidate("cubic_stiffness", 1, 0.4),
+              _candidate("cubic_stiffness", 2, 0.3), _candidate("p_delta", 2, SHORTLIST_FLOOR + 0.01),
+              _candidate("coulomb_friction", 1, SHORTLIST_FLOOR - 0.01), _candidate("coulomb_friction", 3, 0.02)]
+    picked = [(c.mechanism, c.location["storey"]) for c in _shortlist(ranked)]
+    assert picked[:STEP_SHORTLIST] == [("extra_damper", 3), ("cubic_stiffness", 1), ("p_delta", 2)]
+    # ... and a friction the identified C took in as viscous damping screens near zero: beside the
+    # pattern's damper, the friction at the damper's storey (not the better-screening one elsewhere).
+    assert picked[STEP_SHORTLIST:] == [("coulomb_friction", 3)]
+    # Below the floor and without a pattern damper: nothing.
+    assert _shortlist([_candidate("cubic_stiffness", 1, SHORTLIST_FLOOR - 0.01)]) == []
+
+
+@pytest.mark.slow
+def test_friction_and_cubic_stiffness_in_the_same_storey():
+    diag = _diagnosed(FRICTION_CUBIC_SAME_STOREY)
+    # Observed within 0.2 % (friction) and 0.2 % (k3) of the truth: 3 % each, the single-mechanism
+    # figure (2 %) with room for the two forces trading a little of each other in one storey.
+    _check_pair(diag, FRICTION_CUBIC_SAME_STOREY, {
+        ("coulomb_friction", json.dumps({"storey": 2})): ("force", 0.03),
+        ("cubic_stiffness", json.dumps({"storey": 2})): ("k3", 0.03)})
+
+
+@pytest.mark.slow
+def test_friction_the_identified_damping_took_in_and_p_delta_elsewhere():
+    diag = _diagnosed(FRICTION_PDELTA)
+    # Stage 6 alone calls this unexplained (P-Delta grown to 1.7x absorbs the friction); the descent on
+    # the nominal model sizes both: observed within 0.3 % (friction) and 0.03 % (factor): 3 % each.
+    _check_pair(diag, FRICTION_PDELTA, {
+        ("coulomb_friction", json.dumps({"storey": 3})): ("force", 0.03),
+        ("p_delta", json.dumps({"storey": 1})): ("factor", 0.03)})
+
+
+@pytest.mark.slow
+def test_a_damper_that_won_the_replay_and_the_biased_transducer_beside_it():
+    diag = _diagnosed(DAMPER_BIASED_TRANSDUCER)
+    # The damper from the pattern of C identified on corrected data (observed within 0.3 %): 5 %, as
+    # the single case; the 1 mm bias from screening (observed within 0.01 %): 1 %.
+    _check_pair(diag, DAMPER_BIASED_TRANSDUCER, {
+        ("extra_damper", json.dumps({"storey": 2})): ("c", 0.05),
+        ("sensor_bias", json.dumps({"channel": "q3"})): ("bias", 0.01)})

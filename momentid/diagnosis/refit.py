@@ -283,7 +283,8 @@ class Refitter:
             q += float(np.sum(((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
         return q
 
-    def resimulate(self, structure, kind, loc, params, others=(), span=SEARCH_RANGE) -> tuple[dict, dict]:
+    def resimulate(self, structure, kind, loc, params, others=(), span=SEARCH_RANGE,
+                   grid: int = 0) -> tuple[dict, dict]:
         """Output-error refinement of a nonlinear storey force's size by re-simulation.
 
         The regression estimates it from measured drift velocities and drifts, whose noise
@@ -293,7 +294,10 @@ class Refitter:
         standard error comes from the misfit's curvature at the minimum, ``var = 2 s^2 / Q''`` with
         ``s^2`` the misfit per independent sample (band-limited channels), so it grows with any
         misfit the model leaves.  ``others``: mechanisms ((kind, location, parameters) each) held
-        fixed in the model meanwhile; ``span``: the search range relative to the starting value.
+        fixed in the model meanwhile; ``span``: the search range relative to the starting value;
+        ``grid``: first replay this many sizes spread evenly (log scale) over the span and search
+        between the best one's neighbours (for a starting value far off, on a misfit that is sharp
+        near its minimum and flat, unstable, elsewhere: a storey weakened to collapse by P-Delta).
 
         Returns
         -------
@@ -312,9 +316,13 @@ class Refitter:
             return seen[x]
 
         sign = math.copysign(1.0, p0)
-        low, high = span
-        res = scipy.optimize.minimize_scalar(lambda u: cost(sign * math.exp(u)),
-                                             bounds=(math.log(low * abs(p0)), math.log(high * abs(p0))),
+        bounds = (math.log(span[0] * abs(p0)), math.log(span[1] * abs(p0)))
+        if grid > 1:
+            u = np.linspace(*bounds, grid)
+            k = int(np.argmin([cost(sign * math.exp(x)) for x in u]))
+            bounds = (u[max(k - 1, 0)], u[min(k + 1, grid - 1)])
+            p0 = sign * math.exp(u[k])
+        res = scipy.optimize.minimize_scalar(lambda u: cost(sign * math.exp(u)), bounds=bounds,
                                              method="bounded",
                                              options={"xatol": SEARCH_TOLERANCE, "maxiter": SEARCH_REPLAYS})
         best = sign * math.exp(float(res.x)) if res.fun < cost(p0) else p0

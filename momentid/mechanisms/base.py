@@ -225,6 +225,9 @@ class MechanismKind:
     kinematic: ClassVar[bool] = False
     #: How the diagnosis sizes it (None for truth-only kinds).
     refit: ClassVar[Refit | None] = None
+    #: A storey force that opposes the drift velocity: a linear identification takes it into C as an
+    #: equivalent viscous damping, so where C's pattern shows a damper, this kind there is its rival.
+    dissipative: ClassVar[bool] = False
     #: One line for the docs and ``describe``.
     summary: ClassVar[str] = ""
 

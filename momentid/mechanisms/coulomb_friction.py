@@ -38,6 +38,7 @@ class CoulombFriction(MechanismKind):
     fitted = params[0]
     callback = True
     refit = Refit.RESIMULATE
+    dissipative = True
     summary = "F tanh(v / FRICTION_SMOOTHING) across a storey (v: drift velocity)"
 
     def storey_force(self, params, drift, drift_velocity, time, stiffness):

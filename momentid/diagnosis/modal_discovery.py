@@ -52,9 +52,15 @@ MIN_HELD_OUT_GAIN = 0.05
 #: Gauss-Newton iterations of the output-error refinement (each: one batched simulation of every
 #: parameter set on every training run); the relative finite-difference step of its Jacobian; the
 #: Levenberg-Marquardt damping's start and its factors after a rejected / accepted step.
-ITERATIONS = 6
+ITERATIONS = 10
 JACOBIAN_STEP = 1e-3
 DAMPING_START, DAMPING_UP, DAMPING_DOWN = 1e-3, 10.0, 3.0
+#: A step changes no scaled parameter by more than this (an e-fold of k, c or a dissipative term; a
+#: term's coefficient by its unit: a force as large as the whole restoring force).
+STEP_LIMIT = 1.0
+#: A dissipative term's output-error refinement starts at least at this share of its unit (its
+#: coefficient is refined as a logarithm, which cannot start at zero).
+DISSIPATIVE_START = 1e-3
 #: A simulation whose modal displacement exceeds this multiple of the training runs' peak diverged.
 DIVERGED = 1e3
 #: The equation error drops this many periods of the high-pass frequency at each end of a run (the
@@ -258,9 +264,9 @@ def _name(col: Column) -> str:
 
 def _force(cols: list[Column], theta: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
     """``sum_i theta_i g_i(x, v)`` (B,) for B members at once; ``theta``: (B, len(cols))."""
-    total = np.zeros_like(x)
+    total = 0.0 * x
     for i, col in enumerate(cols):
-        total += theta[:, i] * term_signal(col.term, col.shape, x, v, 0.0)
+        total = total + theta[:, i] * term_signal(col.term, col.shape, x, v, 0.0)
     return total
 
 
@@ -280,7 +286,8 @@ def _simulate(k: np.ndarray, c: np.ndarray, theta: np.ndarray, cols: list[Column
     (B, len(cols)); ``zdd``: (n, B) table accelerations (m/s^2).  A member whose ``|eta|`` exceeds
     ``bound`` (m) diverged: its column is NaN."""
     n, B = zdd.shape
-    steps = [_hold(kb, cb, dt) for kb, cb in zip(k, c)]
+    held = {pair: _hold(*pair, dt) for pair in set(zip(k, c))}      # members share (k, c) across runs
+    steps = [held[pair] for pair in zip(k, c)]
     (p00, p01), (p10, p11) = np.array([s[0] for s in steps]).transpose(1, 2, 0)
     (a0, b0), (a1, b1) = np.array([s[1] for s in steps]).T, np.array([s[2] for s in steps]).T
     u = np.vstack([zdd, zdd[-1:]])
@@ -288,26 +295,29 @@ def _simulate(k: np.ndarray, c: np.ndarray, theta: np.ndarray, cols: list[Column
     f = _force(cols, theta, x, v)
     out = np.empty((n, B))
     diverged = np.zeros(B, bool)
-    for j in range(n):
-        w0 = -u[j] - f
-        out[j] = w0 - k * x - c * v
-        w1 = -u[j + 1] - f                                   # predictor: the force held over the step
-        x, v = p00 * x + p01 * v + a0 * w0 + a1 * w1, p10 * x + p11 * v + b0 * w0 + b1 * w1
-        if cols:
-            correction = _force(cols, theta, x, v) - f       # corrector: the force at the step's end
-            x, v = x - a1 * correction, v - b1 * correction
-            f = _force(cols, theta, x, v)
-        if j % 256 == 0:
-            bad = ~(np.abs(x) < bound)
-            diverged |= bad
-            x[bad], v[bad], f[bad] = 0.0, 0.0, 0.0
+    with np.errstate(over="ignore", invalid="ignore"):      # a diverging member overflows before it is caught
+        for j in range(n):
+            w0 = -u[j] - f
+            out[j] = w0 - k * x - c * v
+            w1 = -u[j + 1] - f                                   # predictor: the force held over the step
+            x, v = p00 * x + p01 * v + a0 * w0 + a1 * w1, p10 * x + p11 * v + b0 * w0 + b1 * w1
+            if cols:
+                correction = _force(cols, theta, x, v) - f       # corrector: the force at the step's end
+                x, v = x - a1 * correction, v - b1 * correction
+                f = _force(cols, theta, x, v)
+            if j % 256 == 0:
+                bad = ~(np.abs(x) < bound)
+                diverged |= bad
+                x[bad], v[bad], f[bad] = 0.0, 0.0, 0.0
     out[:, diverged] = np.nan
     return out
 
 
 @dataclass(frozen=True)
 class _Problem:
-    """The output-error fit: training data, the law's columns, reference ``k``, ``c`` and term units."""
+    """The output-error fit: training data, the law's columns, reference ``k``, ``c`` and term units.
+    Parameters are scaled: ``log(k / k0)``, ``log(c / c0)``, each term's coefficient in its unit, a
+    dissipative term's as the log (it stays positive: dissipative)."""
 
     data: _Training
     cols: list
@@ -319,8 +329,17 @@ class _Problem:
     def coefficients(self, law: list[int], p: np.ndarray) -> tuple[float, float, np.ndarray]:
         """``(k, c, theta over every column)`` of scaled parameters ``p`` of the law using columns ``law``."""
         theta = np.zeros(len(self.cols))
-        theta[law] = p[2:] * self.units[law]
+        dissipative = np.array([self.cols[i].term in DISSIPATIVE for i in law], bool)
+        theta[law] = np.where(dissipative, np.exp(np.where(dissipative, p[2:], 0.0)), p[2:]) * self.units[law]
         return self.k0 * math.exp(p[0]), self.c0 * math.exp(p[1]), theta
+
+    def start(self, law: list[int], k: float, c: float, theta: np.ndarray) -> np.ndarray:
+        """Scaled parameters of ``(k, c, theta)`` (``theta`` over the law's columns; a dissipative term's
+        coefficient at least :data:`DISSIPATIVE_START` of its unit)."""
+        scaled = theta / self.units[law]
+        dissipative = np.array([self.cols[i].term in DISSIPATIVE for i in law], bool)
+        scaled = np.where(dissipative, np.log(np.maximum(scaled, DISSIPATIVE_START)), scaled)
+        return np.concatenate([[math.log(k / self.k0), math.log(c / self.c0)], scaled])
 
     def residuals(self, sets: list[tuple[list[int], np.ndarray]]) -> np.ndarray:
         """Output-error residuals (n_sets, N) of each parameter set on every training run, scaled so that
@@ -374,7 +393,7 @@ def _refine(problem: _Problem, laws: list[list[int]], starts: list[np.ndarray]):
             r, J = state[i]
             JTJ = J.T @ J
             step = np.linalg.lstsq(JTJ + damping[i] * np.diag(np.diag(JTJ)), -J.T @ r, rcond=None)[0]
-            trial[i] = best[i] + step
+            trial[i] = best[i] + step * min(1.0, STEP_LIMIT / max(float(np.max(np.abs(step))), 1e-300))
     return best, cost, first
 
 
@@ -396,8 +415,10 @@ def _describe(mode: int, law: list[Column], k: float, c: float, theta: np.ndarra
     for col, th in zip(law, theta):
         velocity = col.term in VELOCITY_TERMS
         at = v_peak if velocity else x_peak
-        g = float(term_signal(col.term, col.shape, 0.0 if velocity else x_peak, v_peak if velocity else 0.0, 0.0))
-        share = th * g / ((c if velocity else k) * at)
+        signal = [float(term_signal(col.term, col.shape, 0.0 if velocity else a, a if velocity else 0.0, 0.0))
+                  for a in (at, -at)]                       # a stop on one side acts on that side only
+        side = int(abs(signal[1]) > abs(signal[0]))
+        share = th * signal[side] / ((c if velocity else k) * at * (1 - 2 * side))
         if velocity:
             kind = "dissipative" if th > 0 else "feeding energy in"
         else:
@@ -406,7 +427,8 @@ def _describe(mode: int, law: list[Column], k: float, c: float, theta: np.ndarra
                         for key, value in col.shape.items() if key.endswith("delta"))
         parts.append(f"{_MEANING[col.term]}{shape}: {kind}, {100 * share:+.1f} % of the mode's linear "
                      f"{'damping' if velocity else 'spring'} force at the training runs' peak "
-                     f"{'velocity' if velocity else 'displacement'} (top floor {1e3 * abs(top) * x_peak:.3g} mm)")
+                     f"{'velocity' if velocity else 'displacement'} (top floor {1e3 * abs(top) * at:.3g} "
+                     f"{'mm/s' if velocity else 'mm'})")
     return f"mode {mode}: " + "; ".join(parts)
 
 
@@ -415,6 +437,18 @@ def _terms(law: list[Column], k: float, c: float, theta: np.ndarray) -> tuple:
               {"term": "v", "meaning": _MEANING["v"], "coefficient": c, "unit": MODAL_UNITS["v"]}]
     return tuple(linear + [{"term": col.term, "meaning": _MEANING[col.term], "coefficient": float(th),
                             "unit": MODAL_UNITS[col.term], **col.shape} for col, th in zip(law, theta)])
+
+
+def _held_out(run, d: int, linear: mc.RunsFit, m: int, law: list[Column], laws, bound: float):
+    """Held-out floor-acceleration NRMSE of each of ``laws`` (``(k, c, theta)``) on mode ``m``, the other
+    modes linear and the sensors the training runs' mean (NaN for a law that diverges)."""
+    dt, start = 1.0 / run.sample_rate, mc.active_start(run)
+    gain, offset = linear.gain.mean(axis=0), linear.offset.mean(axis=0)
+    eta = _simulate(np.array([w[0] for w in laws]), np.array([w[1] for w in laws]), np.array([w[2] for w in laws]),
+                    law, np.column_stack([run["zdd"]] * len(laws)), dt, bound)
+    measured = run.group("a", d)[start:]
+    return tuple(mc.nrmse(measured, _replay(linear, m, eta[:, i], gain, offset, run["zdd"], dt)[start:])
+                 if np.all(np.isfinite(eta[:, i])) else math.nan for i in range(len(laws)))
 
 
 def _search_mode(experiment: Experiment, linear: mc.RunsFit, train, m: int, dt: float):
@@ -451,7 +485,8 @@ def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str,
 
     Returns
     -------
-    ModalDiscovery, or None when no term lowers the leave-one-run-out equation error by :data:`MIN_GAIN`.
+    ModalDiscovery, or None when no term lowers the leave-one-run-out equation error by :data:`MIN_GAIN`
+    on any mode.
     """
     dt = 1.0 / experiment.run(train[0]).sample_rate
     searches = [_search_mode(experiment, linear, train, m, dt) for m in range(experiment.storeys)]
@@ -464,24 +499,19 @@ def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str,
     k0, c0 = float(linear.omega[m] ** 2), float(2 * linear.zeta[m] * linear.omega[m])
     base, fitted = loro.fit([0, 1]), loro.fit([0, 1] + [2 + i for i in chosen])
     units = np.array([float(np.std(y) / max(np.std(col.signal), 1e-300)) for col in law])
-    shift = [math.log(np.clip((r0 + fitted[j] - base[j]) / r0, 0.5, 2.0)) for j, r0 in enumerate((k0, c0))]
+    k_start, c_start = (r0 * float(np.clip((r0 + fitted[j] - base[j]) / r0, 0.5, 2.0)) for j, r0 in enumerate((k0, c0)))
     problem = _Problem(data, law, dt, k0, c0, units)
     everything = list(range(len(law)))
-    (p_base, p_law), (cost_base, cost_law), cost_start = _refine(problem, [[], everything],
-                                                     [np.zeros(2), np.array(shift + list(fitted[2:] / units))])
+    # The law starts twice: from the equation error's coefficients, and from the linear model (which
+    # the equation error on noisy, band-passed signals may have misled); the better one is kept.
+    (p_base, *p_laws), (cost_base, *cost_laws), cost_start = _refine(
+        problem, [[], everything, everything],
+        [np.zeros(2), problem.start(everything, k_start, c_start, fitted[2:]),
+         problem.start(everything, k0, c0, np.zeros(len(law)))])
+    p_law, cost_law = min(zip(p_laws, cost_laws), key=lambda pc: pc[1])
     k, c, theta = problem.coefficients(everything, p_law)
-    if any(col.term in DISSIPATIVE and th < 0 for col, th in zip(law, theta)):
-        return None                                          # refined into a law that feeds energy in
-    run = experiment.run(held)
-    dt, start, d = 1.0 / run.sample_rate, mc.active_start(run), experiment.storeys
-    gain, offset = linear.gain.mean(axis=0), linear.offset.mean(axis=0)
-    laws = [problem.coefficients([], p_base), (k, c, theta)]
-    bound = DIVERGED * float(np.max(np.abs(x)))
-    eta = _simulate(np.array([w[0] for w in laws]), np.array([w[1] for w in laws]), np.array([w[2] for w in laws]),
-                    law, np.column_stack([run["zdd"]] * 2), dt, bound)
-    measured = run.group("a", d)[start:]
-    refitted, after = (mc.nrmse(measured, _replay(linear, m, eta[:, i], gain, offset, run["zdd"], dt)[start:])
-                       if np.all(np.isfinite(eta[:, i])) else math.nan for i in range(2))
+    refitted, after = _held_out(experiment.run(held), experiment.storeys, linear, m, law,
+                                [problem.coefficients([], p_base), (k, c, theta)], DIVERGED * float(np.max(np.abs(x))))
     beats = bool(after <= (1.0 - MIN_HELD_OUT_GAIN) * min(before, refitted))
     R = np.asarray(linear.residues, float)
     pick = np.linspace(0, x.size - 1, min(PLOT_POINTS, x.size)).astype(int)

@@ -265,7 +265,7 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     text = _summary(mech, location, held_name, before, after, noise, candidate["explained"], trend,
                     candidate.get("held_out_amplitude_m_s2"), findings)
     if searched:
-        text += "\n" + _open_search_line(discovered, location)
+        text += "\n" + _open_search_line(discovered)
     curves = {"time": run.time[start:], "measured": {"a": measured}, "linear": {"a": before_full[start:]},
               "augmented": {"a": after_full[start:]}}
     return ModalDiagnosis(mechanism=mech, location=location, parameters=parameters, std=std, held_out=held_name,
@@ -312,11 +312,12 @@ def _summary(mech, location, held, before, after, noise, explained, trend, ampli
     return "\n".join(lines)
 
 
-def _open_search_line(discovered: ModalDiscovery | None, location: dict) -> str:
+def _open_search_line(discovered: ModalDiscovery | None) -> str:
     """One line: what the open search found on the misfit's mode, and whether it beats the linear model."""
     if discovered is None:
-        return (f"Open search on mode {location['mode']}: no term of the function library lowers the "
-                f"leave-one-run-out equation error by {100 * MIN_GAIN:.0f} %: nothing beyond the linear model.")
+        return (f"Open search: on no mode does a term of the function library earn its place (lower the "
+                f"leave-one-run-out equation error by {100 * MIN_GAIN:.0f} %, a dissipative term staying "
+                f"dissipative): nothing beyond the linear model.")
     training = discovered.checks["training_nrmse"]
     numbers = (f"held-out NRMSE {100 * discovered.nrmse_before:.2f} % -> {100 * discovered.nrmse_after:.2f} % "
                f"(the linear model refitted on the training runs the same way: "

@@ -26,7 +26,7 @@ with it.  Steps:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
@@ -109,7 +109,7 @@ class ModalDiscovery:
     nrmse_after: float
     beats_linear: bool
     checks: dict
-    plot: dict
+    plot: dict = field(repr=False)
 
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),

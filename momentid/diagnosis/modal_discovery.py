@@ -291,16 +291,16 @@ def _simulate(k: np.ndarray, c: np.ndarray, theta: np.ndarray, cols: list[Column
     (p00, p01), (p10, p11) = np.array([s[0] for s in steps]).transpose(1, 2, 0)
     (a0, b0), (a1, b1) = np.array([s[1] for s in steps]).T, np.array([s[2] for s in steps]).T
     u = np.vstack([zdd, zdd[-1:]])
+    drive_x, drive_v = -(a0 * u[:-1] + a1 * u[1:]), -(b0 * u[:-1] + b1 * u[1:])    # the table's share, (n, B)
+    hold_x, hold_v = a0 + a1, b0 + b1                     # the force held over a step (the predictor)
     x, v = np.zeros(B), np.zeros(B)
     f = _force(cols, theta, x, v)
-    out = np.empty((n, B))
+    history = np.empty((3, n, B))                         # eta, eta', force at each sample
     diverged = np.zeros(B, bool)
     with np.errstate(over="ignore", invalid="ignore"):      # a diverging member overflows before it is caught
         for j in range(n):
-            w0 = -u[j] - f
-            out[j] = w0 - k * x - c * v
-            w1 = -u[j + 1] - f                                   # predictor: the force held over the step
-            x, v = p00 * x + p01 * v + a0 * w0 + a1 * w1, p10 * x + p11 * v + b0 * w0 + b1 * w1
+            history[0, j], history[1, j], history[2, j] = x, v, f
+            x, v = p00 * x + p01 * v + drive_x[j] - hold_x * f, p10 * x + p11 * v + drive_v[j] - hold_v * f
             if cols:
                 correction = _force(cols, theta, x, v) - f       # corrector: the force at the step's end
                 x, v = x - a1 * correction, v - b1 * correction
@@ -309,6 +309,7 @@ def _simulate(k: np.ndarray, c: np.ndarray, theta: np.ndarray, cols: list[Column
                 bad = ~(np.abs(x) < bound)
                 diverged |= bad
                 x[bad], v[bad], f[bad] = 0.0, 0.0, 0.0
+        out = -zdd - history[2] - k * history[0] - c * history[1]
     out[:, diverged] = np.nan
     return out
 

@@ -24,6 +24,9 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
    ``unexplained``, located on the floor sensor and the modal band that carry the held-out misfit.
    Sensor clock offsets beyond :data:`LATE_SAMPLES` of a sample in every run are findings;
    rocking/out-of-plane motion is a stated limit (the recording holds the shaking axis only).
+6. **Open search** (when the verdict is not ``none`` and a run is held out): a nonlinear restoring law
+   on one mode (:mod:`~momentid.diagnosis.modal_discovery`), reported as ``discovered`` with whether it
+   beats the linear model on the held-out run; the verdict does not change.
 """
 
 from __future__ import annotations

@@ -1,28 +1,31 @@
 """The open search on recordings without added mass: a nonlinear restoring law on one mode.
 
-When the linear modal model of :mod:`momentid.diagnosis.real` misses a held-out run, the mode whose
-band carries the misfit is given a restoring force beyond ``k eta + c eta'`` from the function
-library's terms (:func:`momentid.mechanisms.data_driven.term_signal`: quadratic and cubic stiffness,
-quadratic damping, friction, two-sided gaps and one-sided stops), and the held-out run is replayed
-with it.  Steps:
+When the linear modal model of :mod:`momentid.diagnosis.real` misses a held-out run, one mode is
+given a restoring force beyond ``k eta + c eta'`` from the function library's terms
+(:func:`momentid.mechanisms.data_driven.term_signal`: quadratic and cubic stiffness, quadratic
+damping, friction, two-sided gaps and one-sided stops; not the hysteretic state or the stiffness
+switch), and the held-out run is replayed with it.  Steps:
 
 1. **Modal coordinates** from the floor accelerations: with the fitted residues ``R`` (modes x
    floors), ``a - z'' = eta'' R`` once each floor sensor's fitted gain and clock offset are undone, so
    ``eta'' = (a - z'') R^+``; ``eta'`` and ``eta`` are its integrals in the frequency domain above
    :data:`HIGH_PASS_OVER_MODE_1` x the first mode (below it a double integral is sensor drift).
-2. **Selection** by the equation error: per mode, ``-(eta'' + z'') = k eta + c eta' + sum theta_i g_i``
-   is linear in the coefficients; terms join one at a time while each lowers the leave-one-run-out
-   error by :data:`MIN_GAIN` (cheap: per-run normal equations).  A dissipative term (friction,
-   quadratic damping) whose coefficient comes out negative feeds energy in: it is rejected.
-3. **Output-error refinement** of the selected law and of the linear baseline (``k``, ``c`` alone) on
-   the training runs: damped Gauss-Newton, every parameter set and every run simulated in one batch
-   (exact first-order hold of the linear part, the nonlinear force by a predictor-corrector step).
+2. **Selection** by the equation error, on every mode: ``-(eta'' + z'') = k eta + c eta' + sum
+   theta_i g_i`` is linear in the coefficients; every signal is band-passed to the mode's band and
+   :data:`EDGE_PERIODS` are dropped at each run's ends; terms join one at a time while each lowers the
+   leave-one-run-out error by :data:`MIN_GAIN` (cheap: per-run normal equations).  A dissipative
+   term (friction, quadratic damping) whose coefficient comes out negative feeds energy in: it is
+   rejected.  The mode whose law lowers the error most is kept.
+3. **Output-error refinement** of that law and of the linear baseline (``k``, ``c`` alone) on the
+   training runs: Levenberg-Marquardt, every parameter set and every run simulated in one batch
+   (exact first-order hold of the linear part, the nonlinear force by a predictor-corrector step);
+   the law from two starts (the equation error's coefficients and the linear model), its dissipative
+   terms kept positive.
 4. **Held-out check**: the held-out run replayed with the law on that mode (the others linear); the
    law *beats the linear model* when it lowers the held-out NRMSE by :data:`MIN_HELD_OUT_GAIN` below
    both the linear model's and the refitted baseline's.  Either way the result is reported, with its
-   numbers; the verdict stays ``unexplained``.
+   numbers; the verdict does not change.
 """
-
 from __future__ import annotations
 
 import math
@@ -49,7 +52,7 @@ MIN_GAIN = 0.05
 MAX_TERMS = 2
 #: The law beats the linear model when its held-out NRMSE is this share below the linear model's.
 MIN_HELD_OUT_GAIN = 0.05
-#: Gauss-Newton iterations of the output-error refinement (each: one batched simulation of every
+#: Levenberg-Marquardt iterations of the output-error refinement (each: one batched simulation of every
 #: parameter set on every training run); the relative finite-difference step of its Jacobian; the
 #: Levenberg-Marquardt damping's start and its factors after a rejected / accepted step.
 ITERATIONS = 10

@@ -265,12 +265,18 @@ def _name(col: Column) -> str:
     return col.term + "".join(f" ({k} {v:.3g})" for k, v in col.shape.items())
 
 
-def _force(cols: list[Column], theta: np.ndarray, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``sum_i theta_i g_i(x, v)`` (B,) for B members at once; ``theta``: (B, len(cols))."""
-    total = 0.0 * x
-    for i, col in enumerate(cols):
-        total = total + theta[:, i] * term_signal(col.term, col.shape, x, v, 0.0)
-    return total
+class _Force:
+    """``sum_i theta_i g_i(x, v)`` (B,) for B members at once (``theta``: (B, len(cols))), with the
+    coefficients laid out once: it runs twice per simulation step."""
+
+    def __init__(self, cols: list[Column], theta: np.ndarray):
+        self.terms = [(np.ascontiguousarray(theta[:, i]), col.term, col.shape) for i, col in enumerate(cols)]
+
+    def __call__(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        total = 0.0
+        for th, term, shape in self.terms:
+            total = total + th * term_signal(term, shape, x, v, 0.0)
+        return total if self.terms else np.zeros_like(x)
 
 
 def _hold(k: float, c: float, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -297,7 +303,8 @@ def _simulate(k: np.ndarray, c: np.ndarray, theta: np.ndarray, cols: list[Column
     drive_x, drive_v = -(a0 * u[:-1] + a1 * u[1:]), -(b0 * u[:-1] + b1 * u[1:])    # the table's share, (n, B)
     hold_x, hold_v = a0 + a1, b0 + b1                     # the force held over a step (the predictor)
     x, v = np.zeros(B), np.zeros(B)
-    f = _force(cols, theta, x, v)
+    force = _Force(cols, theta)
+    f = force(x, v)
     history = np.empty((3, n, B))                         # eta, eta', force at each sample
     diverged = np.zeros(B, bool)
     with np.errstate(over="ignore", invalid="ignore"):      # a diverging member overflows before it is caught
@@ -305,9 +312,9 @@ def _simulate(k: np.ndarray, c: np.ndarray, theta: np.ndarray, cols: list[Column
             history[0, j], history[1, j], history[2, j] = x, v, f
             x, v = p00 * x + p01 * v + drive_x[j] - hold_x * f, p10 * x + p11 * v + drive_v[j] - hold_v * f
             if cols:
-                correction = _force(cols, theta, x, v) - f       # corrector: the force at the step's end
+                correction = force(x, v) - f                     # corrector: the force at the step's end
                 x, v = x - a1 * correction, v - b1 * correction
-                f = _force(cols, theta, x, v)
+                f = force(x, v)
             if j % 256 == 0:
                 bad = ~(np.abs(x) < bound)
                 diverged |= bad
@@ -529,7 +536,7 @@ def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str,
                                    "law": problem.nrmse(cost_law)},
                 "held_out_nrmse_linear_refitted": refitted},
         plot={"eta": x[pick], "measured": y[pick],
-              "law": k * x[pick] + c * v[pick] + _force(law, theta[None, :].repeat(pick.size, 0), x[pick], v[pick])})
+              "law": k * x[pick] + c * v[pick] + sum(th * col.signal[pick] for col, th in zip(law, theta))})
 
 
 def plot_modal_discovered(discovery: ModalDiscovery, path) -> None:

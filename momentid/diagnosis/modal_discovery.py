@@ -102,7 +102,8 @@ class ModalDiscovery:
         Equation errors of the selection, training NRMSE of the baseline and the law, held-out NRMSE
         of the refitted baseline.
     plot : dict
-        ``eta`` (m), ``measured`` and ``law`` (m/s^2): the restoring force per unit modal mass.
+        ``eta`` (m), ``measured`` and ``law`` (m/s^2): the restoring force per unit modal mass beyond
+        the law's linear ``k eta + c eta'``, from the data and from the law's terms.
     """
 
     location: dict
@@ -535,22 +536,23 @@ def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str,
                 "training_nrmse": {"linear": problem.nrmse(cost_start), "linear (refitted)": problem.nrmse(cost_base),
                                    "law": problem.nrmse(cost_law)},
                 "held_out_nrmse_linear_refitted": refitted},
-        plot={"eta": x[pick], "measured": y[pick],
-              "law": k * x[pick] + c * v[pick] + sum(th * col.signal[pick] for col, th in zip(law, theta))})
+        plot={"eta": x[pick], "measured": y[pick] - k * x[pick] - c * v[pick],
+              "law": sum(th * col.signal[pick] for col, th in zip(law, theta))})
 
 
 def plot_modal_discovered(discovery: ModalDiscovery, path) -> None:
-    """``discovered.png``: the mode's restoring force per unit modal mass against its displacement,
-    from the data (equation form) and from the discovered law."""
+    """``discovered.png``: the mode's restoring force per unit modal mass beyond the law's linear part,
+    against its displacement, from the data (equation form) and from the discovered law's terms."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     p = discovery.plot
     fig, ax = plt.subplots(figsize=(7, 5))
-    ax.plot(1e3 * p["eta"], p["measured"], ".", color="0.5", ms=3, label="-(eta'' + z''), training runs")
-    ax.plot(1e3 * p["eta"], p["law"], ".", color="C3", ms=1, label="discovered law")
+    ax.plot(1e3 * p["eta"], p["measured"], ".", color="0.5", ms=3,
+            label="-(eta'' + z'') - (k eta + c eta'), training runs")
+    ax.plot(1e3 * p["eta"], p["law"], ".", color="C3", ms=1, label="the discovered law's nonlinear terms")
     ax.set_xlabel(f"modal displacement eta of mode {discovery.location['mode']} (mm)")
-    ax.set_ylabel("restoring force per unit modal mass (m/s^2)")
+    ax.set_ylabel("force per unit modal mass beyond k eta + c eta' (m/s^2)", fontsize=9)
     ax.set_title(f"mode {discovery.location['mode']}: held-out NRMSE {100 * discovery.nrmse_before:.2f} % -> "
                  f"{100 * discovery.nrmse_after:.2f} % ({'beats' if discovery.beats_linear else 'does not beat'} "
                  f"the linear model)", fontsize=10)

@@ -32,7 +32,7 @@ from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import pick_resonances, response_amplitude
 from momentid.estimation.scaled import weighted_line
 
-__all__ = ["RunsFit", "AmplitudeModel", "fit_runs", "replay", "nrmse", "noise_nrmse", "amplitude_model",
+__all__ = ["RunsFit", "AmplitudeModel", "fit_runs", "replay", "sensors", "nrmse", "noise_nrmse", "amplitude_model",
            "active_start", "pooled"]
 
 #: Training amplitudes must spread by at least this fraction of the largest for a trend to be fitted.
@@ -116,11 +116,11 @@ def fit_runs(experiment: Experiment, names) -> RunsFit:
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
     order = np.argsort(model.omega(theta))
     omega = model.omega(theta)[order]
-    sensors = [model.sensors(theta, r) for r in range(len(runs))]
+    fitted_sensors = [model.sensors(theta, r) for r in range(len(runs))]
     return RunsFit(runs=tuple(names), omega=omega, zeta=model.zeta(theta)[order],
                    zeta_std=sd[d:2 * d][order], frequency_std=(omega / (2 * np.pi)) * sd[:d][order],
-                   residues=model.residues(theta)[order], gain=np.array([g for g, _ in sensors]),
-                   offset=np.array([t for _, t in sensors]),
+                   residues=model.residues(theta)[order], gain=np.array([g for g, _ in fitted_sensors]),
+                   offset=np.array([t for _, t in fitted_sensors]),
                    amplitude=np.array([response_amplitude(r, d, active_start(r)) for r in runs]),
                    scale=fit.scale, noise=fit.noise_sources)
 
@@ -187,10 +187,28 @@ def replay(omega, zeta, residues, gain, offset, zdd: np.ndarray, dt: float) -> n
     oscillators = discretize(np.eye(d), np.diag(2 * zeta * omega), np.diag(omega ** 2), dt)
     absolute = outputs(oscillators, simulate_linear(oscillators, zdd))["a"]   # eta'' + z'', (n, d)
     a = absolute @ R + (1.0 - R.sum(axis=0))[None, :] * zdd[:, None]
-    n = zdd.size
-    spectrum = np.fft.rfft(a, 2 * n, axis=0)                     # zero-padded: no wrap-around of the delay
+    return sensors(a, gain, offset, dt)
+
+
+def sensors(a: np.ndarray, gain, offset, dt: float, *, undo: bool = False) -> np.ndarray:
+    """Floor accelerations ``a`` (n, d) as the floor sensors read them: each channel times its gain and
+    delayed by its clock offset (fractional, in the frequency domain, zero-padded so that the delay does
+    not wrap around); ``undo=True`` is the inverse (a recording with its sensors' gains and offsets undone).
+
+    Parameters
+    ----------
+    a : ndarray, shape (n, d)
+        Accelerations (m/s^2).
+    gain, offset : array_like, shape (d,)
+        Gain (1) and clock offset (s, positive: lags) of each channel.
+    dt : float
+        Sample interval (s).
+    """
+    n = a.shape[0]
+    spectrum = np.fft.rfft(a, 2 * n, axis=0)
     w_bins = 2 * np.pi * np.fft.rfftfreq(2 * n, dt)
-    spectrum *= np.asarray(gain, float)[None, :] * np.exp(-1j * w_bins[:, None] * np.asarray(offset)[None, :])
+    gain, offset = np.asarray(gain, float)[None, :], np.asarray(offset, float)[None, :]
+    spectrum *= np.exp(1j * w_bins[:, None] * offset) / gain if undo else gain * np.exp(-1j * w_bins[:, None] * offset)
     return np.fft.irfft(spectrum, 2 * n, axis=0)[:n]
 
 

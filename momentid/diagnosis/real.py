@@ -24,6 +24,9 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
    ``unexplained``, located on the floor sensor and the modal band that carry the held-out misfit.
    Sensor clock offsets beyond :data:`LATE_SAMPLES` of a sample in every run are findings;
    rocking/out-of-plane motion is a stated limit (the recording holds the shaking axis only).
+6. **Open search** (when the verdict is not ``none`` and a run is held out): a nonlinear restoring law
+   on one mode (:mod:`~momentid.diagnosis.modal_discovery`), reported as ``discovered`` with whether it
+   beats the linear model on the held-out run; the verdict does not change.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ from threadpoolctl import threadpool_limits
 
 from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
+from momentid.diagnosis.modal_discovery import MIN_GAIN, ModalDiscovery, discover_modal
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.peaks import response_amplitude
@@ -88,6 +92,10 @@ class ModalDiagnosis:
         ``time``, and ``measured``/``linear``/``augmented`` each ``{"a": (n, d)}`` (plots).
     notes : tuple of str
         What reading the recording recovered or repaired (runs a damaged file lost).
+    discovered : ModalDiscovery or None
+        The open search's law on the misfit's mode (:mod:`~momentid.diagnosis.modal_discovery`), run when
+        the linear model misses the held-out run by more than :data:`~momentid.diagnosis.thresholds.EXCESS`
+        x noise; None when not run or when no term earned its place.
     """
 
     mechanism: str
@@ -107,6 +115,7 @@ class ModalDiagnosis:
     augmented_xml: str = ""
     localisation: dict = field(default_factory=dict)
     notes: tuple = ()
+    discovered: ModalDiscovery | None = None
 
     def to_dict(self) -> dict:
         return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
@@ -114,7 +123,8 @@ class ModalDiagnosis:
                 "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
                 "noise_nrmse": self.noise_nrmse, "channel_nrmse": self.channel_nrmse,
                 "training": self.training, "candidate": self.candidate, "findings": list(self.findings),
-                "path": "modal (no added mass)", "notes": list(self.notes)}
+                "path": "modal (no added mass)", "notes": list(self.notes),
+                "discovered": self.discovered.to_dict() if self.discovered is not None else None}
 
 
 def _split(experiment: Experiment, hold_out: str | None):
@@ -248,6 +258,8 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
                         "dzeta_dA_per_m_s2": trend.damping_slope_std.tolist()}) if mech == AMPLITUDE_DEPENDENCE else ({}, {})
     per = {f"a{j + 1}": {"before": float(b), "after": float(a)} for j, (b, a) in
            enumerate(zip(mc.channel_nrmse(measured, before_full[start:]), mc.channel_nrmse(measured, after_full[start:])))}
+    searched = mech != "none" and held not in train and len(train) > 1
+    discovered = discover_modal(experiment, linear, train, held, location, before) if searched else None
     findings = tuple(_sensor_findings(linear, dt)) + (ROCKING_LIMIT,)
     training = {"runs": list(train), "frequency_hz": linear.frequency.tolist(), "damping_ratio": linear.zeta.tolist(),
                 "residual_variance_factor": linear.scale, "sensor_gain": linear.gain.tolist(),
@@ -255,11 +267,14 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     held_name = held if held not in train else f"{held} (no run held out: checked on its own training data)"
     text = _summary(mech, location, held_name, before, after, noise, candidate["explained"], trend,
                     candidate.get("held_out_amplitude_m_s2"), findings)
+    if searched:
+        text += "\n" + _open_search_line(discovered)
     curves = {"time": run.time[start:], "measured": {"a": measured}, "linear": {"a": before_full[start:]},
               "augmented": {"a": after_full[start:]}}
     return ModalDiagnosis(mechanism=mech, location=location, parameters=parameters, std=std, held_out=held_name,
                           nrmse_before=before, nrmse_after=after, noise_nrmse=noise, channel_nrmse=per,
-                          training=training, candidate=candidate, findings=findings, summary=text, curves=curves)
+                          training=training, candidate=candidate, findings=findings, summary=text, curves=curves,
+                          discovered=discovered)
 
 
 def _explained(before: float, after: float, noise: float) -> float:
@@ -298,3 +313,22 @@ def _summary(mech, location, held, before, after, noise, explained, trend, ampli
                      f"around that mode holding that share of its residual power).")
     lines += [f"Finding: {f}" for f in findings]
     return "\n".join(lines)
+
+
+def _open_search_line(discovered: ModalDiscovery | None) -> str:
+    """One line: what the open search found on the misfit's mode, and whether it beats the linear model."""
+    if discovered is None:
+        return (f"Open search: on no mode does a term of the function library earn its place (lower the "
+                f"leave-one-run-out equation error by {100 * MIN_GAIN:.0f} %, a dissipative term staying "
+                f"dissipative): nothing beyond the linear model.")
+    training = discovered.checks["training_nrmse"]
+    numbers = (f"held-out NRMSE {100 * discovered.nrmse_before:.2f} % -> {100 * discovered.nrmse_after:.2f} % "
+               f"(the linear model refitted on the training runs the same way: "
+               f"{100 * discovered.checks['held_out_nrmse_linear_refitted']:.2f} %; training runs "
+               f"{100 * training['linear']:.2f} % -> {100 * training['law']:.2f} %, refitted linear "
+               f"{100 * training['linear (refitted)']:.2f} %)")
+    if discovered.beats_linear:
+        return (f"Open search: {discovered.description}; {numbers}: it beats the linear model on the held-out run "
+                f"(a data-driven law, not a named mechanism; the verdict is unchanged).")
+    return (f"Open search: {discovered.description}; {numbers}: it does NOT beat the linear model on the held-out "
+            f"run (the verdict is unchanged).")

@@ -12,6 +12,7 @@ import numpy as np
 from momentid.core.series import json_safe
 from momentid import mechanisms
 from momentid.diagnosis.discovery import Discovery, plot_discovered
+from momentid.diagnosis.modal_discovery import ModalDiscovery, plot_modal_discovered
 from momentid.diagnosis.screening import Candidate
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 
@@ -123,7 +124,8 @@ def write_report(diag: Diagnosis, folder) -> Path:
         from momentid.diagnosis.locate import plot_localisation
         plot_localisation(diag.localisation, folder / "locate.png")
     if diag.discovered is not None:
-        plot_discovered(diag.discovered, folder / "discovered.png")
+        plot = plot_modal_discovered if isinstance(diag.discovered, ModalDiscovery) else plot_discovered
+        plot(diag.discovered, folder / "discovered.png")
     return folder
 
 

@@ -26,6 +26,7 @@ replays' misfit above noise, they are the diagnosis.
 
 from __future__ import annotations
 
+import enum
 import json
 import math
 from dataclasses import dataclass, replace
@@ -38,6 +39,7 @@ from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, re
 from momentid.diagnosis.selection import SHORTLIST_FLOOR, Finding, explained_share
 from momentid.diagnosis.stages import Stages, run_stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
+from momentid.diagnosis.workers import run_forked
 from momentid.mechanisms.base import Refit, Target
 
 __all__ = ["Named", "Compound", "extend", "MAX_MECHANISMS", "EARNS"]
@@ -329,6 +331,24 @@ def _descend(stages: Stages, entries, stds):
     return nominal, entries, stds
 
 
+class _Trial(enum.Enum):
+    """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`)."""
+
+    JOINT = "joint"
+    DESCENT = "descent"
+
+
+def _trial(stages: Stages, task):
+    """(training NRMSE, structure, entries, stds) of one trial ((candidate, how, entries, stds)), or
+    None (an unphysical size)."""
+    _, how, entries, stds = task
+    joint = _joint(stages, entries, stds, newcomer=True) if how is _Trial.JOINT else _descend(stages, entries, stds)
+    if joint is None:
+        return None
+    structure, entries, stds = joint
+    return stages.refitter.score_joint(structure, entries, _records(entries)), structure, entries, stds
+
+
 def _physics(stages: Stages, start) -> Compound:
     """Physical mechanisms: add the one that earns its place most, while one does."""
     refitter = stages.refitter
@@ -339,14 +359,14 @@ def _physics(stages: Stages, start) -> Compound:
     partial = stages.found.mechanism == "unexplained"   # the start was sized on a model that lacked the rest
     steps = []
     while len(entries) < MAX_MECHANISMS and score > EXCESS * noise:
-        trials = []
+        tasks = []
         for c in _shortlist(_candidates(stages, entries)):
             trial = (entries + [(kind_of(c.mechanism), c.location, dict(c.parameters))], stds + [dict(c.std)])
-            joints = [_joint(stages, *trial, newcomer=True)]
-            if partial and len(entries) == 1:
-                joints.append(_descend(stages, *trial))
-            for s, e, sd in filter(None, joints):
-                trials.append((refitter.score_joint(s, e, _records(e)), c, s, e, sd))
+            tasks.append((c, _Trial.JOINT, *trial))
+            if partial and len(entries) == 1 and kind_of(c.mechanism).refit is Refit.RESIMULATE:
+                tasks.append((c, _Trial.DESCENT, *trial))
+        outs = run_forked(lambda task: _trial(stages, task), tasks, refitter)
+        trials = [(out[0], c, *out[1:]) for (c, *_), out in zip(tasks, outs) if out]
         if not trials:
             break
         after, c, s, e, sd = min(trials, key=lambda t: t[0])

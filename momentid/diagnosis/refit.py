@@ -195,6 +195,18 @@ class Refitter:
             self._cache[key] = compute()
         return self._cache[key]
 
+    def memo_keys(self) -> set:
+        """The keys memoised so far (:meth:`new_memos` hands a worker's later ones back)."""
+        return set(self._cache)
+
+    def new_memos(self, known: set) -> dict:
+        """The memos added since :meth:`memo_keys` returned ``known`` (a worker process's results)."""
+        return {k: v for k, v in self._cache.items() if k not in known}
+
+    def absorb(self, memos: dict) -> None:
+        """Take a worker process's memos (:meth:`new_memos`), so that nothing is computed twice."""
+        self._cache.update(memos)
+
     def refit_forces(self, entries):
         """:func:`refit_eiv` of the training runs with the storey forces of ``entries`` ((kind,
         location, parameters) each), memoised by kind and place (a force's signal per unit of its

@@ -19,6 +19,7 @@ from momentid.diagnosis.screening import (Candidate, DampingPattern, Domain, Rep
                                           screen_attachment, screen_equation, screen_replay)
 from momentid.diagnosis.sensor_check import SensorCheck
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
+from momentid.diagnosis.workers import run_forked
 from momentid.mechanisms.base import Refit
 
 __all__ = ["Verdict", "Screening", "Choice", "Finding", "screen", "choose", "select", "explained_share"]
@@ -193,8 +194,10 @@ def select(model: LinearModel, choice: Choice, screening: Screening, refitter: R
         shortlist = _shortlist(list(screening.pool) + extra, choice.candidate)
         if len(shortlist) > 1:
             base = refitter.linear_score()
-            scored = [(refitter.score(refitter.augment(c.mechanism, c.location, c.parameters, c.std),
-                                      c.mechanism, c.location), c) for c in shortlist]
+            scores = run_forked(lambda c: refitter.score(refitter.augment(c.mechanism, c.location, c.parameters,
+                                                                          c.std), c.mechanism, c.location),
+                                shortlist, refitter)
+            scored = list(zip(scores, shortlist))
             _, best = min(scored, key=lambda x: x[0])
             selection = {"training_nrmse_linear": base,
                          "training_nrmse": [{"mechanism": c.mechanism, "location": c.location, "nrmse": nrmse}

@@ -19,6 +19,7 @@ from momentid.diagnosis.compound import STEP_SHORTLIST, _shortlist
 from momentid.diagnosis.pipeline import diagnose
 from momentid.diagnosis.screening import Candidate, Domain
 from momentid.diagnosis.selection import SHORTLIST_FLOOR
+from momentid.diagnosis.workers import run_forked
 from momentid.diagnosis.report import write_report
 
 FRICTION_LATE_TABLE = ([{"type": "coulomb_friction", "storey": 2, "force": 0.3}], {"zdd": {"clock_offset": 0.01}})
@@ -163,3 +164,32 @@ def test_a_damper_that_won_the_replay_and_the_biased_transducer_beside_it():
     _check_pair(diag, DAMPER_BIASED_TRANSDUCER, {
         ("extra_damper", json.dumps({"storey": 2})): ("c", 0.05),
         ("sensor_bias", json.dumps({"channel": "q3"})): ("bias", 0.01)})
+
+
+class _Memos:
+    """The memo interface of a Refitter, on a dict."""
+
+    def __init__(self):
+        self.cache = {}
+
+    def memo_keys(self):
+        return set(self.cache)
+
+    def new_memos(self, known):
+        return {k: v for k, v in self.cache.items() if k not in known}
+
+    def absorb(self, memos):
+        self.cache.update(memos)
+
+
+def test_forked_trials_keep_their_order_and_hand_back_what_they_memoised():
+    refitter = _Memos()
+    refitter.cache["before"] = 0
+
+    def job(x):
+        refitter.cache[("square", x)] = x * x    # in a worker: lost unless handed back
+        return x + 1
+
+    assert run_forked(job, [3, 1, 2], refitter) == [4, 2, 3]
+    assert refitter.cache == {"before": 0, ("square", 3): 9, ("square", 1): 1, ("square", 2): 4}
+    assert run_forked(job, [5], refitter) == [6] and refitter.cache[("square", 5)] == 25   # one: in process

@@ -11,9 +11,13 @@ earns its place:
   signature's columns are fitted with every candidate's (:func:`~momentid.diagnosis.screening.
   screen_equation` with ``found``), on the equation residual's alternate blocks.  The best candidate
   of each kind that explains at least ``SHORTLIST_FLOOR`` of the excess left on the held-out blocks
-  is re-simulated, and the model with it must remove at least ``EARNS`` of the training replays'
-  misfit above noise that the model without it leaves.  The loop stops when none does, when the replays are at the noise
-  level, or at ``MAX_MECHANISMS``.
+  is re-simulated (beside a damper of the damping pattern, a dissipative storey force there too),
+  and the model with it must remove at least ``EARNS`` of the training replays' misfit above noise
+  that the model without it leaves.  The loop stops when none does, when the replays are at the
+  noise level, or at ``MAX_MECHANISMS``.  The trials of a step run on two processes
+  (:mod:`~momentid.diagnosis.workers`);
+* beside the physics, a **sensor fault** that contended with it in screening is undone and the
+  corrected experiment diagnosed again (:func:`_fault_beside`).
 
 Every size is then refitted jointly (errors-in-variables with every storey force as an input,
 the damping pattern on the refitted C, then each storey force's size searched by re-simulation
@@ -125,7 +129,7 @@ def _extend(stages: Stages, replay: bool, corrections: int) -> Compound:
     if start[0][0].refit is Refit.CORRECT_DATA:
         return _after_correction(stages, start, corrections)
     physics = _physics(stages, start)
-    return _fault_beside(stages, physics) if physics.mechanisms else physics
+    return _fault_beside(stages, physics, corrections) if physics.mechanisms and corrections else physics
 
 
 def _start(stages: Stages):
@@ -310,7 +314,8 @@ def _descend(stages: Stages, entries, stds):
     For a start that stage 6 left partial: its size was searched on a model that lacked the newcomer
     and took in what the newcomer does (P-Delta grown to absorb a friction's effect), and the linear
     part identified beside it has taken in the rest (the friction as viscous damping); the nominal
-    model has taken in neither.  Returns (structure, entries, stds), or None without a nominal model.
+    model has taken in neither.  Returns (structure, entries, stds), or None (no nominal model, no joint
+    regression, or a size it makes unphysical).
     """
     refitter, nominal = stages.refitter, stages.model.nominal
     refit = _refitted(stages, entries)
@@ -398,7 +403,7 @@ def _physics(stages: Stages, start) -> Compound:
     return Compound(finding, named, tuple(entries), steps)
 
 
-def _fault_beside(stages: Stages, physics: Compound) -> Compound:
+def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compound:
     """A sensor fault beside the physics found: the one screening explains best (at least
     ``EXPLAINED`` of the equation residual's excess), of those that contended with the physics
     (:func:`_contender`), is undone on every run and the corrected
@@ -422,7 +427,8 @@ def _fault_beside(stages: Stages, physics: Compound) -> Compound:
     kind, loc, params = kind_of(c.mechanism), c.location, dict(c.parameters)
     experiment = stages.model.experiment
     fixed = replace(experiment, runs=tuple(kind.correct_run(r, loc, params) for r in experiment.runs))
-    again = _extend(run_stages(fixed, replay=True, result=refitter.identify_corrected(kind, loc, params)), True, 0)
+    again = _extend(run_stages(fixed, replay=True, result=refitter.identify_corrected(kind, loc, params)), True,
+                    corrections - 1)
     if not again.entries:
         return physics
     entries = ((kind, loc, params),) + again.entries

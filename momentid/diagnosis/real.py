@@ -32,8 +32,6 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 from __future__ import annotations
 
 import json
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +41,7 @@ from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
 from momentid.diagnosis.modal_discovery import MIN_GAIN, ModalDiscovery, discover_modal
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
+from momentid.diagnosis.workers import run_forked
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.peaks import response_amplitude
 
@@ -56,9 +55,6 @@ AMPLITUDE_DEPENDENCE = "amplitude_dependence"
 LATE_SAMPLES = 0.1
 #: The held-out run's active part is split into this many windows to say when its misfit is largest.
 TIME_WINDOWS = 8
-#: Processes for the modal fits (one per training run): the 2 cores a
-#: lab laptop has; each fit is single-threaded.
-WORKERS = 2
 #: Floor sensor gains fitted on the training runs that differ by more than this between runs are
 #: reported: a real accelerometer's gain is constant to well below 1 %, so a 2 % spread is the
 #: model absorbing something else (an amplitude-dependent response at low frequency, a loose mount).
@@ -197,18 +193,9 @@ def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Mo
         return _diagnose(experiment, hold_out)
 
 
-def _single_threaded() -> None:
-    """Worker start: one BLAS thread (see :func:`diagnose_modal`)."""
-    threadpool_limits(limits=1, user_api="blas")
-
-
 def _fits(experiment: Experiment, train):
-    """One modal fit per training run, on :data:`WORKERS` processes when there are several."""
-    if len(train) < 2:
-        return [mc.fit_runs(experiment, train)]
-    with ProcessPoolExecutor(max_workers=WORKERS, mp_context=multiprocessing.get_context("fork"),
-                             initializer=_single_threaded) as pool:
-        return list(pool.map(mc.fit_runs, [experiment] * len(train), [[n] for n in train]))
+    """One modal fit per training run, on the machine's cores (:func:`~momentid.diagnosis.workers.run_forked`)."""
+    return run_forked(lambda name: mc.fit_runs(experiment, [name]), list(train))
 
 
 def _candidate(per_run, run, start: int, linear: mc.RunsFit, gain, offset):

@@ -2,7 +2,7 @@
 
 Trying the candidates of a step (stage 6's shortlist, a compound step's newcomers) means a few
 independent jobs of seconds each, most of it MuJoCo replays with a Python force callback, one core
-each.  :func:`run_forked` runs them on :data:`WORKERS` forked processes: the job and its inputs are
+each; so do the per-run modal fits of recordings without added mass (:mod:`~momentid.diagnosis.real`).  :func:`run_forked` runs them on :data:`WORKERS` forked processes: the job and its inputs are
 inherited by the fork, not pickled, and the re-simulations a worker memoised come back to the
 parent's :class:`~momentid.diagnosis.refit.Refitter`, so nothing is computed twice.  Results are the
 same as one after the other (each job is deterministic and single-threaded).
@@ -27,13 +27,13 @@ _JOB: tuple | None = None
 
 def _call(i: int):
     job, tasks, refitter = _JOB
-    known = refitter.memo_keys()
+    known = refitter.memo_keys() if refitter is not None else set()
     with threadpool_limits(limits=1, user_api="blas"):   # small dense products: threads only add waiting
         out = job(tasks[i])
-    return out, refitter.new_memos(known)
+    return out, refitter.new_memos(known) if refitter is not None else {}
 
 
-def run_forked(job: Callable, tasks: Sequence, refitter) -> list:
+def run_forked(job: Callable, tasks: Sequence, refitter=None) -> list:
     """``[job(task) for task in tasks]``, on :data:`WORKERS` forked processes when there are several.
 
     Parameters
@@ -42,8 +42,8 @@ def run_forked(job: Callable, tasks: Sequence, refitter) -> list:
         One task -> a picklable result; may use ``refitter`` (its memos are handed back).
     tasks : sequence
         The jobs' inputs (not pickled: the workers inherit them).
-    refitter : Refitter
-        The diagnosis's refitter, whose memos the workers extend.
+    refitter : Refitter, optional
+        The diagnosis's refitter, whose memos the workers extend (None: nothing to hand back).
 
     Returns
     -------
@@ -61,5 +61,6 @@ def run_forked(job: Callable, tasks: Sequence, refitter) -> list:
     finally:
         _JOB = None
     for _, memos in results:
-        refitter.absorb(memos)
+        if refitter is not None:
+            refitter.absorb(memos)
     return [out for out, _ in results]

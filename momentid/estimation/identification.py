@@ -49,7 +49,7 @@ from momentid.core.analytic import Modes, modal_properties
 from momentid.core.series import Experiment, RunData
 from momentid.errors import IdentificationError, SensorDataError
 from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
-from momentid.lab.sensors import check_run
+from momentid.estimation.checks import check_run
 
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
            "MAX_CONDITION", "MAX_NOISE_EXCESS", "Layout", "equation_form_bytes", "require_equation_memory"]

@@ -260,7 +260,7 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     IdentificationError
         No noise source, fewer resonances than storeys, or a singular fit.
     """
-    from momentid.lab.sensors import check_run
+    from momentid.estimation.checks import check_run
 
     selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
     if not selected:

@@ -22,7 +22,7 @@ import scipy.signal
 
 from momentid.errors import IdentificationError
 
-__all__ = ["LinearModel", "discretize", "simulate_linear", "free_response", "MAX_EIGENVALUE_STEP"]
+__all__ = ["LinearModel", "discretize", "simulate_linear", "MAX_EIGENVALUE_STEP"]
 
 
 @dataclass(frozen=True)
@@ -194,33 +194,11 @@ def simulate_linear(model: LinearModel, u: np.ndarray, x0=None) -> np.ndarray:
     return np.real(xi @ model.V.T)
 
 
-def free_response(model: LinearModel, n: int) -> np.ndarray:
-    """States from each unit initial state: shape (n, 2d, 2d), ``[k, :, i]`` from ``e_i``."""
-    powers = _powers(model.lam, n)
-    Vinv = np.linalg.inv(model.V)
-    return np.real(np.einsum("ij,kj,jl->kil", model.V, powers, Vinv))
-
-
-def free_outputs(model: LinearModel, n: int, out: np.ndarray) -> np.ndarray:
-    """Outputs ``out @ x`` from each unit initial state: shape (n, n_out, 2d)."""
-    W = np.asarray(out, float) @ model.V                     # (n_out, 2d)
-    Vinv = np.linalg.inv(model.V)
-    O = W.T[:, :, None] * Vinv[:, None, :]                   # (2d, n_out, 2d): mode j's outer product
-    p = _powers(model.lam, n)                                # (n, 2d)
-    return np.real(p @ O.reshape(O.shape[0], -1)).reshape(n, W.shape[0], -1)
-
-
 def output_matrix(model: LinearModel, groups) -> np.ndarray:
     """Rows mapping the state to the output groups (``'q'``, ``'v'``, ``'a'``), stacked."""
     d = model.d
     rows = {"q": np.eye(2 * d)[:d], "v": np.eye(2 * d)[d:], "a": model.out_a}
     return np.vstack([rows[g] for g in groups])
-
-
-def _powers(lam: np.ndarray, n: int) -> np.ndarray:
-    k = np.arange(n)[:, None]
-    with np.errstate(under="ignore"):
-        return np.exp(k * np.log(lam.astype(complex))[None, :])
 
 
 def outputs(model: LinearModel, x: np.ndarray) -> dict[str, np.ndarray]:

@@ -19,7 +19,7 @@ from pathlib import Path
 from momentid.core.series import json_safe
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
 
-__all__ = ["main"]
+__all__ = ["main", "only_json_on_stdout"]
 
 _EPILOG = """examples:
   momentid run                                        # the embedded default scenario
@@ -90,9 +90,11 @@ def _output_folder(out: str) -> Path:
 
 
 @contextlib.contextmanager
-def _only_json_on_stdout(active: bool):
-    """With ``--json``, stdout carries exactly one JSON object: anything native code writes to
-    file descriptor 1 (LAPACK's ``** On entry to ...`` lines, say) goes to stderr instead."""
+def only_json_on_stdout(active: bool):
+    """Context manager: with ``active`` (``--json``), stdout carries exactly one JSON object: anything
+    native code writes to file descriptor 1 (LAPACK's ``** On entry to ...`` lines, say) goes to
+    stderr instead; Python's ``print`` still reaches stdout.  Inactive, or when stdout is not file
+    descriptor 1 (captured), it changes nothing."""
     try:
         fd = sys.stdout.fileno() if active else -1
     except (AttributeError, OSError, io.UnsupportedOperation):  # captured or replaced stdout
@@ -315,16 +317,12 @@ def _cmd_diagnose(args) -> int:
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
     diag = diagnose(experiment, hold_out=args.hold_out)
-    write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
+    written = write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
         print(diag.summary)
-        print(f"\nreport written to {out}/ (report.json, summary.txt"
-              + (", model_augmented.xml" if diag.augmented_xml else "")
-              + (", replay.png, diagnosis.rrd" if diag.curves else "")
-              + (", locate.png" if diag.localisation else "")
-              + (", discovered.png" if getattr(diag, "discovered", None) is not None else "") + ")")
+        print(f"\nreport written to {out}/ ({', '.join(written)})")
     return 0
 
 
@@ -395,7 +393,7 @@ def build_parser() -> argparse.ArgumentParser:
                     "(Majcher 2025, input-output method with system momentum change).",
         epilog=_EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from momentid import __version__
+    from momentid import __version__, mechanisms
     parser.add_argument("--version", action="version", version=f"momentid {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
@@ -470,8 +468,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("diagnose", help="locate a model/recording mismatch and name the missing physics",
                        description="Compare the linear shear model (identified from the recording and the nominal "
                                    "one stored in it) with the recordings, locate the mismatch, test candidate "
-                                   "mechanisms (Coulomb friction, cubic stiffness, extra damper, P-Delta, flexible "
-                                   "added mass, sensor delay/gain/bias), add the best one to the MuJoCo model and "
+                                   "mechanisms (" + ", ".join(kind.name for kind in mechanisms.library()) + "), "
+                                   "add the best one to the MuJoCo model and "
                                    "replay a held-out run before and after. Recordings without added mass (accelerometers "
                                    "only): the modal model fitted on the other runs is checked on a held-out run "
                                    "against the noise level, and amplitude dependence is tested.")
@@ -524,7 +522,7 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
-        with _only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings():
+        with only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
             warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
             return args.func(args)

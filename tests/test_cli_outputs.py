@@ -40,8 +40,8 @@ def test_json_mode_sends_native_writes_to_stderr():
     bytes must not reach stdout, which carries exactly one JSON object."""
     code = textwrap.dedent("""
         import json, os, sys
-        from momentid.cli import _only_json_on_stdout
-        with _only_json_on_stdout(True):
+        from momentid.cli import only_json_on_stdout
+        with only_json_on_stdout(True):
             os.write(1, b" ** On entry to DLASCL parameter number 4 had an illegal value\\n")
             print(json.dumps({"ok": 1}))
         print("after")
@@ -126,9 +126,9 @@ def test_import_onto_a_full_disk_is_one_line_and_keeps_the_completed_runs(tmp_pa
 
 def test_diagnose_json_names_the_runs_a_truncated_recording_lost(tmp_path):
     """Issue 12: the note of lost runs went only to stderr, not to `diagnose --json` or report.json."""
-    from bad_input.cli import _rec
+    from bad_input.cli import recording_file
 
-    rec = _rec(tmp_path, cut_after=2)
+    rec = recording_file(tmp_path, cut_after=2)
     proc = _run("diagnose", str(rec), "--json", "-o", str(tmp_path / "report"))
     payload = json.loads(proc.stdout)
     report = json.loads((tmp_path / "report" / "report.json").read_text())

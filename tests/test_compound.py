@@ -15,12 +15,14 @@ import pytest
 
 import momentid as mi
 from benchmarks.diagnosis_compound import FAULT_KINDS, expected, scenario
-from momentid.diagnosis.compound import STEP_SHORTLIST, _shortlist
+from momentid import mechanisms
+from momentid.diagnosis.compound import STEP_SHORTLIST, shortlist
 from momentid.diagnosis.pipeline import diagnose
 from momentid.diagnosis.screening import Candidate, Domain
 from momentid.diagnosis.selection import SHORTLIST_FLOOR
 from momentid.diagnosis.workers import run_forked
 from momentid.diagnosis.report import write_report
+from momentid.mechanisms.place import Place, Target
 
 FRICTION_LATE_TABLE = ([{"type": "coulomb_friction", "storey": 2, "force": 0.3}], {"zdd": {"clock_offset": 0.01}})
 CUBIC_FLOOR_GAIN = ([{"type": "cubic_stiffness", "storey": 1, "k3": 3.5e7}], {"a1": {"gain": 1.05}})
@@ -64,8 +66,8 @@ def _check_pair(diag, case, tolerances: dict):
     # and near what sensor noise alone leaves in the training replays (within 3x: the held-out run has
     # its own noise realisation and the largest added mass, where P-Delta matters most).
     assert diag.nrmse_after * 3 <= diag.nrmse_before, diag.summary
-    selection = diag.selection.get("after_correction", diag.selection)
-    assert diag.nrmse_after < 3 * selection["training_nrmse_noise"], diag.summary
+    selection = diag.evidence.selection.after_correction or diag.evidence.selection
+    assert diag.nrmse_after < 3 * selection.noise, diag.summary
     report = diag.to_dict()
     assert [m["mechanism"] for m in report["mechanisms"]] == [m.mechanism for m in diag.mechanisms]
     assert set(report["mechanisms"][0]) == {"mechanism", "location", "parameters", "std"}
@@ -118,7 +120,7 @@ def test_extra_damper_and_p_delta_in_another_storey(tmp_path):
 
 
 def _candidate(mechanism, storey, explained, domain=Domain.EQUATION):
-    return Candidate(mechanism, {"storey": storey}, {}, {}, explained, domain)
+    return Candidate(mechanisms.get(mechanism), Place(Target.STOREY, storey), {}, {}, explained, domain)
 
 
 def test_compound_shortlist_takes_weak_kinds_and_frictions_beside_a_pattern_damper():
@@ -127,13 +129,13 @@ def test_compound_shortlist_takes_weak_kinds_and_frictions_beside_a_pattern_damp
     ranked = [_candidate("extra_damper", 3, 0.9, Domain.PARAMETERS), _candidate("cubic_stiffness", 1, 0.4),
               _candidate("cubic_stiffness", 2, 0.3), _candidate("p_delta", 2, SHORTLIST_FLOOR + 0.01),
               _candidate("coulomb_friction", 1, SHORTLIST_FLOOR - 0.01), _candidate("coulomb_friction", 3, 0.02)]
-    picked = [(c.mechanism, c.location["storey"]) for c in _shortlist(ranked)]
+    picked = [(c.mechanism, c.place.index) for c in shortlist(ranked)]
     assert picked[:STEP_SHORTLIST] == [("extra_damper", 3), ("cubic_stiffness", 1), ("p_delta", 2)]
     # ... and a friction the identified C took in as viscous damping screens near zero: beside the
     # pattern's damper, the friction at the damper's storey (not the better-screening one elsewhere).
     assert picked[STEP_SHORTLIST:] == [("coulomb_friction", 3)]
     # Below the floor and without a pattern damper: nothing.
-    assert _shortlist([_candidate("cubic_stiffness", 1, SHORTLIST_FLOOR - 0.01)]) == []
+    assert shortlist([_candidate("cubic_stiffness", 1, SHORTLIST_FLOOR - 0.01)]) == []
 
 
 # Friction and cubic stiffness in one storey: observed within 0.2 % (friction) and 0.2 % (k3) of the
@@ -158,30 +160,13 @@ def test_compound_shortlist_takes_weak_kinds_and_frictions_beside_a_pattern_damp
 def test_pairs_the_first_mechanism_hides(case, tolerances):
     _check_pair(_diagnosed(case), case, tolerances)
 
-class _Memos:
-    """The memo interface of a Refitter, on a dict."""
-
-    def __init__(self):
-        self.cache = {}
-
-    def memo_keys(self):
-        return set(self.cache)
-
-    def new_memos(self, known):
-        return {k: v for k, v in self.cache.items() if k not in known}
-
-    def absorb(self, memos):
-        self.cache.update(memos)
-
-
-def test_forked_trials_keep_their_order_and_hand_back_what_they_memoised():
-    refitter = _Memos()
-    refitter.cache["before"] = 0
+def test_forked_trials_keep_their_order_and_return_their_results():
+    seen = []
 
     def job(x):
-        refitter.cache[("square", x)] = x * x    # in a worker: lost unless handed back
-        return x + 1
+        seen.append(x)                 # in a worker: a copy of the caller's state, lost with the worker
+        return x + 1, x * x            # everything the caller needs comes back as the value
 
-    assert run_forked(job, [3, 1, 2], refitter) == [4, 2, 3]
-    assert refitter.cache == {"before": 0, ("square", 3): 9, ("square", 1): 1, ("square", 2): 4}
-    assert run_forked(job, [5], refitter) == [6] and refitter.cache[("square", 5)] == 25   # one: in process
+    assert run_forked(job, [3, 1, 2]) == [(4, 9), (2, 1), (3, 4)]
+    assert seen == []                  # nothing but the values came back
+    assert run_forked(job, [5]) == [(6, 25)] and seen == [5]   # one task: in process

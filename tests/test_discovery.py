@@ -16,9 +16,9 @@ import pytest
 import momentid as mi
 from momentid.core.structure import Mechanism
 from momentid.diagnosis import discovery
-from momentid.diagnosis.function_library import place_direction
 from momentid.lab import rig
 from momentid.lab import simulation as sim
+from momentid.mechanisms.place import Place, Target
 
 from conftest import load
 
@@ -32,7 +32,7 @@ def _callback_forces(structure, mechs, qpos, qvel, act=None):
     data.qpos[1:], data.qvel[1:] = qpos, qvel
     if act is not None:
         data.act[1:] = act
-    callback = sim._StoreyForces(model, mechs, structure)
+    callback = sim.CallbackForces(model, mechs, structure)
     callback(model, data)
     return data.qfrc_applied[1:].copy(), callback, model, data
 
@@ -91,11 +91,11 @@ def _rows(force_at, law, d=3, fs=200.0, seconds=30.0, noise=0.05, seed=4):
                          for j in range(d)])
     v = np.column_stack([np.sum(amps[j] * 2 * np.pi * freqs[j] * np.cos(2 * np.pi * freqs[j] * t[:, None] + phases[j]),
                                 axis=1) for j in range(d)])
-    (kind, index), = force_at.items()
-    x = q[:, index - 1] - (q[:, index - 2] if kind == "storey" and index > 1 else 0.0)
+    lower, upper = force_at.nodes
+    x = q[:, upper - 1] - (q[:, lower - 1] if lower > 0 else 0.0)
     f = law(x)
     sigma = noise * float(np.sqrt(np.mean(f ** 2)))
-    residual = np.outer(f, place_direction(force_at, d)) + rng.normal(0, sigma, (len(t), d))
+    residual = np.outer(f, force_at.direction(d)) + rng.normal(0, sigma, (len(t), d))
     runs = []
     for k in range(2):   # two runs of half the record each
         part = slice(k * len(t) // 2, (k + 1) * len(t) // 2)
@@ -104,28 +104,29 @@ def _rows(force_at, law, d=3, fs=200.0, seconds=30.0, noise=0.05, seed=4):
     return tuple(runs), np.full(d, sigma)
 
 
-@pytest.mark.parametrize("place", [{"floor": 3}, {"storey": 3}, {"storey": 1}])
+@pytest.mark.parametrize("place", [Place(Target.FLOOR_TABLE, 3), Place(Target.STOREY, 3), Place(Target.STOREY, 1)],
+                         ids=["floor3_table", "storey3", "storey1"])
 def test_a_stop_is_found_where_it_acts(place):
     gap, k = 1.5e-3, 2e4
     rows, noise = _rows(place, lambda x: k * np.maximum(x - gap, 0.0))
-    found = discovery._search(rows, noise, 3)
+    found = discovery.search(rows, noise, 3)
     # The top floor against the table, the top storey's drift and the first storey (the same as floor
     # 1 against the table) put the force on different floors: each place is told from the others.
-    assert found.place.location == place
+    assert found.place == place
     terms = {c.term: (c, coef) for c, coef in zip(found.selected.columns, found.selected.coefficients)}
     assert set(terms) == {"x", "v", "gap_pos"}
     col, coef = terms["gap_pos"]
     # 5 % noise on the force; the gap is refined between grid points by least squares: 3 % on the
     # gap and the contact stiffness (observed within 1 %).
     assert abs(col.shape["gap_pos_delta"] - gap) < 0.03 * gap and abs(coef - k) < 0.03 * k
-    words = discovery.describe(place, discovery._terms(found, 1.0), load("hidden/clean").structure,
+    words = discovery.describe(place, discovery.found_terms(found, 1.0), load("hidden/clean").structure,
                                float(np.max(np.abs(found.x))))
     assert "stop on the + side" in words and "+1.5 mm" in words
 
 
 def test_a_linear_force_adds_no_nonlinear_term():
-    rows, noise = _rows({"storey": 2}, lambda x: 300.0 * x)
-    found = discovery._search(rows, noise, 3)
+    rows, noise = _rows(Place(Target.STOREY, 2), lambda x: 300.0 * x)
+    found = discovery.search(rows, noise, 3)
     # A storey spring missing from the model is linear: the library's nonlinear terms must not be
     # picked to fit its noise.
-    assert [c.term for c in found.selected.columns] == ["x", "v"] and found.place.location == {"storey": 2}
+    assert [c.term for c in found.selected.columns] == ["x", "v"] and found.place == Place(Target.STOREY, 2)

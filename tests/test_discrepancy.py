@@ -31,7 +31,7 @@ def expected(name: str) -> tuple[str, dict]:
     scenario = load(f"hidden/{name}")
     for mech in scenario.truth:
         kind = mechanisms.get(mech.type)
-        return ("unexplained" if kind.truth_only else mech.type), {kind.target.value: mech.location}
+        return ("unexplained" if kind.truth_only else mech.type), kind.place(mech.location).location
     for channel, fault in scenario.sensors.faults:
         changed = [f.name for f in fields(ChannelFault) if getattr(fault, f.name) != f.default]
         return FAULT_KINDS[changed[0]], {"channel": channel}

@@ -114,7 +114,7 @@ def test_rig_equals_the_exact_discretisation(name):
 
 
 def test_callback_applies_the_storey_force_laws():
-    """The simulator's fast callback and ``model.storey_forces`` are the same physics."""
+    """The simulator's fast callback and ``rig.callback_forces`` are the same physics."""
 
     from momentid.core.structure import Mechanism
 
@@ -126,13 +126,12 @@ def test_callback_applies_the_storey_force_laws():
     model = rig.compile_model(rig.build_spec(s, None, mechanisms=mechanisms))
     data = mujoco.MjData(model)
     rng = np.random.default_rng(0)
-    callback = sim._StoreyForces(model, mechanisms, s)
+    callback = sim.CallbackForces(model, mechanisms, s)
     for t in (0.2, 0.7):
         data.qpos[1:] = rng.normal(0, 2e-3, 4)
         data.qvel[1:] = rng.normal(0, 2e-3, 4)
         data.time = t
         callback(model, data)
-        want = rig.storey_to_floor(rig.storey_forces(mechanisms, rig.drifts(data.qpos[1:]),
-                                                     rig.drifts(data.qvel[1:]), t, s))
+        want = rig.callback_forces(mechanisms, data.qpos[1:], data.qvel[1:], t, s)[0]
         # Same formulas, evaluated in another order: round-off apart.
         assert np.allclose(data.qfrc_applied[1:], want, rtol=1e-12, atol=1e-15)

@@ -19,7 +19,9 @@ from momentid.cli import main
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
 from momentid.diagnosis.pipeline import diagnose
-from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE, ModalDiagnosis
+from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE
+from momentid.diagnosis.result import Diagnosis, ModalEvidence
+from momentid.diagnosis.verdict import Verdict
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.io.recording import write_experiment
@@ -64,15 +66,19 @@ def lab(*runs) -> Experiment:
     return Experiment(runs=tuple(runs), statement=LabStatement(storeys=3, masses=MASSES), source="sim")
 
 
-def consistent(diag: ModalDiagnosis) -> None:
+def consistent(diag: Diagnosis) -> None:
     """The verdict follows the rule of momentid.diagnosis.real from the reported numbers."""
+    assert isinstance(diag, Diagnosis) and isinstance(diag.evidence, ModalEvidence)
     assert np.isfinite(diag.nrmse_before) and np.isfinite(diag.nrmse_after) and diag.noise_nrmse > 0
     if diag.nrmse_before <= EXCESS * diag.noise_nrmse:
-        assert diag.mechanism == "none"
+        assert diag.verdict is Verdict.NONE and diag.mechanism == "none" and diag.mechanisms == ()
     elif diag.mechanism == AMPLITUDE_DEPENDENCE:
-        assert diag.candidate["explained"] >= EXPLAINED and diag.nrmse_after < diag.nrmse_before
+        assert diag.verdict is Verdict.MECHANISM
+        assert diag.evidence.candidate["explained"] >= EXPLAINED and diag.nrmse_after < diag.nrmse_before
+        assert [m.mechanism for m in diag.mechanisms] == [AMPLITUDE_DEPENDENCE]
     else:
-        assert diag.mechanism == "unexplained" and diag.location["sensor"] in ("a1", "a2", "a3")
+        assert diag.verdict is Verdict.UNEXPLAINED and diag.mechanism == "unexplained"
+        assert diag.location["sensor"] in ("a1", "a2", "a3")
     out = diag.to_dict()
     for key in ("mechanism", "location", "summary", "held_out", "nrmse_before", "nrmse_after", "noise_nrmse"):
         assert key in out
@@ -81,13 +87,13 @@ def consistent(diag: ModalDiagnosis) -> None:
 
 def test_linear_rig_no_mechanism():
     diag = diagnose(lab(run("r1", 0.3, 1), run("r2", 0.6, 2), run("r3", 0.45, 3)))
-    assert isinstance(diag, ModalDiagnosis) and diag.held_out == "r3"
+    assert diag.held_out == "r3"
     consistent(diag)
     assert diag.mechanism == "none", diag.summary
     # A linear rig: the linear model's held-out misfit is the noise's (the rule's EXCESS margin).
     assert diag.nrmse_before <= EXCESS * diag.noise_nrmse
     # Ideal simulated sensors: no clock offset or gain difference to report.
-    assert not any(f.startswith("sensor") for f in diag.findings), diag.findings
+    assert not any(f.startswith("sensor") for f in diag.evidence.findings), diag.evidence.findings
 
 
 def test_amplitude_dependent_rig_named():

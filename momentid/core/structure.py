@@ -81,10 +81,12 @@ class Structure:
 
 @dataclass(frozen=True)
 class Mechanism:
-    """One piece of physics beyond the linear model, at a storey or floor (1 = lowest)."""
+    """One piece of physics beyond the linear model: its kind (:mod:`momentid.mechanisms`), where it
+    sits (a storey or floor number, 1 = lowest, or two floor numbers; the kind's
+    :class:`~momentid.mechanisms.place.Place` reads it) and its parameters."""
 
     type: str
-    location: int
+    location: int | tuple[int, int]
     parameters: tuple[tuple[str, float], ...]
 
     def get(self, name: str) -> float:

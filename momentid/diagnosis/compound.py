@@ -5,23 +5,27 @@ After stage 6 names one mechanism (a :class:`~momentid.diagnosis.selection.Findi
 earns its place:
 
 * a **sensor fault** (a kind sized by ``Refit.CORRECT_DATA``) is undone on every run, and unless the
-  corrected training replays are at the noise level (within ``EXCESS``), the stages run again on the
-  corrected experiment (the physics behind a faulty channel is found on clean data);
+  corrected training replays are at the noise level (within ``EXCESS``), the corrected experiment is
+  diagnosed again (the physics behind a faulty channel is found on clean data);
 * with a **physical mechanism** in the model, the library is screened again on what it leaves: its
   signature's columns are fitted with every candidate's (:func:`~momentid.diagnosis.screening.
   screen_equation` with ``found``), on the equation residual's alternate blocks.  The best candidate
   of each kind that explains at least ``SHORTLIST_FLOOR`` of the excess left on the held-out blocks
-  is re-simulated (beside a damper of the damping pattern, a dissipative storey force there too),
+  is re-simulated (beside a dashpot of the damping pattern, a dissipative force at its link too),
   and the model with it must remove at least ``EARNS`` of the training replays' misfit above noise
   that the model without it leaves.  The loop stops when none does, when the replays are at the
   noise level, or at ``MAX_MECHANISMS``.  The trials of a step run on two processes
-  (:mod:`~momentid.diagnosis.workers`);
+  (:mod:`~momentid.diagnosis.workers`) and return their results as values;
 * beside the physics, a **sensor fault** that contended with it in screening is undone and the
   corrected experiment diagnosed again (:func:`_fault_beside`).
 
-Every size is then refitted jointly (errors-in-variables with every storey force as an input,
-the damping pattern on the refitted C, then each storey force's size searched by re-simulation
-with the others in the model), and one augmented MuJoCo model carries them all.
+Every size is then refitted jointly (errors-in-variables with every force as an input, the damping
+pattern on the refitted C, then each force's size searched by re-simulation with the others in the
+model), and one augmented MuJoCo model carries them all.
+
+Diagnosing corrected recordings again is not done here: :func:`extend` returns a :class:`Correction`
+(the corrected experiment, and what to do with its diagnosis), and the pipeline
+(:func:`momentid.diagnosis.pipeline.diagnose`) runs the stages on it with their own refitter.
 
 A stage-6 verdict of ``unexplained`` whose best candidate removed part of the misfit is also
 extended: when that candidate and the further ones together remove ``ACCEPTED`` of the training
@@ -31,29 +35,29 @@ replays' misfit above noise, they are the diagnosis.
 from __future__ import annotations
 
 import enum
-import json
 import math
 from dataclasses import dataclass, replace
+from typing import Callable
 
 from momentid import mechanisms
-from momentid.core.structure import Mechanism
-from momentid.diagnosis.refit import SEARCH_RANGE, identified_structure, kind_of
-from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, remaining_excess, screen_equation,
-                                          storey_damper)
-from momentid.diagnosis.selection import SHORTLIST_FLOOR, Finding, explained_share
-from momentid.diagnosis.stages import Stages, run_stages
+from momentid.core.series import Experiment
+from momentid.core.structure import Structure
+from momentid.diagnosis.refit import SEARCH_RANGE, ForceRefit
+from momentid.diagnosis.replay import Entry, identified_structure, records
+from momentid.diagnosis.screening import Candidate, Domain, damping_pattern, pattern_fit, remaining_excess, screen_equation
+from momentid.diagnosis.selection import EARNS, SHORTLIST_FLOOR, Finding, Step, explained_share
+from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
+from momentid.diagnosis.verdict import Named, Verdict
 from momentid.diagnosis.workers import run_forked
-from momentid.mechanisms.base import Refit, Target
+from momentid.mechanisms.base import Refit
+from momentid.mechanisms.place import Target
 
-__all__ = ["Named", "Compound", "extend", "MAX_MECHANISMS", "EARNS"]
+__all__ = ["Compound", "Correction", "extend", "MAX_MECHANISMS", "STEP_SHORTLIST", "MAX_CORRECTIONS", "shortlist"]
 
 #: At most this many mechanisms in one diagnosis: a guard on the loop, not the rule that stops it
-#: (a further mechanism must earn its place).
+#: (a further mechanism must earn its place, ``EARNS``).
 MAX_MECHANISMS = 3
-#: A further mechanism must remove at least this share of the training replays' misfit above noise
-#: that the model without it leaves (half: it does more than any one-parameter fit of noise can).
-EARNS = 0.5
 #: Candidates re-simulated per step: the best of each kind, by the share of the remaining excess they
 #: explain, up to this many (the replay test, ``EARNS``, decides among them).
 STEP_SHORTLIST = 3
@@ -69,20 +73,6 @@ MAX_CORRECTIONS = 2
 
 
 @dataclass(frozen=True)
-class Named:
-    """One named mechanism: ``report.json``'s ``mechanisms`` entry (parameters in the lab's terms)."""
-
-    mechanism: str
-    location: dict
-    parameters: dict
-    std: dict
-
-    def to_dict(self) -> dict:
-        return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
-                "std": self.std}
-
-
-@dataclass(frozen=True)
 class Compound:
     """Stage 6b: every mechanism of the diagnosis and their joint model.
 
@@ -92,68 +82,89 @@ class Compound:
         The verdict: the primary mechanism (the first found) and the joint model's structure and records.
     mechanisms : tuple of Named
         Every named mechanism, primary first (empty for ``none`` and ``unexplained``).
-    entries : tuple
-        (kind, location, fitted parameters) of each, as :func:`~momentid.diagnosis.refit.joint_replay`
-        replays them (sensor faults first: undone on the recordings).
-    steps : list of dict
-        Each further mechanism tried: the training NRMSE before and with it, and whether it earned its place.
+    entries : tuple of Entry
+        Each of them as :func:`~momentid.diagnosis.replay.joint_replay` replays them (sensor faults
+        first: undone on the recordings).
+    steps : tuple of Step
+        Each further mechanism tried, and whether it earned its place.
+    score : float or None
+        The training runs' NRMSE through the joint model, when it was replayed.
     """
 
     finding: Finding
     mechanisms: tuple[Named, ...]
-    entries: tuple
-    steps: list
+    entries: tuple[Entry, ...]
+    steps: tuple[Step, ...] = ()
+    score: float | None = None
 
 
-def extend(stages: Stages, *, replay: bool) -> Compound:
+@dataclass(frozen=True)
+class Correction:
+    """A request of :func:`extend`: diagnose ``experiment`` (the recordings with a sensor fault undone,
+    whose training runs are identified as ``identification``) with at most ``corrections`` further
+    corrections, then hand its :class:`Compound` to ``then``, which returns the diagnosis."""
+
+    experiment: Experiment
+    identification: object
+    corrections: int
+    then: Callable[[Compound], Compound]
+
+
+@dataclass(frozen=True)
+class _Start:
+    """The mechanism a compound diagnosis continues from, its standard errors and its model's structure."""
+
+    entry: Entry
+    std: dict
+    structure: Structure
+
+
+def extend(stages: Stages, *, replay: bool, corrections: int = MAX_CORRECTIONS) -> Compound | Correction:
     """Stage 6b: continue from stage 6's finding (``stages.found``) on what it leaves (see the module
-    docstring); ``replay`` off: stage 6's answer as it is."""
-    return _extend(stages, replay, MAX_CORRECTIONS)
-
-
-def _single(stages: Stages) -> Compound:
-    found = stages.found
-    kind = kind_of(found.mechanism)
-    if kind is None:
-        return Compound(found, (), (), [])
-    named = Named(found.mechanism, found.location, found.parameters, found.std)
-    return Compound(found, (named,), ((kind, found.location, found.parameters),), [])
-
-
-def _extend(stages: Stages, replay: bool, corrections: int) -> Compound:
+    docstring); ``replay`` off: stage 6's answer as it is.  A :class:`Correction` when the recordings
+    with a sensor fault undone are to be diagnosed first (the caller runs the stages on them)."""
     if not replay:
-        return _single(stages)
+        return _single(stages.found)
     start = _start(stages)
     if start is None:
-        return _single(stages)
-    if start[0][0].refit is Refit.CORRECT_DATA:
+        return _single(stages.found)
+    if start.entry.kind.refit is Refit.CORRECT_DATA:
         return _after_correction(stages, start, corrections)
     physics = _physics(stages, start)
     return _fault_beside(stages, physics, corrections) if physics.mechanisms and corrections else physics
 
 
-def _start(stages: Stages):
-    """The mechanism to continue from: stage 6's, or the partial candidate of an ``unexplained``.
+def _single(found: Finding) -> Compound:
+    if found.kind is None:
+        return Compound(found, (), ())
+    named = Named(found.mechanism, found.location, found.parameters, found.std)
+    return Compound(found, (named,), (Entry(found.kind, found.place, found.parameters),))
 
-    Returns ((kind, location, parameters), std, structure) or None.
-    """
+
+def _start(stages: Stages) -> _Start | None:
+    """The mechanism to continue from: stage 6's, or the partial candidate of an ``unexplained``."""
     found, refitter, screening = stages.found, stages.refitter, stages.screening
-    kind = kind_of(found.mechanism)
-    if kind is not None:
-        return (kind, found.location, found.parameters), found.std, found.structure
-    part = found.selection.get("partial")
+    if found.kind is not None:
+        return _Start(Entry(found.kind, found.place, found.parameters), found.std, found.structure)
+    part = found.selection.partial
     if part is None:
         return None
     extra = [screening.pattern.candidate] if screening.pattern else []
     for c in list(screening.pool) + extra:
-        if (c.mechanism, c.location) == (part["mechanism"], part["location"]):
-            aug = refitter.augment(c.mechanism, c.location, c.parameters, c.std)
-            params = dict(aug.parameters, **part["parameters"])
-            return (kind_of(c.mechanism), c.location, params), aug.std or c.std, aug.structure
+        if c.same_as(part.candidate):
+            aug = part.augmented if c == part.candidate else refitter.augment(c.kind, c.place, c.parameters, c.std)
+            params = dict(aug.parameters, **part.parameters)
+            return _Start(Entry(c.kind, c.place, params), aug.std or c.std, aug.structure)
     return None
 
 
-def _after_correction(stages: Stages, start, corrections: int) -> Compound:
+def _corrected(experiment: Experiment, entry: Entry) -> Experiment:
+    """``experiment`` with the sensor fault ``entry`` undone on every run."""
+    return replace(experiment, runs=tuple(entry.kind.correct_run(r, entry.place, entry.parameters)
+                                          for r in experiment.runs))
+
+
+def _after_correction(stages: Stages, start: _Start, corrections: int) -> Compound | Correction:
     """A sensor fault: undo it on every run and diagnose the corrected experiment.
 
     A fault that stage 6 left ``unexplained`` (it removed too little alone) is named with what the
@@ -161,31 +172,30 @@ def _after_correction(stages: Stages, start, corrections: int) -> Compound:
     above noise.
     """
     found, refitter = stages.found, stages.refitter
-    (kind, loc, params), std, _ = start
-    first = _single(stages)
-    left, noise = found.selection.get("training_nrmse_augmented"), found.selection.get("training_nrmse_noise")
-    if corrections == 0 or (found.mechanism != "unexplained" and left is not None and left <= EXCESS * noise):
+    entry = start.entry
+    first = _single(found)
+    left, noise = found.selection.augmented, found.selection.noise
+    if corrections == 0 or (found.verdict is not Verdict.UNEXPLAINED and left is not None and left <= EXCESS * noise):
         return first   # the corrected recordings' replays are at the noise level: nothing more to find
-    experiment = stages.model.experiment
-    fixed = replace(experiment, runs=tuple(kind.correct_run(r, loc, params) for r in experiment.runs))
-    known = refitter.identify_corrected(kind, loc, params)   # identified while the fault was sized
-    again = _extend(run_stages(fixed, replay=True, result=known), True, corrections - 1)
-    if not again.mechanisms or any((n.mechanism, n.location) == (kind.name, loc) for n in again.mechanisms):
-        return first   # nothing more (or the same fault again: its correction is all there is)
-    entries = ((kind, loc, params),) + again.entries
-    selection = dict(found.selection, after_correction=again.finding.selection)
-    if found.mechanism == "unexplained":
-        score = refitter.score_joint(again.finding.structure, entries, again.finding.records)
-        share = explained_share(refitter.linear_score(), score, refitter.noise_nrmse())
-        selection.update(training_nrmse_joint=score, joint_explained=share)
-        if share < ACCEPTED:
-            return Compound(replace(found, selection=selection), (), (), again.steps)
-    joint = Finding(kind.name, loc, params, std, again.finding.structure, again.finding.records, selection)
-    return Compound(joint, (Named(kind.name, loc, params, std),) + again.mechanisms, entries, again.steps)
+    known = refitter.identify_corrected(*entry)   # identified while the fault was sized
 
-
-def _records(entries) -> tuple[Mechanism, ...]:
-    return tuple(r for kind, loc, params in entries for r in kind.as_records(loc, params))
+    def then(again: Compound) -> Compound:
+        if not again.mechanisms or any((e.kind, e.place) == (entry.kind, entry.place) for e in again.entries):
+            return first   # nothing more (or the same fault again: its correction is all there is)
+        entries = (entry,) + again.entries
+        selection = replace(found.selection, after_correction=again.finding.selection)
+        if found.verdict is Verdict.UNEXPLAINED:
+            score = refitter.score_joint(again.finding.structure, entries, again.finding.records)
+            share = explained_share(refitter.linear_score(), score, refitter.noise_nrmse())
+            selection = replace(selection, joint=score, joint_explained=share)
+            if share < ACCEPTED:
+                return Compound(replace(found, selection=selection), (), (), again.steps)
+        kind, place, params = entry
+        joint = Finding(Verdict.MECHANISM, kind, place, place.location, params, start.std, again.finding.structure,
+                        again.finding.records, selection)
+        named = Named(kind.name, place.location, params, start.std)
+        return Compound(joint, (named,) + again.mechanisms, entries, again.steps)
+    return Correction(_corrected(stages.model.experiment, entry), known, corrections - 1, then)
 
 
 def _candidates(stages: Stages, entries) -> list[Candidate]:
@@ -195,8 +205,8 @@ def _candidates(stages: Stages, entries) -> list[Candidate]:
     # A sensor fault is undone on the data, not fitted; an attachment's equation signature is a grid
     # over frequencies, not a few columns: neither is carried as columns, and an attachment is not
     # screened again (its replay screening, stage 4, is its test; the grid would cost most of the time).
-    found = [(kind, loc) for kind, loc, _ in entries
-             if kind.target is not Target.CHANNEL and kind.refit is not Refit.ATTACHMENT]
+    found = [(e.kind, e.place) for e in entries
+             if e.kind.target is not Target.CHANNEL and e.kind.refit is not Refit.ATTACHMENT]
     domains = [(model.result, residuals.rows, Domain.EQUATION)]
     if residuals.nominal_rows is not None:
         domains.append((model.nominal_result, residuals.nominal_rows, Domain.NOMINAL))
@@ -205,21 +215,22 @@ def _candidates(stages: Stages, entries) -> list[Candidate]:
         if remaining_excess(result, rows, residuals.noise_floor, model.f_top, found).max() > EXCESS:
             out += screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found,
                                    kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
-    done = {(kind.name, json.dumps(loc, sort_keys=True)) for kind, loc, _ in entries}
-    # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the storey
-    # forces found (unmodelled, they distort the identified C).
-    pattern = damping_pattern(_elastic(stages, entries, _refitted(stages, entries)[0]), model.storeys)
+    # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the forces
+    # found (unmodelled, they distort the identified C).
+    refit = _refitted(stages, entries)
+    pattern = damping_pattern(_elastic(stages, entries, refit.result if refit else model.result), model.storeys)
     if pattern is not None:
         out.append(pattern.candidate)
-    out = [c for c in out if (c.mechanism, json.dumps(c.location, sort_keys=True)) not in done
-           and kind_of(c.mechanism).physical(c.parameters) and kind_of(c.mechanism).refit is not Refit.CORRECT_DATA]
+    done = {(e.kind, e.place) for e in entries}
+    out = [c for c in out if (c.kind, c.place) not in done and c.kind.physical(c.parameters)
+           and c.kind.refit is not Refit.CORRECT_DATA]
     return sorted(out, key=lambda c: -c.explained)
 
 
-def _shortlist(candidates: list[Candidate]) -> list[Candidate]:
+def shortlist(candidates: list[Candidate]) -> list[Candidate]:
     """The best candidate of each kind that explains at least ``SHORTLIST_FLOOR`` of what is left (and
-    the damping pattern), up to ``STEP_SHORTLIST``, and beside a damper of the damping pattern the
-    best dissipative storey force at its storey: the replay decides among them.
+    the damping pattern), up to ``STEP_SHORTLIST``, and beside a dashpot of the damping pattern the
+    best dissipative force at its link: the replay decides among them.
 
     Not ``EXPLAINED``: with a mechanism in the model, what is left is partly that mechanism's own
     misfit (friction's signature, a smoothed sign of noisy drift velocities, leaves part of a
@@ -230,28 +241,31 @@ def _shortlist(candidates: list[Candidate]) -> list[Candidate]:
     """
     out, kinds = [], set()
     for c in candidates:
-        if c.mechanism in kinds or (c.domain is not Domain.PARAMETERS and c.explained < SHORTLIST_FLOOR):
+        if c.kind in kinds or (c.domain is not Domain.PARAMETERS and c.explained < SHORTLIST_FLOOR):
             continue
-        kinds.add(c.mechanism)
+        kinds.add(c.kind)
         out.append(c)
     out = out[:STEP_SHORTLIST]
     for damper in [c for c in out if c.domain is Domain.PARAMETERS]:
-        rivals = [c for c in candidates if c.location == damper.location and c.mechanism not in kinds
-                  and kind_of(c.mechanism).dissipative and kind_of(c.mechanism).refit is Refit.RESIMULATE]
+        rivals = [c for c in candidates if c.place.target.link and c.place.nodes == damper.place.nodes
+                  and c.kind not in kinds and c.kind.dissipative and c.kind.refit is Refit.RESIMULATE]
         if rivals:
-            kinds.add(rivals[0].mechanism)
+            kinds.add(rivals[0].kind)
             out.append(rivals[0])
     return out
 
 
-def _refitted(stages: Stages, entries):
-    """The linear model refitted by errors-in-variables with the storey forces (``RESIMULATE`` kinds)
-    of ``entries`` as inputs: (result, [their parameters], [their std]); the identified model and
-    empty lists when there are none (or noise-free data, or runs the refit cannot use)."""
-    model = stages.model
-    forces = [e for e in entries if e[0].refit is Refit.RESIMULATE]
-    refit = stages.refitter.refit_forces(forces) if forces and not model.ideal else None
-    return refit if refit is not None else (model.result, [], [])
+def _forces(stages: Stages, entries) -> list[Entry]:
+    """The forces (``RESIMULATE`` kinds) of ``entries`` the errors-in-variables refit takes as inputs
+    (none for noise-free data, identified by the plain equation error)."""
+    return [] if stages.model.ideal else [e for e in entries if e.kind.refit is Refit.RESIMULATE]
+
+
+def _refitted(stages: Stages, entries) -> ForceRefit | None:
+    """The linear model refitted by errors-in-variables with the forces of ``entries`` as inputs; None
+    when there are none (or noise-free data, or runs the refit cannot use)."""
+    forces = _forces(stages, entries)
+    return stages.refitter.refit_forces(forces) if forces else None
 
 
 def _elastic(stages: Stages, entries, result):
@@ -259,14 +273,19 @@ def _elastic(stages: Stages, entries, result):
     proportional to: without what the mechanisms of ``entries`` take from it in the model (P-Delta's
     loss to the floors' own weight, which an identified K holds)."""
     structure = identified_structure(result, stages.model.nominal)
-    for kind, loc, params in entries:
-        structure = kind.replay_structure(structure, loc, params, True)
+    for kind, place, params in entries:
+        structure = kind.replay_structure(structure, place, params, True)
     return replace(result, K=structure.stiffness_matrix())
 
 
+def _quadrature(sim_std: dict, std: dict) -> dict:
+    """A search's standard errors (conditional on the linear model) with a refit's (marginal), in quadrature."""
+    return {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
+
+
 def _joint(stages: Stages, entries, stds, *, newcomer: bool):
-    """The joint model of ``entries`` ((kind, location, parameters) each): the linear part refitted
-    with every storey force, and sizes searched by re-simulation with the others in the model.
+    """The joint model of ``entries`` (:class:`Entry` each): the linear part refitted with every
+    force, and sizes searched by re-simulation with the others in the model.
 
     With ``newcomer``, the last entry is new: it starts from the joint regression and only its size
     is searched (over the full range); without, every size but the last is searched again around its
@@ -276,40 +295,39 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
     refitter, model = stages.refitter, stages.model
     entries, stds = list(entries), [dict(s) for s in stds]
     last = len(entries) - 1
-    forces = [i for i, (kind, _, _) in enumerate(entries) if kind.refit is Refit.RESIMULATE]
+    forces = [i for i, e in enumerate(entries) if e.kind.refit is Refit.RESIMULATE]
     result, structure = model.result, refitter.linear_structure
     refit = _refitted(stages, entries)
-    if refit[1]:
-        result, params, std = refit
+    if refit is not None:
+        result = refit.result
         structure = identified_structure(result, model.nominal)
-        for i, p, s in zip(forces, params, std):
+        for i, p, s in zip(forces, refit.parameters, refit.std):
             if (i == last) == newcomer:   # to be searched: the refit's std, in quadrature below
                 stds[i] = dict(s)
             if newcomer and i == last:    # the newcomer starts from the joint regression
-                entries[i] = (entries[i][0], entries[i][1], p)
-    for i, (kind, loc, params) in enumerate(entries):
+                entries[i] = entries[i]._replace(parameters=p)
+    for i, (kind, place, params) in enumerate(entries):
         if kind.refit is Refit.DAMPING_PATTERN:
-            _, (a, b, c) = storey_damper(_elastic(stages, entries, result), loc["storey"] - 1)
+            _, (a, b, c) = pattern_fit(_elastic(stages, entries, result), kind.damping_pattern(place, model.storeys))
             structure = replace(structure, rayleigh_mu=max(a, 0.0), rayleigh_kappa=max(b, 0.0))
-            entries[i] = (kind, loc, dict(params, **{kind.fitted.name: float(c)}))
-    if not all(kind.physical(params) for kind, _, params in entries):
+            entries[i] = Entry(kind, place, dict(params, **{kind.fitted.name: float(c)}))
+    if not all(e.kind.physical(e.parameters) for e in entries):
         return None
     if model.nominal is not None:
         structure = min((structure, model.nominal), key=lambda b: refitter.misfit(b, entries))
     for i in forces:
         if (i == last) != newcomer:
             continue
-        kind, loc, params = entries[i]
-        params, sim_std = refitter.resimulate(structure, kind, loc, params, entries[:i] + entries[i + 1:],
+        params, sim_std = refitter.resimulate(structure, entries[i], entries[:i] + entries[i + 1:],
                                               SEARCH_RANGE if newcomer else JOINT_SPAN)
-        entries[i] = (kind, loc, params)
-        stds[i] = {k: float(math.hypot(v, stds[i].get(k, 0.0))) for k, v in sim_std.items()}
+        entries[i] = entries[i]._replace(parameters=params)
+        stds[i] = _quadrature(sim_std, stds[i])
     return structure, entries, stds
 
 
 def _descend(stages: Stages, entries, stds):
-    """The lab's nominal model with every storey force of ``entries`` sized by re-simulation in turn
-    (over the full range, the others in the model as they stand), starting from the joint regression.
+    """The lab's nominal model with every force of ``entries`` sized by re-simulation in turn (over the
+    full range, the others in the model as they stand), starting from the joint regression.
 
     For a start that stage 6 left partial: its size was searched on a model that lacked the newcomer
     and took in what the newcomer does (P-Delta grown to absorb a friction's effect), and the linear
@@ -319,157 +337,176 @@ def _descend(stages: Stages, entries, stds):
     """
     refitter, nominal = stages.refitter, stages.model.nominal
     refit = _refitted(stages, entries)
-    if nominal is None or not refit[1]:
+    if nominal is None or refit is None:
         return None
     entries, stds = list(entries), [dict(s) for s in stds]
-    forces = [i for i, (kind, _, _) in enumerate(entries) if kind.refit is Refit.RESIMULATE]
-    for i, p in zip(forces, refit[1]):
-        entries[i] = (entries[i][0], entries[i][1], p)
-    if not all(kind.physical(params) for kind, _, params in entries):
+    forces = [i for i, e in enumerate(entries) if e.kind.refit is Refit.RESIMULATE]
+    for i, p in zip(forces, refit.parameters):
+        entries[i] = entries[i]._replace(parameters=p)
+    if not all(e.kind.physical(e.parameters) for e in entries):
         return None
     for i in forces:
-        kind, loc, params = entries[i]
-        params, sim_std = refitter.resimulate(nominal, kind, loc, params, entries[:i] + entries[i + 1:],
-                                              grid=DESCENT_GRID)
-        entries[i] = (kind, loc, params)
-        stds[i] = {k: float(math.hypot(v, stds[i].get(k, 0.0))) for k, v in sim_std.items()}
+        params, sim_std = refitter.resimulate(nominal, entries[i], entries[:i] + entries[i + 1:], grid=DESCENT_GRID)
+        entries[i] = entries[i]._replace(parameters=params)
+        stds[i] = _quadrature(sim_std, stds[i])
     return nominal, entries, stds
 
 
-class _Trial(enum.Enum):
+class _How(enum.Enum):
     """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`)."""
 
     JOINT = "joint"
     DESCENT = "descent"
 
 
-def _trial(stages: Stages, task):
-    """(training NRMSE, structure, entries, stds) of one trial ((candidate, how, entries, stds)), or
-    None (an unphysical size)."""
-    _, how, entries, stds = task
-    joint = _joint(stages, entries, stds, newcomer=True) if how is _Trial.JOINT else _descend(stages, entries, stds)
-    if joint is None:
-        return None
-    structure, entries, stds = joint
-    return stages.refitter.score_joint(structure, entries, _records(entries)), structure, entries, stds
+@dataclass(frozen=True)
+class _Task:
+    """One trial of a step: a newcomer ``candidate`` beside the mechanisms found, and how it is sized."""
+
+    candidate: Candidate
+    how: _How
+    entries: tuple[Entry, ...]
+    stds: tuple[dict, ...]
 
 
-def _physics(stages: Stages, start) -> Compound:
+@dataclass(frozen=True)
+class _Trial:
+    """What a trial returns: the training NRMSE of its joint model (None: a size came out unphysical),
+    the model, and the errors-in-variables refit of its forces (recorded by the refitter)."""
+
+    task: _Task
+    score: float | None
+    structure: Structure | None
+    entries: tuple[Entry, ...]
+    stds: tuple[dict, ...]
+    forces: tuple[Entry, ...]
+    refit: ForceRefit | None
+
+
+def _trial(stages: Stages, task: _Task) -> _Trial:
+    """One trial (runs in a worker process: its results come back as this value)."""
+    sized = (_joint(stages, task.entries, task.stds, newcomer=True) if task.how is _How.JOINT
+             else _descend(stages, task.entries, task.stds))
+    forces = tuple(_forces(stages, task.entries))
+    refit = stages.refitter.refit_forces(forces) if forces else None
+    if sized is None:
+        return _Trial(task, None, None, task.entries, task.stds, forces, refit)
+    structure, entries, stds = sized
+    score = stages.refitter.score_joint(structure, entries, records(entries))
+    return _Trial(task, score, structure, tuple(entries), tuple(stds), forces, refit)
+
+
+def _physics(stages: Stages, start: _Start) -> Compound:
     """Physical mechanisms: add the one that earns its place most, while one does."""
-    refitter = stages.refitter
-    (entry, std, structure) = start
-    entries, stds = [entry], [dict(std)]
+    refitter, found = stages.refitter, stages.found
+    entries, stds, structure = [start.entry], [dict(start.std)], start.structure
     noise, linear = refitter.noise_nrmse(), refitter.linear_score()
-    score = refitter.score_joint(structure, entries, _records(entries))
-    partial = stages.found.mechanism == "unexplained"   # the start was sized on a model that lacked the rest
+    score = refitter.score_joint(structure, entries, records(entries))
+    partial = found.verdict is Verdict.UNEXPLAINED   # the start was sized on a model that lacked the rest
     steps = []
     while len(entries) < MAX_MECHANISMS and score > EXCESS * noise:
         tasks = []
-        for c in _shortlist(_candidates(stages, entries)):
-            trial = (entries + [(kind_of(c.mechanism), c.location, dict(c.parameters))], stds + [dict(c.std)])
-            tasks.append((c, _Trial.JOINT, *trial))
-            if partial and len(entries) == 1 and kind_of(c.mechanism).refit is Refit.RESIMULATE:
-                tasks.append((c, _Trial.DESCENT, *trial))
-        outs = run_forked(lambda task: _trial(stages, task), tasks, refitter)
-        trials = [(out[0], c, *out[1:]) for (c, *_), out in zip(tasks, outs) if out]
+        for c in shortlist(_candidates(stages, entries)):
+            trial = (tuple(entries) + (Entry(c.kind, c.place, dict(c.parameters)),), tuple(stds) + (dict(c.std),))
+            tasks.append(_Task(c, _How.JOINT, *trial))
+            if partial and len(entries) == 1 and c.kind.refit is Refit.RESIMULATE:
+                tasks.append(_Task(c, _How.DESCENT, *trial))
+        trials = run_forked(lambda task: _trial(stages, task), tasks)
+        for t in trials:
+            if t.forces:
+                refitter.remember_refit(t.forces, t.refit)
+        trials = [t for t in trials if t.score is not None]
         if not trials:
             break
-        after, c, s, e, sd = min(trials, key=lambda t: t[0])
-        share = explained_share(score, after, noise)
-        steps.append({"mechanism": c.mechanism, "location": c.location, "screening_explained": c.explained,
-                      "training_nrmse_before": score, "training_nrmse_with": after, "training_nrmse_noise": noise,
-                      "explained": share, "earns_above": EARNS, "earned": share >= EARNS})
-        if share < EARNS:
+        best = min(trials, key=lambda t: t.score)
+        c = best.task.candidate
+        steps.append(Step(c.mechanism, c.location, c.explained, score, best.score, noise,
+                          explained_share(score, best.score, noise)))
+        if not steps[-1].earned:
             break
-        score, structure, entries, stds = after, s, e, sd
-    found = stages.found
+        score, structure, entries, stds = best.score, best.structure, list(best.entries), list(best.stds)
+    steps = tuple(steps)
     if len(entries) == 1:   # stage 6's answer stands
-        single = _single(replace(stages, found=replace(found, selection=dict(found.selection, compound=steps))))
-        return replace(single, steps=steps)
-    if any(kind.refit is Refit.RESIMULATE for kind, _, _ in entries[:-1]):
+        return replace(_single(replace(found, selection=replace(found.selection, steps=steps))), steps=steps,
+                       score=score)
+    if any(e.kind.refit is Refit.RESIMULATE for e in entries[:-1]):
         # the earlier sizes were searched before the last mechanism came in: refine them with it
         joint = _joint(stages, entries, stds, newcomer=False)
         if joint is not None:
             structure, entries, stds = joint
-            score = refitter.score_joint(structure, entries, _records(entries))
+            score = refitter.score_joint(structure, entries, records(entries))
     overall = explained_share(linear, score, noise)
-    selection = dict(found.selection, compound=steps, training_nrmse_joint=score, joint_explained=overall)
-    if found.mechanism == "unexplained" and overall < ACCEPTED:   # together still too little: unexplained
-        return Compound(replace(found, selection=selection), (), (), steps)
-    named = tuple(_named(stages, kind, loc, params, sd) for (kind, loc, params), sd in zip(entries, stds))
-    first = named[0]
-    finding = Finding(first.mechanism, first.location, first.parameters, first.std, structure, _records(entries),
-                      selection)
-    return Compound(finding, named, tuple(entries), steps)
+    selection = replace(found.selection, steps=steps, joint=score, joint_explained=overall)
+    if found.verdict is Verdict.UNEXPLAINED and overall < ACCEPTED:   # together still too little: unexplained
+        return Compound(replace(found, selection=selection), (), (), steps, score)
+    named = tuple(_named(stages, e, sd) for e, sd in zip(entries, stds))
+    first = entries[0]
+    finding = Finding(Verdict.MECHANISM, first.kind, first.place, named[0].location, named[0].parameters,
+                      named[0].std, structure, records(entries), selection)
+    return Compound(finding, named, tuple(entries), steps, score)
 
 
-def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compound:
+def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compound | Correction:
     """A sensor fault beside the physics found: the one screening explains best (at least
     ``EXPLAINED`` of the equation residual's excess), of those that contended with the physics
-    (:func:`_contender`), is undone on every run and the corrected
-    experiment diagnosed again; the fault joins when the corrected diagnosis with it removes at
-    least ``EARNS`` of the training replays' misfit above noise that the physics alone leaves.
+    (:func:`_contender`), is undone on every run and the corrected experiment diagnosed again; the
+    fault joins when the corrected diagnosis with it removes at least ``EARNS`` of the training
+    replays' misfit above noise that the physics alone leaves.
 
     (A fault that screens well may lose stage 6's replay to physics that takes in part of its effect,
     a storey damper for a biased displacement transducer; what the physics leaves then holds the rest.)
     """
     refitter = stages.refitter
     noise = refitter.noise_nrmse()
-    score = refitter.score_joint(physics.finding.structure, physics.entries, physics.finding.records)
+    score = physics.score
     if score <= EXCESS * noise:
         return physics
     faults = [c for c in sorted(stages.screening.candidates, key=lambda c: -c.explained)
-              if kind_of(c.mechanism) is not None and kind_of(c.mechanism).refit is Refit.CORRECT_DATA
-              and c.explained >= EXPLAINED and _contender(stages, physics, c)]
+              if c.kind.refit is Refit.CORRECT_DATA and c.explained >= EXPLAINED and _contender(stages, physics, c)]
     if not faults:
         return physics
     c = faults[0]
-    kind, loc, params = kind_of(c.mechanism), c.location, dict(c.parameters)
-    experiment = stages.model.experiment
-    fixed = replace(experiment, runs=tuple(kind.correct_run(r, loc, params) for r in experiment.runs))
-    again = _extend(run_stages(fixed, replay=True, result=refitter.identify_corrected(kind, loc, params)), True,
-                    corrections - 1)
-    if not again.entries:
-        return physics
-    entries = ((kind, loc, params),) + again.entries
-    after = refitter.score_joint(again.finding.structure, entries, again.finding.records)
-    share = explained_share(score, after, noise)
-    step = {"mechanism": kind.name, "location": loc, "screening_explained": c.explained,
-            "training_nrmse_before": score, "training_nrmse_with": after, "training_nrmse_noise": noise,
-            "explained": share, "earns_above": EARNS, "earned": share >= EARNS}
-    steps = physics.steps + [step]
-    if share < EARNS:
-        selection = dict(physics.finding.selection, compound=steps)
-        return replace(physics, finding=replace(physics.finding, selection=selection), steps=steps)
-    selection = dict(physics.finding.selection, compound=steps, after_correction=again.finding.selection,
-                     training_nrmse_joint=after)
-    finding = replace(again.finding, selection=selection)
-    named = again.mechanisms + (Named(kind.name, loc, params, dict(c.std)),)
-    return Compound(finding, named, entries, steps)
+    fault = Entry(c.kind, c.place, dict(c.parameters))
+
+    def then(again: Compound) -> Compound:
+        if not again.entries:
+            return physics
+        entries = (fault,) + again.entries
+        after = refitter.score_joint(again.finding.structure, entries, again.finding.records)
+        step = Step(c.mechanism, c.location, c.explained, score, after, noise, explained_share(score, after, noise))
+        steps = physics.steps + (step,)
+        if not step.earned:
+            finding = replace(physics.finding, selection=replace(physics.finding.selection, steps=steps))
+            return replace(physics, finding=finding, steps=steps)
+        selection = replace(physics.finding.selection, steps=steps, after_correction=again.finding.selection,
+                            joint=after)
+        named = again.mechanisms + (Named(c.mechanism, c.location, fault.parameters, dict(c.std)),)
+        return Compound(replace(again.finding, selection=selection), named, entries, steps, after)
+    return Correction(_corrected(stages.model.experiment, fault), refitter.identify_corrected(*fault),
+                      corrections - 1, then)
 
 
 def _contender(stages: Stages, physics: Compound, fault: Candidate) -> bool:
     """Whether a sensor fault contended with the physics named: stage 6 re-simulated it (it was the
     screening's choice), or it screens at least as well as any of the physics named.  (Diagnosing the
     corrected experiment costs a second pass of stages 1-6: not for every fault that screens well
-    beside a storey force whose replay is imperfect.)"""
-    tried = stages.found.selection.get("training_nrmse", [])
-    if any((t["mechanism"], t["location"]) == (fault.mechanism, fault.location) for t in tried):
+    beside a force whose replay is imperfect.)"""
+    if any(t.candidate.same_as(fault) for t in stages.found.selection.tried):
         return True
-    named = {(n.mechanism, json.dumps(n.location, sort_keys=True)) for n in physics.mechanisms}
-    rivals = [c.explained for c in stages.screening.candidates
-              if (c.mechanism, json.dumps(c.location, sort_keys=True)) in named]
+    named = {(e.kind, e.place) for e in physics.entries}
+    rivals = [c.explained for c in stages.screening.candidates if (c.kind, c.place) in named]
     return fault.explained >= max(rivals, default=math.inf)
 
 
-def _named(stages: Stages, kind, loc: dict, params: dict, std: dict) -> Named:
+def _named(stages: Stages, entry: Entry, std: dict) -> Named:
     """A mechanism in the lab's terms; a damper from the damping pattern takes the standard error of
     the same damper fitted to the equation residual (as stage 6 does)."""
+    kind, place, params = entry
     key = kind.fitted.name
     if kind.refit is Refit.DAMPING_PATTERN and not std.get(key):
         same = [c for c in stages.screening.candidates
-                if c.mechanism == kind.name and c.location == loc and c.std.get(key)]
+                if c.kind is kind and c.place == place and c.std.get(key)]
         if same:
             std = {key: float(max(same, key=lambda c: c.explained).std[key])}
-    params, std = kind.in_lab_terms(params, std, loc, stages.model.nominal)
-    return Named(kind.name, loc, params, std)
+    params, std = kind.in_lab_terms(params, std, place, stages.model.nominal)
+    return Named(kind.name, place.location, params, std)

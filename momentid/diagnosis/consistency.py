@@ -53,12 +53,6 @@ class SensorFit:
     gain_std: float = float("nan")    # of gain_only
     delay_std: float = float("nan")   # of delay_only (s)
 
-    def verdict(self) -> tuple[str, dict, dict, float]:
-        """The single-parameter fault that removes more: (mechanism, parameters, std, explained)."""
-        if self.explained["delay"] >= self.explained["gain"]:
-            return "sensor_delay", {"delay": self.delay_only}, {"delay": self.delay_std}, self.explained["delay"]
-        return "sensor_gain", {"gain": self.gain_only}, {"gain": self.gain_std}, self.explained["gain"]
-
 
 @dataclass(frozen=True)
 class KinematicCheck:
@@ -71,11 +65,6 @@ class KinematicCheck:
     @property
     def consistent(self) -> bool:
         return max(self.excess.values()) <= EXCESS
-
-    def best(self) -> SensorFit | None:
-        return self.fits[0] if self.fits else None
-
-
 
 
 #: Band (fractions of the sample rate) of the diagnosis's noise estimate: far above the modes of

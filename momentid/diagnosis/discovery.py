@@ -26,17 +26,19 @@ from threadpoolctl import threadpool_limits
 
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
-from momentid.diagnosis.function_library import (ALWAYS, Place, Selected, columns, hysteretic_columns,
-                                                 place_direction, refine, select)
-from momentid.diagnosis.refit import Refitter, measured_groups
+from momentid.diagnosis.function_library import ALWAYS, Selected, columns, hysteretic_columns, refine, select
+from momentid.diagnosis.refit import Resimulator
+from momentid.diagnosis.replay import Entry, measured_groups
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
-from momentid.diagnosis.selection import Finding, Verdict, explained_share
+from momentid.diagnosis.selection import Finding, explained_share
+from momentid.diagnosis.verdict import Verdict
 from momentid.errors import ModelError, SimulationError
 from momentid.mechanisms.bouc_wen import bouc_wen_state
 from momentid.mechanisms.data_driven import HYSTERETIC_BETA, TERMS
+from momentid.mechanisms.place import Place, Target
 
-__all__ = ["Discovery", "discover", "describe", "plot_discovered", "ACCEPTED_SHARE", "SCALE_RANGE",
-           "SCALE_REPLAYS", "PLOT_POINTS"]
+__all__ = ["Discovery", "Found", "discover", "search", "found_terms", "describe", "plot_discovered", "ACCEPTED_SHARE",
+           "SCALE_RANGE", "SCALE_REPLAYS", "PLOT_POINTS"]
 
 #: A discovered force is reported when its model removes this share of the held-out run's replay
 #: misfit above the noise (0.5: the misfit's excess power at least halves).
@@ -58,8 +60,9 @@ class Discovery:
 
     Attributes
     ----------
-    location : dict
-        ``{"storey": i}`` (against its drift) or ``{"floor": j}`` (against the table), 1-based.
+    place : Place
+        A storey (against its drift) or a floor against the table; its ``location`` is
+        ``{"storey": i}`` or ``{"floor": j}``, 1-based.
     description : str
         The force in words.
     terms : tuple of dict
@@ -74,7 +77,7 @@ class Discovery:
         ``x`` (m), ``measured`` and ``law`` (N): the residual's force at the place and the discovered law.
     """
 
-    location: dict
+    place: Place
     description: str
     terms: tuple[dict, ...]
     nrmse_before: float
@@ -83,14 +86,19 @@ class Discovery:
     structure: Structure = field(repr=False)
     plot: dict = field(default_factory=dict, repr=False)
 
+    @property
+    def location(self) -> dict:
+        return self.place.location
+
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
                 "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after}
 
 
 @dataclass(frozen=True)
-class _Found:
-    """The best force on one residual: place, selected terms, the signals behind the plot."""
+class Found:
+    """The best force on one residual (:func:`search`): its place, the selected terms, and the place's
+    stretch ``x`` (n,) (m) and the residual's force there ``y`` (n,) (N) behind the plot."""
 
     place: Place
     selected: Selected
@@ -99,12 +107,28 @@ class _Found:
 
 
 def _places(d: int) -> list[Place]:
-    locations = [{"storey": i + 1} for i in range(d)] + [{"floor": j + 1} for j in range(1, d)]
-    return [Place(loc, place_direction(loc, d)) for loc in locations]
+    """Every storey, and every floor above the first against the table (floor 1 against the table is
+    storey 1)."""
+    return [Place(Target.STOREY, i) for i in range(1, d + 1)] + [Place(Target.FLOOR_TABLE, j) for j in range(2, d + 1)]
 
 
-def _search(rows, noise_floor: np.ndarray, d: int) -> _Found | None:
-    """The force at the place where the library explains the held-out residual best."""
+def search(rows, noise_floor: np.ndarray, d: int) -> Found | None:
+    """The force at the place where the library explains the held-out residual best.
+
+    Parameters
+    ----------
+    rows : sequence of ResidualRow
+        The training runs' equation residual (:class:`~momentid.diagnosis.residuals.ResidualRow`).
+    noise_floor : ndarray, shape (d,)
+        Per floor, the residual RMS sensor noise alone leaves (N).
+    d : int
+        Storeys.
+
+    Returns
+    -------
+    Found or None
+        None for reconstructed signals (no sample clock to integrate a hysteretic state on).
+    """
     if any(r.signals["q"].shape[0] != r.run.n_samples for r in rows):
         return None   # reconstructed (weak-form) signals have no sample clock to integrate a state on
     fs = rows[0].run.sample_rate
@@ -117,37 +141,38 @@ def _search(rows, noise_floor: np.ndarray, d: int) -> _Found | None:
     noise_test = float(np.sum(noise_floor ** 2)) * int(test.sum())
     total_test = float(np.sum(R[test] ** 2))
     places = _places(d)
-    xv = [p.signals(q, v) for p in places]
+    xv = [(p.stretch(q), p.stretch(v)) for p in places]
     hyst = hysteretic_columns([s[1] for s in xv], [float(np.max(np.abs(s[0]))) for s in xv], segments, 1 / fs)
     best = None
     for place, (x, vel), h in zip(places, xv, hyst):
-        y, w2 = place.force(R), float(place.w @ place.w)
+        w = place.direction(d)
+        y, w2 = place.force(R), float(w @ w)
         sel = select(columns(x, vel, time, segments, h), y, w2, total_test - w2 * float(np.sum(y[test] ** 2)),
                      noise_test, train, test)
         if best is None or sel.test_rss < best[0].test_rss:
             best = (sel, place, x, vel, y)
     sel, place, x, vel, y = best
-    return _Found(place, refine(sel, y, x, vel, time), x, y)
+    return Found(place, refine(sel, y, x, vel, time), x, y)
 
 
-def _record(found: _Found, scale: float = 1.0) -> Mechanism:
-    """The force as a ``data_driven_*`` record; ``scale`` multiplies the nonlinear terms' coefficients."""
-    (kind_name, index), = found.place.location.items()
-    kind = mechanisms.get(f"data_driven_{kind_name}")
+def _record(found: Found, scale: float = 1.0) -> Mechanism:
+    """The force as a record of the open search's kind at its place; ``scale`` multiplies the nonlinear
+    terms' coefficients."""
+    kind = mechanisms.open_search_kind(found.place.target)
     params = {p.name: (0.0 if p.name.startswith("c_") else p.example) for p in kind.params}
     for col, c in zip(found.selected.columns, found.selected.coefficients):
         params[f"c_{col.term}"] = float(c) * (1.0 if col.term in ALWAYS else scale)
         params.update(col.shape)
-    return Mechanism(kind.name, index, tuple(params.items()))
+    return Mechanism(kind.name, found.place.index, tuple(params.items()))
 
 
-def _misfit(refitter: Refitter, structure: Structure, record: Mechanism) -> float:
+def _misfit(refitter: Resimulator, structure: Structure, record: Mechanism) -> float:
     """The refitter's replay misfit of its search run through ``structure`` with the force ``record``."""
     kind = mechanisms.get(record.type)
-    return refitter.misfit(structure, [(kind, {kind.target.value: record.location}, dict(record.parameters))])
+    return refitter.misfit(structure, [Entry(kind, kind.place(record.location), dict(record.parameters))])
 
 
-def _sized(refitter: Refitter, structure: Structure, found: _Found) -> tuple[float, float]:
+def _sized(refitter: Resimulator, structure: Structure, found: Found) -> tuple[float, float]:
     """Common scale of the nonlinear terms by re-simulation of the search run, and its misfit."""
     if all(c.term in ALWAYS for c in found.selected.columns):
         return 1.0, _misfit(refitter, structure, _record(found))
@@ -165,7 +190,7 @@ def _sized(refitter: Refitter, structure: Structure, found: _Found) -> tuple[flo
     return math.exp(u), cost(u)
 
 
-def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitter, found: Finding,
+def discover(model: LinearModel, residuals: EquationResiduals, refitter: Resimulator, found: Finding,
              before: float) -> Discovery | None:
     """The open search (see the module docstring); None when the verdict is not ``unexplained``, the
     held-out replay was skipped (``before`` not finite), or no force removes enough of the misfit.
@@ -178,7 +203,7 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     before : float
         The held-out run's replay NRMSE through the linear model.
     """
-    if found.mechanism != Verdict.UNEXPLAINED.value or not math.isfinite(before):
+    if found.verdict is not Verdict.UNEXPLAINED or not math.isfinite(before):
         return None
     bases = [(residuals.rows, refitter.linear_structure)]
     if residuals.nominal_rows is not None and model.nominal is not None:
@@ -186,7 +211,7 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     trials = []
     for rows, structure in bases:
         with threadpool_limits(limits=1, user_api="blas"):   # tall, thin products: threads only add waiting
-            got = _search(rows, residuals.noise_floor, model.storeys)
+            got = search(rows, residuals.noise_floor, model.storeys)
         if got is not None:
             trials.append((_misfit(refitter, structure, _record(got)), structure, got))
     if not trials:
@@ -197,11 +222,11 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     after = _held_out(model, structure, record)
     if explained_share(before, after, refitter.noise_nrmse()) < ACCEPTED_SHARE:
         return None
-    terms = _terms(got, scale)
+    terms = found_terms(got, scale)
     fitted = np.column_stack([c.signal for c in got.selected.columns]) @ np.array(
         [t["coefficient"] for t in terms])
     pick = np.linspace(0, len(got.x) - 1, min(PLOT_POINTS, len(got.x))).astype(int)
-    return Discovery(location=got.place.location, description=describe(got.place.location, terms, structure,
+    return Discovery(place=got.place, description=describe(got.place, terms, structure,
                                                                        float(np.max(np.abs(got.x)))),
                      terms=tuple(terms), nrmse_before=float(before), nrmse_after=float(after), record=record,
                      structure=structure, plot={"x": got.x[pick], "measured": got.y[pick], "law": fitted[pick]})
@@ -218,7 +243,9 @@ def _held_out(model: LinearModel, structure: Structure, record: Mechanism) -> fl
     return nrmse(sim, measured_groups(run, model.storeys), run.sample_rate, model.band)
 
 
-def _terms(found: _Found, scale: float) -> list[dict]:
+def found_terms(found: Found, scale: float) -> list[dict]:
+    """The selected terms of ``found`` as the report lists them (``term``, ``meaning``, ``coefficient``
+    with its ``unit``, shape parameters), the nonlinear terms' coefficients multiplied by ``scale``."""
     by_name = {t.name: t for t in TERMS}
     out = []
     for col, c in zip(found.selected.columns, found.selected.coefficients):
@@ -239,13 +266,14 @@ def _loop_area(coefficient: float, yield_drift: float, exponent: float, amplitud
     return float(coefficient * np.sum(0.5 * (z[last][1:] + z[last][:-1]) * np.diff(x[last])))
 
 
-def describe(location: dict, terms: list[dict], structure: Structure, peak: float) -> str:
-    """The discovered force in words (gaps in mm, stiffness changes in % of the place's stiffness)."""
-    (kind, index), = location.items()
-    name = f"the drift of storey {index}" if kind == "storey" else f"q{index} (floor {index} against the table)"
-    short = "|x|" if kind == "storey" else f"|q{index}|"
+def describe(place: Place, terms: list[dict], structure: Structure, peak: float) -> str:
+    """The discovered force at ``place`` (a storey or a floor against the table) in words (gaps in mm,
+    stiffness changes in % of the place's stiffness)."""
+    storey, index = place.target is Target.STOREY, place.index
+    name = f"the drift of storey {index}" if storey else f"q{index} (floor {index} against the table)"
+    short = "|x|" if storey else f"|q{index}|"
     coef = {t["term"]: t for t in terms}
-    k_lin = (structure.storey_stiffness[index - 1] if kind == "storey" else 0.0) + coef["x"]["coefficient"]
+    k_lin = (structure.storey_stiffness[index - 1] if storey else 0.0) + coef["x"]["coefficient"]
     words = []
     for t in terms:
         c, term = t["coefficient"], t["term"]
@@ -279,7 +307,7 @@ def describe(location: dict, terms: list[dict], structure: Structure, peak: floa
     if not words:
         words.append(f"a linear spring {coef['x']['coefficient']:.3g} N/m and dashpot {coef['v']['coefficient']:.3g} "
                      f"N s/m missing from the model")
-    return f"Discovered at {json.dumps(location)}, against {name}: " + "; ".join(words) + "."
+    return f"Discovered at {json.dumps(place.location)}, against {name}: " + "; ".join(words) + "."
 
 
 def plot_discovered(discovery: Discovery, path) -> None:
@@ -287,15 +315,15 @@ def plot_discovered(discovery: Discovery, path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    p = discovery.plot
-    (kind, index), = discovery.location.items()
+    p, place = discovery.plot, discovery.place
     fig, ax = plt.subplots(figsize=(7, 5))
     ax.plot(1e3 * p["x"], p["measured"], ".", color="0.5", ms=3, label="residual force of the linear model "
             "(training runs)")
     ax.plot(1e3 * p["x"], p["law"], ".", color="C3", ms=1, label="discovered force")
-    ax.set_xlabel(f"{'drift of storey' if kind == 'storey' else 'displacement vs. table of floor'} {index} (mm)")
+    what = "drift of storey" if place.target is Target.STOREY else "displacement vs. table of floor"
+    ax.set_xlabel(f"{what} {place.index} (mm)")
     ax.set_ylabel("force resisting it (N)")
-    ax.set_title(f"{kind} {index}: held-out NRMSE {100 * discovery.nrmse_before:.2f} % -> "
+    ax.set_title(f"{place.words}: held-out NRMSE {100 * discovery.nrmse_before:.2f} % -> "
                  f"{100 * discovery.nrmse_after:.2f} %", fontsize=10)
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -1,11 +1,12 @@
 """The open search's function library: candidate force terms at one place, and their sparse selection.
 
-A place is a storey (the force acts against its drift ``x`` and drift velocity ``v``) or a floor
-against the table (against its displacement and velocity relative to the table).  A force ``f``
-(n,) there puts the floor forces ``f w`` into the equation residual, with ``w`` (d,) the place's
-direction (a storey: ``-1`` on its floor, ``+1`` on the floor below; a floor: ``-1`` on it), so
-the residual's least-squares force at the place is ``y = R w / |w|^2`` and every fit is a scalar
-regression of ``y`` (see :class:`Place`).
+A place is a link of the rig (:class:`~momentid.mechanisms.place.Place`): a storey (the force acts
+against its drift ``x`` and drift velocity ``v``) or a floor against the table (against its
+displacement and velocity relative to the table).  A force ``f`` (n,) there puts the floor forces
+``f w`` into the equation residual, with ``w`` (d,) the place's direction (a storey: ``-1`` on its
+floor, ``+1`` on the floor below; a floor: ``-1`` on it), so the residual's least-squares force at
+the place is ``y = R w / |w|^2`` (:meth:`~momentid.mechanisms.place.Place.force`) and every fit is a
+scalar regression of ``y``.
 
 The library (:func:`columns`) holds the terms of :data:`momentid.mechanisms.data_driven.TERMS` on
 grids of their shape parameters: polynomial and velocity terms, gaps (two-sided dead zone, one-sided
@@ -25,7 +26,7 @@ import scipy.optimize
 from momentid.mechanisms.bouc_wen import bouc_wen_state
 from momentid.mechanisms.data_driven import HYSTERETIC_BETA, TERMS, term_signal
 
-__all__ = ["Place", "Column", "Selected", "place_direction", "columns", "hysteretic_columns", "select", "refine",
+__all__ = ["Column", "Selected", "columns", "hysteretic_columns", "select", "refine",
            "ALWAYS", "DELTA_FRACTIONS", "YIELD_FRACTIONS", "EXPONENTS", "SWITCH_STEP", "MIN_GAIN", "MAX_TERMS"]
 
 #: Terms every discovered force carries: the linear spring and dashpot at its place, which the
@@ -47,38 +48,6 @@ SIGN_SCALE = 0.05
 MIN_GAIN = 0.05
 #: ... and at most this many terms beyond :data:`ALWAYS` (one per term kind).
 MAX_TERMS = 3
-
-
-@dataclass(frozen=True)
-class Place:
-    """Where a force may act: ``location`` (``{"storey": i}`` or ``{"floor": j}``, 1-based) and its
-    direction ``w`` (d,) in the floor forces."""
-
-    location: dict
-    w: np.ndarray
-
-    def force(self, residual: np.ndarray) -> np.ndarray:
-        """The residual's least-squares force (n,) at this place (N), from floor forces (n, d)."""
-        return residual @ self.w / float(self.w @ self.w)
-
-    def signals(self, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Displacement ``x`` (m) and velocity (m/s), each (n,), the force acts against, from floor
-        displacements and velocities (n, d) relative to the table."""
-        (kind, index), = self.location.items()
-        j = index - 1
-        if kind == "storey" and j > 0:
-            return q[:, j] - q[:, j - 1], v[:, j] - v[:, j - 1]
-        return q[:, j], v[:, j]
-
-
-def place_direction(location: dict, d: int) -> np.ndarray:
-    """The floor-force direction (d,) of a force resisting ``x`` at ``location``."""
-    (kind, index), = location.items()
-    w = np.zeros(d)
-    w[index - 1] = -1.0
-    if kind == "storey" and index > 1:
-        w[index - 2] = 1.0
-    return w
 
 
 @dataclass(frozen=True)

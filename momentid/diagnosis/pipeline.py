@@ -11,18 +11,24 @@
 4. **Localisation** (:func:`~momentid.diagnosis.locate.locate`): storey, runs, time, amplitude,
    band and shape of the mismatch.
 5. **Screening** (:func:`~momentid.diagnosis.selection.screen`): every mechanism of the registry
-   (:mod:`momentid.mechanisms`) fitted where it could be, in the equation and replay residuals;
-   :func:`~momentid.diagnosis.selection.choose` names the verdict.
+   (:mod:`momentid.mechanisms`) fitted at every place of its target, in the equation and replay
+   residuals; :func:`~momentid.diagnosis.selection.choose` names the verdict.
 6. **Refit by re-simulation and selection** (:func:`~momentid.diagnosis.selection.select`,
    :class:`~momentid.diagnosis.refit.Refitter`): the plausible candidates' augmented MuJoCo models
    replay the training runs; the best is sized, and kept only if it removes most of the misfit.
    Then (:func:`~momentid.diagnosis.compound.extend`) what it leaves is screened again: every further
-   mechanism that earns its place is named, and all are refitted jointly in one model.
+   mechanism that earns its place is named, and all are refitted jointly in one model; when a sensor
+   fault is to be undone first, stages 1-6 run again on the corrected recordings (:func:`_compound`).
 7. **Report** (:mod:`~momentid.diagnosis.report`): the held-out run replayed through the linear and
-   augmented models (NRMSE before/after), the summary and the report folder.
+   augmented models (NRMSE before/after), the :class:`~momentid.diagnosis.result.Diagnosis` and its
+   report folder.
 8. **Open search** (:func:`~momentid.diagnosis.discovery.discover`), on an ``unexplained`` verdict only:
    a sparse force from a function library, located, put into the MuJoCo model and replayed on the
    held-out run (``discovered``; the verdict stays ``unexplained``, at the discovered place).
+
+Recordings without added mass (accelerometers only) take the modal path
+(:func:`momentid.diagnosis.real.diagnose_modal`); its result is the same
+:class:`~momentid.diagnosis.result.Diagnosis`.
 """
 
 from __future__ import annotations
@@ -32,49 +38,40 @@ from dataclasses import replace
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from momentid import mechanisms
 from momentid.core.series import Experiment
-from momentid.diagnosis.compound import extend
+from momentid.diagnosis.compound import Compound, Correction, extend
 from momentid.diagnosis.discovery import discover
-from momentid.diagnosis.refit import replay_check
-from momentid.diagnosis.report import Diagnosis, summary, write_report
-from momentid.diagnosis.screening import Candidate
-from momentid.diagnosis.stages import run_stages
-from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
+from momentid.diagnosis.refit import noise_ratios
+from momentid.diagnosis.replay import replay_check
+from momentid.diagnosis.report import write_report
+from momentid.diagnosis.result import AddedMassEvidence, Diagnosis
+from momentid.diagnosis.stages import Stages, run_stages
 from momentid.errors import MomentidError
 
-__all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "verdicts", "EXCESS", "EXPLAINED", "ACCEPTED"]
-
-
-def verdicts() -> tuple[str, ...]:
-    """Every verdict :func:`diagnose` can give: ``none``, ``unexplained``, a mechanism of the library, or
-    (recordings without added mass) ``amplitude_dependence``."""
-    from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE
-    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library()) + (AMPLITUDE_DEPENDENCE,)
+__all__ = ["Diagnosis", "diagnose", "write_report", "REPORTED_CANDIDATES"]
 
 #: Candidates listed in the report, best first.
 REPORTED_CANDIDATES = 8
 
 
-def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | None = None):
+def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | None = None) -> Diagnosis:
     """Find, name and model the physics the linear shear model leaves out.
 
     Parameters
     ----------
     experiment : Experiment
         At least two runs (one with added mass); with three or more, the last
-        run is held out for the before/after replay.
+        run is held out for the before/after replay.  Runs without added mass
+        (accelerometer-only labs) take :func:`momentid.diagnosis.real.diagnose_modal`.
     replay : bool
         Replay the held-out run through the linear and augmented MuJoCo models
         (the NRMSE figures); off only for quick screening.
-
     hold_out : str, optional
         Runs without added mass only: the run to hold out (default: the last).
 
     Returns
     -------
-    Diagnosis, or ModalDiagnosis when no run adds mass (accelerometer-only labs:
-    :func:`momentid.diagnosis.real.diagnose_modal`)
+    Diagnosis
     """
     if not any(np.any(run.added_mass) for run in experiment.runs):
         from momentid.diagnosis.real import diagnose_modal
@@ -88,12 +85,23 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
         return _diagnose(experiment, replay)
 
 
-def _diagnose(experiment: Experiment, replay: bool):
+def _compound(stages: Stages, replay: bool, corrections: int | None = None) -> Compound:
+    """Stage 6b on ``stages``; when it asks for recordings with a sensor fault undone to be diagnosed
+    first (a :class:`~momentid.diagnosis.compound.Correction`), stages 1-6 run on them, with their own
+    refitter, and their diagnosis is handed back."""
+    out = extend(stages, replay=replay) if corrections is None else extend(stages, replay=replay,
+                                                                             corrections=corrections)
+    if isinstance(out, Correction):
+        again = run_stages(out.experiment, replay=True, result=out.identification)
+        return out.then(_compound(again, True, out.corrections))
+    return out
+
+
+def _diagnose(experiment: Experiment, replay: bool) -> Diagnosis:
     """:func:`diagnose` of an experiment with added mass."""
     stages = run_stages(experiment, replay=replay)
-    model, residuals, sensors, where = stages.model, stages.residuals, stages.sensors, stages.where
-    screening, refitter = stages.screening, stages.refitter
-    joint = extend(stages, replay=replay)
+    model, residuals, screening, refitter = stages.model, stages.residuals, stages.screening, stages.refitter
+    joint = _compound(stages, replay)
     found = joint.finding
     before = after = float("nan")
     curves, xml = {}, ""
@@ -101,16 +109,17 @@ def _diagnose(experiment: Experiment, replay: bool):
         before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, joint.entries,
                                                   found.records)
     discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
-    location = discovered.location if discovered is not None else found.location
-    run, held_out = model.evaluation_run.name, model.holdout is not None
-    text = summary(found.mechanism, location, found.parameters, found.std, residuals.excess,
-                   screening.replay.excess, before, after, run, held_out, sensors.to_dict(), found.selection,
-                   where.words, joint.mechanisms, discovered)
-    return Diagnosis(mechanism=found.mechanism, location=location, parameters=found.parameters,
-                     std=found.std, nrmse_before=before, nrmse_after=after, excess_equation=residuals.excess,
-                     excess_replay=screening.replay.excess,
-                     candidates=tuple(sorted(screening.candidates, key=lambda c: -c.explained)[:REPORTED_CANDIDATES]),
-                     summary=text, holdout=run if held_out else f"{run} (no run held out)",
-                     parameter_pattern=screening.pattern_info, sensor_check=sensors.to_dict(),
-                     selection=found.selection, localisation=where.to_dict(), augmented_xml=xml, curves=curves,
-                     notes=tuple(experiment.notes), mechanisms=joint.mechanisms, discovered=discovered)
+    run = model.evaluation_run
+    noise = float(np.mean(noise_ratios(model.result, run, model.storeys, model.band)))
+    evidence = AddedMassEvidence(
+        run=run.name, held=model.holdout is not None, excess_equation=residuals.excess,
+        excess_replay=screening.replay.excess,
+        candidates=tuple(sorted(screening.candidates, key=lambda c: -c.explained)[:REPORTED_CANDIDATES]),
+        parameter_pattern=screening.pattern_info, sensor_check=stages.sensors.to_dict(), selection=found.selection,
+        localisation=stages.where)
+    return Diagnosis(verdict=found.verdict, mechanism=found.mechanism,
+                     location=discovered.location if discovered is not None else found.location,
+                     parameters=found.parameters, std=found.std, mechanisms=joint.mechanisms,
+                     held_out=run.name if evidence.held else f"{run.name} (no run held out)",
+                     nrmse_before=before, nrmse_after=after, noise_nrmse=noise, evidence=evidence,
+                     discovered=discovered, augmented_xml=xml, curves=curves, notes=tuple(experiment.notes))

@@ -1,5 +1,8 @@
 """Diagnosis of recordings without added mass: a held-out check of the modal model and a verdict.
 
+Its result is the :class:`~momentid.diagnosis.result.Diagnosis` of every recording, with a
+:class:`~momentid.diagnosis.result.ModalEvidence`; :func:`summary` words it.
+
 :func:`diagnose_modal` is what :func:`momentid.diagnosis.pipeline.diagnose` runs when no run adds
 mass (real labs: accelerometers only, no added-mass runs).  Stages:
 
@@ -32,7 +35,6 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -40,12 +42,14 @@ from threadpoolctl import threadpool_limits
 from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
 from momentid.diagnosis.modal_discovery import MIN_GAIN, ModalDiscovery, discover_modal
+from momentid.diagnosis.result import Diagnosis, ModalEvidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
+from momentid.diagnosis.verdict import Named, Verdict
 from momentid.diagnosis.workers import run_forked
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.peaks import response_amplitude
 
-__all__ = ["ModalDiagnosis", "diagnose_modal", "AMPLITUDE_DEPENDENCE", "LATE_SAMPLES"]
+__all__ = ["diagnose_modal", "summary", "AMPLITUDE_DEPENDENCE", "LATE_SAMPLES"]
 
 #: Verdict name of the amplitude-dependence mechanism (modes that shift with the response amplitude).
 AMPLITUDE_DEPENDENCE = "amplitude_dependence"
@@ -62,65 +66,6 @@ GAIN_SPREAD = 0.02
 #: The recording's limit, said in every report.
 ROCKING_LIMIT = ("Rocking and out-of-plane motion cannot be tested: the recording holds the shaking axis "
                  "only (import the sensors' other axes to test them).")
-
-
-@dataclass(frozen=True)
-class ModalDiagnosis:
-    """Result of :func:`diagnose_modal` (``report.json`` is :meth:`to_dict`).
-
-    Attributes
-    ----------
-    mechanism : str
-        ``"none"``, ``"unexplained"`` or :data:`AMPLITUDE_DEPENDENCE`.
-    location : dict
-        Where the held-out misfit is: worst floor sensor, modal band.
-    parameters, std : dict
-        The named mechanism's slopes per mode (empty otherwise).
-    held_out : str
-    nrmse_before, nrmse_after, noise_nrmse : float
-        Held-out floor-acceleration NRMSE of the linear model, of the amplitude model (equal to
-        ``nrmse_before`` when it could not be fitted) and of noise alone.
-    channel_nrmse : dict
-        Per floor sensor: before, after, noise.
-    findings : tuple of str
-    summary : str
-    curves : dict
-        ``time``, and ``measured``/``linear``/``augmented`` each ``{"a": (n, d)}`` (plots).
-    notes : tuple of str
-        What reading the recording recovered or repaired (runs a damaged file lost).
-    discovered : ModalDiscovery or None
-        The open search's law on the misfit's mode (:mod:`~momentid.diagnosis.modal_discovery`), run when
-        the linear model misses the held-out run by more than :data:`~momentid.diagnosis.thresholds.EXCESS`
-        x noise; None when not run or when no term earned its place.
-    """
-
-    mechanism: str
-    location: dict
-    parameters: dict
-    std: dict
-    held_out: str
-    nrmse_before: float
-    nrmse_after: float
-    noise_nrmse: float
-    channel_nrmse: dict
-    training: dict
-    candidate: dict
-    findings: tuple
-    summary: str
-    curves: dict = field(default_factory=dict, repr=False)
-    augmented_xml: str = ""
-    localisation: dict = field(default_factory=dict)
-    notes: tuple = ()
-    discovered: ModalDiscovery | None = None
-
-    def to_dict(self) -> dict:
-        return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
-                "std": self.std, "summary": self.summary, "held_out": self.held_out, "holdout": self.held_out,
-                "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
-                "noise_nrmse": self.noise_nrmse, "channel_nrmse": self.channel_nrmse,
-                "training": self.training, "candidate": self.candidate, "findings": list(self.findings),
-                "path": "modal (no added mass)", "notes": list(self.notes),
-                "discovered": self.discovered.to_dict() if self.discovered is not None else None}
 
 
 def _split(experiment: Experiment, hold_out: str | None):
@@ -173,7 +118,7 @@ def _location(measured, model, fit: mc.RunsFit, dt: float, t0: float) -> dict:
             "worst_window_nrmse": round(relative[k], 3)}
 
 
-def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> ModalDiagnosis:
+def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Diagnosis:
     """Check the modal model on a held-out run and name what it misses (see the module docstring).
 
     Parameters
@@ -182,6 +127,12 @@ def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Mo
         Runs without added mass, channels ``zdd`` and ``a1..ad`` (m/s^2).
     hold_out : str, optional
         Run to hold out (default: the last run).
+
+    Returns
+    -------
+    Diagnosis
+        With a :class:`~momentid.diagnosis.result.ModalEvidence`: the per-channel misfit, the
+        training runs' pooled modal model, the amplitude model tried, the sensor findings.
 
     Raises
     ------
@@ -213,14 +164,14 @@ def _candidate(per_run, run, start: int, linear: mc.RunsFit, gain, offset):
                              "predicted_damping_ratio": zeta.tolist(), **trend.to_dict()}
 
 
-def _verdict(before: float, after: float, noise: float, tested: bool) -> str:
+def _verdict(before: float, after: float, noise: float, tested: bool) -> Verdict:
     """``none`` within :data:`EXCESS` x noise; the candidate if it removes :data:`EXPLAINED` of the rest."""
     if before <= EXCESS * noise:
-        return "none"
-    return AMPLITUDE_DEPENDENCE if tested and _explained(before, after, noise) >= EXPLAINED else "unexplained"
+        return Verdict.NONE
+    return Verdict.MECHANISM if tested and _explained(before, after, noise) >= EXPLAINED else Verdict.UNEXPLAINED
 
 
-def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
+def _diagnose(experiment: Experiment, hold_out: str | None) -> Diagnosis:
     held, train = _split(experiment, hold_out)
     run = experiment.run(held)
     dt, d = 1.0 / run.sample_rate, experiment.storeys
@@ -236,32 +187,31 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> ModalDiagnosis:
     after_full = before_full if after_full is None else after_full
     before, after = mc.nrmse(measured, before_full[start:]), mc.nrmse(measured, after_full[start:])
     candidate["explained"] = _explained(before, after, noise)
-    mech = _verdict(before, after, noise, trend is not None)
-    best = after_full if mech == AMPLITUDE_DEPENDENCE else before_full
-    location = {} if mech == "none" else _location(measured, best[start:], linear, dt, float(run.time[start]))
+    verdict = _verdict(before, after, noise, trend is not None)
+    best = after_full if verdict is Verdict.MECHANISM else before_full
+    location = {} if verdict is Verdict.NONE else _location(measured, best[start:], linear, dt, float(run.time[start]))
     parameters, std = ({"df_dA_hz_per_m_s2": trend.frequency_coef[:, 1].tolist(),
                         "dzeta_dA_per_m_s2": trend.damping_coef[:, 1].tolist()},
                        {"df_dA_hz_per_m_s2": trend.frequency_slope_std.tolist(),
-                        "dzeta_dA_per_m_s2": trend.damping_slope_std.tolist()}) if mech == AMPLITUDE_DEPENDENCE else ({}, {})
+                        "dzeta_dA_per_m_s2": trend.damping_slope_std.tolist()}) if verdict is Verdict.MECHANISM else ({}, {})
     per = {f"a{j + 1}": {"before": float(b), "after": float(a)} for j, (b, a) in
            enumerate(zip(mc.channel_nrmse(measured, before_full[start:]), mc.channel_nrmse(measured, after_full[start:])))}
-    searched = mech != "none" and held not in train and len(train) > 1
+    searched = verdict is not Verdict.NONE and held not in train and len(train) > 1
     discovered = discover_modal(experiment, linear, train, held, location, before) if searched else None
     findings = tuple(_sensor_findings(linear, dt)) + (ROCKING_LIMIT,)
     training = {"runs": list(train), "frequency_hz": linear.frequency.tolist(), "damping_ratio": linear.zeta.tolist(),
                 "residual_variance_factor": linear.scale, "sensor_gain": linear.gain.tolist(),
                 "sensor_offset_s": linear.offset.tolist(), "noise": list(linear.noise)}
     held_name = held if held not in train else f"{held} (no run held out: checked on its own training data)"
-    text = _summary(mech, location, held_name, before, after, noise, candidate["explained"], trend,
-                    candidate.get("held_out_amplitude_m_s2"), findings)
-    if searched:
-        text += "\n" + _open_search_line(discovered)
     curves = {"time": run.time[start:], "measured": {"a": measured}, "linear": {"a": before_full[start:]},
               "augmented": {"a": after_full[start:]}}
-    return ModalDiagnosis(mechanism=mech, location=location, parameters=parameters, std=std, held_out=held_name,
-                          nrmse_before=before, nrmse_after=after, noise_nrmse=noise, channel_nrmse=per,
-                          training=training, candidate=candidate, findings=findings, summary=text, curves=curves,
-                          discovered=discovered)
+    mechanism = AMPLITUDE_DEPENDENCE if verdict is Verdict.MECHANISM else verdict.value
+    named = (Named(AMPLITUDE_DEPENDENCE, location, parameters, std),) if verdict is Verdict.MECHANISM else ()
+    evidence = ModalEvidence(channel_nrmse=per, training=training, candidate=candidate, findings=findings,
+                             trend=trend, amplitude=candidate.get("held_out_amplitude_m_s2"), searched=searched)
+    return Diagnosis(verdict=verdict, mechanism=mechanism, location=location, parameters=parameters, std=std,
+                     mechanisms=named, held_out=held_name, nrmse_before=before, nrmse_after=after, noise_nrmse=noise,
+                     evidence=evidence, discovered=discovered, curves=curves)
 
 
 def _explained(before: float, after: float, noise: float) -> float:
@@ -270,7 +220,19 @@ def _explained(before: float, after: float, noise: float) -> float:
     return float((before ** 2 - after ** 2) / excess) if excess > 0 else 0.0
 
 
-def _summary(mech, location, held, before, after, noise, explained, trend, amplitude, findings) -> str:
+def summary(diag: Diagnosis) -> str:
+    """The report's text of a diagnosis without added mass: the linear modal model's held-out misfit
+    against noise, the amplitude model and the verdict, the sensor findings, and the open search."""
+    evidence = diag.evidence
+    lines = _summary_lines(diag.verdict, diag.location, diag.held_out, diag.nrmse_before, diag.nrmse_after,
+                           diag.noise_nrmse, evidence.candidate["explained"], evidence.trend, evidence.amplitude,
+                           evidence.findings)
+    if evidence.searched:
+        lines.append(_open_search_line(diag.discovered))
+    return "\n".join(lines)
+
+
+def _summary_lines(verdict, location, held, before, after, noise, explained, trend, amplitude, findings) -> list[str]:
     lines = [f"Held-out run {held}: floor-acceleration NRMSE of the linear modal model {100 * before:.2f} % "
              f"({before / noise:.1f} x the {100 * noise:.2f} % noise alone leaves)."]
     if trend is not None:
@@ -286,10 +248,10 @@ def _summary(mech, location, held, before, after, noise, explained, trend, ampli
                          f"model extrapolates.")
     else:
         lines.append("Amplitude dependence not tested: it needs at least two training runs of different amplitudes.")
-    if mech == "none":
+    if verdict is Verdict.NONE:
         lines.append(f"No missing physics: the linear modal model explains the held-out run to within "
                      f"{EXCESS:g} x the noise level.")
-    elif mech == AMPLITUDE_DEPENDENCE:
+    elif verdict is Verdict.MECHANISM:
         lines.append(f"Verdict: amplitude dependence (modes shift with the response amplitude); the held-out misfit "
                      f"left is largest at {json.dumps(location)}.")
         if after > EXCESS * noise:
@@ -299,7 +261,7 @@ def _summary(mech, location, held, before, after, noise, explained, trend, ampli
         lines.append(f"Verdict: unexplained mismatch at {json.dumps(location)} (worst floor sensor, and the band "
                      f"around that mode holding that share of its residual power).")
     lines += [f"Finding: {f}" for f in findings]
-    return "\n".join(lines)
+    return lines
 
 
 def _open_search_line(discovered: ModalDiscovery | None) -> str:

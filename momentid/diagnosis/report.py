@@ -1,132 +1,106 @@
-"""Stage 7 of the diagnosis: the :class:`Diagnosis` record, its summary and its report folder."""
+"""Stage 7 of the diagnosis: the summary of a :class:`~momentid.diagnosis.result.Diagnosis` and its
+report folder."""
 
 from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from momentid.core.series import json_safe
 from momentid import mechanisms
-from momentid.diagnosis.discovery import Discovery, plot_discovered
+from momentid.core.series import json_safe
+from momentid.diagnosis.discovery import plot_discovered
 from momentid.diagnosis.modal_discovery import ModalDiscovery, plot_modal_discovered
-from momentid.diagnosis.screening import Candidate
+from momentid.diagnosis.result import AddedMassEvidence, Diagnosis
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
+from momentid.diagnosis.verdict import Verdict
+from momentid.mechanisms.place import Place
 
-__all__ = ["Diagnosis", "summary", "write_report"]
-
-
-@dataclass(frozen=True)
-class Diagnosis:
-    """Result of :func:`~momentid.diagnosis.pipeline.diagnose` (``report.json`` is its serialised form)."""
-
-    mechanism: str
-    location: dict
-    parameters: dict
-    std: dict
-    nrmse_before: float
-    nrmse_after: float
-    excess_equation: dict      # per floor: residual RMS / noise-only RMS
-    excess_replay: dict        # per channel: replay NRMSE / noise-only NRMSE
-    candidates: tuple[Candidate, ...]
-    summary: str
-    holdout: str
-    parameter_pattern: dict = field(default_factory=dict)
-    sensor_check: dict = field(default_factory=dict)   # a_j = zdd + q_j'': excess per floor, best fits
-    selection: dict = field(default_factory=dict)      # training-run NRMSE of each re-simulated candidate
-    localisation: dict = field(default_factory=dict)   # storey, runs, time windows, amplitude, bands, shape
-    augmented_xml: str = ""
-    curves: dict = field(default_factory=dict, repr=False)
-    notes: tuple[str, ...] = ()                        # what reading the recording recovered (lost runs)
-    discovered: Discovery | None = None              # the open search's force (verdict "unexplained")
-    #: every named mechanism (:class:`~momentid.diagnosis.compound.Named`), primary first; empty for
-    #: ``none`` and ``unexplained``
-    mechanisms: tuple = ()
-
-    def to_dict(self) -> dict:
-        return {
-            "mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
-            "std": self.std, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
-            "summary": self.summary, "holdout": self.holdout,
-            "excess_equation": self.excess_equation, "excess_replay": self.excess_replay,
-            "parameter_pattern": self.parameter_pattern, "sensor_check": self.sensor_check,
-            "selection": self.selection, "localisation": self.localisation,
-            "candidates": [asdict(c) for c in self.candidates],
-            "notes": list(self.notes),
-            "discovered": self.discovered.to_dict() if self.discovered is not None else None,
-            "mechanisms": [m.to_dict() for m in self.mechanisms],
-        }
+__all__ = ["summary", "write_report"]
 
 
-def summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_name, held_out, sensor_check,
-            selection, where, named=(), discovered: Discovery | None = None) -> str:
-    """The report's text: residuals vs. noise, where, the sensor check, the verdict, the replay, and
-    the open search's discovered force.
-
-    ``named``: every mechanism of a compound diagnosis (:class:`~momentid.diagnosis.compound.Named`),
-    one sentence each when there are several.
-    """
+def summary(diag: Diagnosis) -> str:
+    """The report's text: for a rig identified with added masses, residuals vs. noise, where, the
+    sensor check, the verdict, the replay and the open search's force; for accelerometer-only
+    recordings, :func:`momentid.diagnosis.real.summary`.  A compound diagnosis names every mechanism,
+    one sentence each."""
+    evidence = diag.evidence
+    if not isinstance(evidence, AddedMassEvidence):
+        from momentid.diagnosis.real import summary as modal_summary
+        return modal_summary(diag)
+    excess_eq, excess_rep, selection = evidence.excess_equation, evidence.excess_replay, evidence.selection
     worst = max(excess_eq, key=excess_eq.get)
     lines = ["Equation residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_eq.items()) + ".",
              "Replay residual vs. noise: " + ", ".join(f"{k} {v:.2f}x" for k, v in excess_rep.items()) + "."]
     if max(excess_eq.values()) > EXCESS:
-        lines.append(where)
-    if sensor_check:
-        verdict = "consistent" if sensor_check["consistent"] else "INCONSISTENT"
+        lines.append(evidence.localisation.words)
+    if evidence.sensor_check:
+        check = evidence.sensor_check
+        verdict = "consistent" if check["consistent"] else "INCONSISTENT"
         lines.append("Sensors against each other (a = zdd + q''): " + ", ".join(
-            f"{k} {v:.2f}x" for k, v in sensor_check["excess"].items()) + f" of noise ({verdict}).")
-    if mech == "none":
+            f"{k} {v:.2f}x" for k, v in check["excess"].items()) + f" of noise ({verdict}).")
+    loc = diag.location
+    if diag.verdict is Verdict.NONE:
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
-    elif mech == "unexplained" and "partial" in selection:
-        part = selection["partial"]
+    elif diag.verdict is Verdict.UNEXPLAINED and selection.partial is not None:
+        part = selection.partial
         lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "
-                     f"{part['mechanism'].replace('_', ' ')} at {json.dumps(part['location'])}, removes only "
-                     f"{100 * max(selection['explained'], 0):.0f} % of the training runs' misfit above noise "
-                     f"(NRMSE {100 * selection['training_nrmse_linear']:.2f} % -> "
-                     f"{100 * selection['training_nrmse_augmented']:.2f} %, noise alone "
-                     f"{100 * selection['training_nrmse_noise']:.2f} %); the model is left linear.")
-    elif mech == "unexplained":
+                     f"{part.candidate.mechanism.replace('_', ' ')} at {json.dumps(part.candidate.location)}, removes "
+                     f"only {100 * max(selection.explained, 0):.0f} % of the training runs' misfit above noise "
+                     f"(NRMSE {100 * selection.linear:.2f} % -> {100 * selection.augmented:.2f} %, noise alone "
+                     f"{100 * selection.noise:.2f} %); the model is left linear.")
+    elif diag.verdict is Verdict.UNEXPLAINED:
         lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
                      f"explains at least {int(EXPLAINED * 100)} % of it.")
-    elif len(named) > 1:
-        lines.append(f"{len(named)} mechanisms together, refitted jointly in one model (the primary first):")
-        lines += ["  " + mechanisms.get(n.mechanism).describe(n.location, n.parameters, n.std) for n in named]
     else:
-        lines.append(mechanisms.get(mech).describe(loc, params, std))
+        if len(diag.mechanisms) > 1:
+            lines.append(f"{len(diag.mechanisms)} mechanisms together, refitted jointly in one model (the primary "
+                         f"first):")
+        for n in diag.mechanisms:
+            kind = mechanisms.get(n.mechanism)
+            line = kind.describe(Place.at(kind.target, n.location), n.parameters, n.std)
+            lines.append("  " + line if len(diag.mechanisms) > 1 else line)
+    before, after, discovered = diag.nrmse_before, diag.nrmse_after, diag.discovered
+    which = f"held-out run {evidence.run}" if evidence.held else f"run {evidence.run}"
     if math.isfinite(before):
-        which = f"held-out run {run_name}" if held_out else f"run {run_name}"
         lines.append(f"{which} NRMSE {100 * before:.2f} % -> {100 * after:.2f} %.")
     if discovered is not None:
         lines.append(f"{discovered.description} With it, {which} NRMSE {100 * discovered.nrmse_before:.2f} % -> "
                      f"{100 * discovered.nrmse_after:.2f} % (a data-driven model, not a named mechanism).")
-    elif mech == "unexplained" and math.isfinite(before):
+    elif diag.verdict is Verdict.UNEXPLAINED and math.isfinite(before):
         lines.append("Open search: no force from the function library lowers the held-out misfit enough to report.")
     return "\n".join(lines)
 
 
-def write_report(diag: Diagnosis, folder) -> Path:
-    """``report.json``, ``summary.txt``, ``model_augmented.xml``, ``diagnosis.rrd`` and the PNG plots
-    ``replay.png`` (recorded vs. linear vs. augmented), ``locate.png`` (where the mismatch is) and, when
-    the open search found a force, ``discovered.png`` (its force against the drift or displacement)."""
+def write_report(diag: Diagnosis, folder) -> tuple[str, ...]:
+    """Write the report folder; returns the names of the files written, in this order:
+    ``report.json``, ``summary.txt``, ``model_augmented.xml`` (when there is an augmented model),
+    ``replay.png`` (recorded vs. linear vs. augmented) and ``diagnosis.rrd`` (the same for ``rerun``),
+    ``locate.png`` (where the mismatch is, added-mass path) and ``discovered.png`` (the open search's
+    force, when it found one)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))
     (folder / "summary.txt").write_text(diag.summary + "\n")
+    written = ["report.json", "summary.txt"]
     if diag.augmented_xml:
         (folder / "model_augmented.xml").write_text(diag.augmented_xml)
+        written.append("model_augmented.xml")
     if diag.curves:
         _plots(diag, folder)
         _rerun(diag, folder / "diagnosis.rrd")
-    if diag.localisation:
+        written += ["replay.png", "diagnosis.rrd"]
+    if isinstance(diag.evidence, AddedMassEvidence):
         from momentid.diagnosis.locate import plot_localisation
-        plot_localisation(diag.localisation, folder / "locate.png")
+        plot_localisation(diag.evidence.localisation.to_dict(), folder / "locate.png")
+        written.append("locate.png")
     if diag.discovered is not None:
         plot = plot_modal_discovered if isinstance(diag.discovered, ModalDiscovery) else plot_discovered
         plot(diag.discovered, folder / "discovered.png")
-    return folder
+        written.append("discovered.png")
+    return tuple(written)
 
 
 def _rerun(diag: Diagnosis, path: Path) -> None:

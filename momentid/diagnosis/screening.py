@@ -7,13 +7,13 @@ on half of the data (alternate time blocks), and scored on the other half by the
 *excess over noise* it explains.  Faults of the table channel show only in replays driven by it
 (:func:`screen_replay`); a flexibly attached mass is tested by replay too
 (:func:`screen_attachment`); a linear damper hides in the identified C, so it is also tested on
-the identified matrices (:func:`damping_pattern`).
+the identified matrices (:func:`damping_pattern`).  Every kind is screened at every place of its
+target (:meth:`~momentid.mechanisms.base.MechanismKind.places`), links first.
 """
 
 from __future__ import annotations
 
 import enum
-import json
 import math
 from dataclasses import dataclass
 
@@ -27,10 +27,12 @@ from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
 from momentid.errors import IdentificationError
 from momentid.estimation.identification import damping_models
 from momentid.estimation.linear import discretize, outputs, simulate_linear
-from momentid.mechanisms.base import EquationSignals, Refit, Screened, Target, drifts
+from momentid.mechanisms.base import EquationSignals, MechanismKind, Refit, Screened, drifts
+from momentid.mechanisms.place import Place, Target
 
 __all__ = ["Domain", "Candidate", "ReplayResiduals", "DampingPattern", "screen_equation", "screen_replay",
-           "screen_attachment", "damping_pattern", "signature_columns", "remaining_excess", "storey_damper"]
+           "screen_attachment", "damping_pattern", "signature_columns", "remaining_excess", "pattern_fit",
+           "screening_order"]
 
 #: Replay residual floor for noise-free data: this fraction of the replayed channels' RMS.
 REPLAY_ROUND_OFF = 1e-6
@@ -64,14 +66,32 @@ class Domain(str, enum.Enum):
 
 @dataclass(frozen=True)
 class Candidate:
-    """One fitted candidate mechanism."""
+    """One fitted candidate mechanism: a kind at a place, its fitted parameters and standard errors,
+    the share of the excess residual it explains on held-out blocks, and where it was screened."""
 
-    mechanism: str
-    location: dict
+    kind: MechanismKind
+    place: Place
     parameters: dict
     std: dict
-    explained: float          # share of the excess residual explained on held-out blocks
+    explained: float
     domain: Domain
+
+    @property
+    def mechanism(self) -> str:
+        return self.kind.name
+
+    @property
+    def location(self) -> dict:
+        return self.place.location
+
+    def same_as(self, other: Candidate) -> bool:
+        """The same kind at the same place (whatever the fit)."""
+        return self.kind is other.kind and self.place == other.place
+
+    def to_dict(self) -> dict:
+        """An entry of ``report.json``'s ``candidates``."""
+        return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
+                "std": self.std, "explained": self.explained, "domain": self.domain}
 
 
 @dataclass(frozen=True)
@@ -91,8 +111,8 @@ class ReplayResiduals:
 
 @dataclass(frozen=True)
 class DampingPattern:
-    """A storey damper read from the identified C (``candidate``) and the fits behind it (``info``,
-    reported as ``parameter_pattern``)."""
+    """A dashpot read from the identified C (``candidate``) and the fits behind it (``info``, reported
+    as ``parameter_pattern``)."""
 
     candidate: Candidate
     info: dict
@@ -147,14 +167,14 @@ def _fitter(target: np.ndarray, train: np.ndarray, test: np.ndarray, noise_rss: 
     train_d, test_d, y = np.repeat(train, d), np.repeat(test, d), target.ravel()
     extra = [c.ravel() for c in extra]
 
-    def fit(columns, confounds, location, to_params) -> list[Screened]:
+    def fit(columns, confounds, place, to_params) -> list[Screened]:
         res = _fit([c.ravel() for c in columns], [c.ravel() for c in confounds] + extra, y, train_d, test_d,
                    noise_rss)
         if res is None:
             return []
         coef, std, explained = res
         params, pstd = to_params(coef, std)
-        return [Screened(location, params, pstd, explained)]
+        return [Screened(place, params, pstd, explained)]
     return fit
 
 
@@ -176,24 +196,31 @@ def _equation_signals(result, rows: tuple[ResidualRow, ...], f_top: float) -> Eq
                            K=result.K, sample_rate=fs, f_top=f_top, attachment_response=_attachment_response(fs))
 
 
-def signature_columns(kind, signals: EquationSignals, location: dict) -> list[np.ndarray]:
-    """The columns (n, d each) ``kind`` fits at ``location`` (a storey or floor): its signature and
-    the linear confounds it is fitted with, as its :meth:`screen_equation` passes them."""
+def signature_columns(kind: MechanismKind, signals: EquationSignals, place: Place) -> list[np.ndarray]:
+    """The columns (n, d each) ``kind`` fits at ``place``: its signature and the linear confounds it is
+    fitted with, as its :meth:`~momentid.mechanisms.base.MechanismKind.screen_equation` passes them."""
     taken: list[np.ndarray] = []
 
     def capture(columns, confounds, where, to_params):
-        if where == location:
+        if where == place:
             taken.extend(list(columns) + list(confounds))
         return []
-    kind.screen_equation(signals, capture, location[kind.target.value] - 1)
+    kind.screen_equation(signals, capture, place)
     return taken
+
+
+def screening_order(kinds, storeys: int) -> list[tuple[MechanismKind, Place]]:
+    """Every (kind, place) of ``kinds`` in a rig of ``storeys`` storeys, in the order screening visits
+    them: storeys first, then the other places, each floor from the lowest up, the kinds in turn."""
+    pairs = [(kind, place) for kind in kinds for place in kind.places(storeys)]
+    return sorted(pairs, key=lambda kp: (kp[1].target is not Target.STOREY, kp[1].level))
 
 
 def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
                     domain: Domain, found=(), kinds=None) -> list[Candidate]:
     """Candidates whose signature lives in the floor-force residual ``rows`` of the model ``result``.
 
-    ``found``: (kind, location) of mechanisms already found; their columns are fitted with every
+    ``found``: (kind, place) of mechanisms already found; their columns are fitted with every
     candidate (:func:`signature_columns`), which is scored on what they leave, and they are not
     candidates again.  ``kinds``: the kinds screened (default: the library).
     """
@@ -203,25 +230,19 @@ def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarr
     target = np.concatenate([r.residual for r in rows])                     # (N, d)
     noise_rss = float(np.sum(noise_floor ** 2)) * int(test.sum())
     signals = _equation_signals(result, rows, f_top)
-    extra = [c for kind, loc in found for c in signature_columns(kind, signals, loc)]
+    extra = [c for kind, place in found for c in signature_columns(kind, signals, place)]
     fit = _fitter(target, train, test, noise_rss, extra)
     kinds = mechanisms.library() if kinds is None else kinds
-    done = {(kind.name, json.dumps(loc, sort_keys=True)) for kind, loc in found}
-    out = []
-    for targets in ((Target.STOREY,), (Target.FLOOR, Target.CHANNEL)):
-        for index in range(signals.storeys):
-            for kind in kinds:
-                if kind.target in targets:
-                    out += [Candidate(kind.name, s.location, s.parameters, s.std, s.explained, domain)
-                            for s in kind.screen_equation(signals, fit, index)
-                            if (kind.name, json.dumps(s.location, sort_keys=True)) not in done]
-    return out
+    done = set(found)
+    return [Candidate(kind, s.place, s.parameters, s.std, s.explained, domain)
+            for kind, place in screening_order(kinds, signals.storeys)
+            for s in kind.screen_equation(signals, fit, place) if (kind, s.place) not in done]
 
 
 def remaining_excess(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
                      found) -> np.ndarray:
     """Per floor (d,): RMS of the residual ``rows`` on the held-out blocks once the columns of the
-    mechanisms ``found`` ((kind, location) each) are fitted on the others, over the noise-only RMS.
+    mechanisms ``found`` ((kind, place) each) are fitted on the others, over the noise-only RMS.
 
     The equation residual's excess given what is already found: near 1 when nothing is left.
     """
@@ -229,7 +250,7 @@ def remaining_excess(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndar
     train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
     target = np.concatenate([r.residual for r in rows])
     signals = _equation_signals(result, rows, f_top)
-    columns = [c for kind, loc in found for c in signature_columns(kind, signals, loc)]
+    columns = [c for kind, place in found for c in signature_columns(kind, signals, place)]
     left = target[~train]
     if columns:
         X = np.stack(columns, axis=-1)                                        # (N, d, m)
@@ -262,12 +283,13 @@ def screen_replay(result, runs, d: int, band) -> ReplayResiduals:
     fit = _fitter(target, train, test, float(np.sum(floor ** 2)) * int(test.sum()))
     sims, rates, steps = np.concatenate(sims), np.concatenate(rates), np.concatenate(steps)
     cands = []
+    table = Place(Target.CHANNEL, "zdd")
     for kind in mechanisms.library():
-        signature = kind.replay_column(sims, rates, steps)
+        signature = kind.replay_column(sims, rates, steps) if kind.target is Target.CHANNEL else None
         if signature is not None:
             column, to_params = signature
-            cands += [Candidate(kind.name, s.location, s.parameters, s.std, s.explained, Domain.REPLAY)
-                      for s in fit([column], [], {"channel": "zdd"}, to_params)]
+            cands += [Candidate(kind, s.place, s.parameters, s.std, s.explained, Domain.REPLAY)
+                      for s in fit([column], [], table, to_params)]
     return ReplayResiduals(excess=excess, candidates=tuple(cands))
 
 
@@ -291,7 +313,8 @@ def screen_attachment(result, runs, d: int, band, f_top: float) -> list[Candidat
         if kind.refit is not Refit.ATTACHMENT:
             continue
         found = []
-        for j in range(d):
+        for place in kind.places(d):
+            j = place.index - 1
             loaded = [r for r in runs if r.added_mass[j] > 0 and r.has("a1")]
             if not loaded:
                 continue
@@ -315,19 +338,17 @@ def screen_attachment(result, runs, d: int, band, f_top: float) -> list[Candidat
                 ATTACHMENT_GRID_POINTS)]
             f_a, best = min(grid, key=lambda x: x[1])
             n_eff = sum(r.n_samples for r in loaded) * d * min(1.0, 2 * (band.high or fs / 2) / fs)
-            found.append((best, j, f_a, base, noise, rss, n_eff))
+            found.append((best, place, f_a, base, noise, rss, n_eff))
         if not found:
             continue
         # The attachment's frequency and damping, refined where the grid fits best.
-        _, j, f_a, base, noise, rss, n_eff = min(found, key=lambda x: x[0])
+        _, place, f_a, base, noise, rss, n_eff = min(found, key=lambda x: x[0])
         params, std, best = _refine_oscillator(rss, f_a, ATTACHMENT_DAMPING_RATIO, n_eff)
-        out.append(Candidate(kind.name, {"floor": j + 1}, params, std, float((base - best) / (base - noise)),
-                             Domain.REPLAY))
-        for b, k, f_k, base_k, noise_k, _, _ in found:
-            if k != j:
-                out.append(Candidate(kind.name, {"floor": k + 1}, {"frequency": float(f_k),
-                                     "damping_ratio": ATTACHMENT_DAMPING_RATIO}, {},
-                                     float((base_k - b) / (base_k - noise_k)), Domain.REPLAY))
+        out.append(Candidate(kind, place, params, std, float((base - best) / (base - noise)), Domain.REPLAY))
+        for b, other, f_k, base_k, noise_k, _, _ in found:
+            if other != place:
+                out.append(Candidate(kind, other, {"frequency": float(f_k), "damping_ratio": ATTACHMENT_DAMPING_RATIO},
+                                     {}, float((base_k - b) / (base_k - noise_k)), Domain.REPLAY))
     return out
 
 
@@ -372,32 +393,28 @@ def _refine_oscillator(rss, f0: float, zeta0: float, n_eff: float):
 
 
 def damping_pattern(result, d: int) -> DampingPattern | None:
-    """A linear damper across one storey hides in the identified C: look for its pattern
-    (``C = a M + b K + c e_s e_s^T``, ``e_s`` the storey's drift direction)."""
+    """A linear dashpot hides in the identified C: look for the pattern of one, of any kind the
+    library sizes by it (``Refit.DAMPING_PATTERN``) at any of its places (``C = a M + b K + c P``, ``P``
+    the kind's term there, :meth:`~momentid.mechanisms.base.MechanismKind.damping_pattern`).  The place
+    whose pattern fits best wins (on a tie, the first in :func:`screening_order`)."""
     kinds = [k for k in mechanisms.library() if k.refit is Refit.DAMPING_PATTERN]
     fits = {f.model: f for f in damping_models(result)}
     ray = fits["rayleigh"]
     if not kinds or not (ray.p_value < RAYLEIGH_P_VALUE and ray.misfit > RAYLEIGH_MISFIT):
         return None
-    best = min((storey_damper(result, s) + (s,) for s in range(d)), key=lambda x: x[0])
-    mis, coef, s = best
-    kind = kinds[0]
-    cand = Candidate(kind.name, {"storey": s + 1}, {kind.fitted.name: float(coef[2])}, {},
-                     float(1.0 - mis / ray.misfit), Domain.PARAMETERS)
+    mis, coef, kind, place = min((pattern_fit(result, kind.damping_pattern(place, d)) + (kind, place)
+                                  for kind, place in screening_order(kinds, d)), key=lambda x: x[0])
+    cand = Candidate(kind, place, {kind.fitted.name: float(coef[2])}, {}, float(1.0 - mis / ray.misfit),
+                     Domain.PARAMETERS)
     return DampingPattern(cand, {"rayleigh_misfit": ray.misfit, "rayleigh_p_value": ray.p_value,
                                  "with_damper_misfit": mis, "coefficients": [float(x) for x in coef]})
 
 
-def storey_damper(result, s: int) -> tuple[float, np.ndarray]:
-    """The identified C as ``a M + b K + c e_s e_s^T`` (storey ``s``, 0-based, ``e_s`` its drift
-    direction), least squares over the upper triangle.  Returns (relative misfit, (a, b, c))."""
-    d = result.storeys
-    iu = np.triu_indices(d)
+def pattern_fit(result, pattern: np.ndarray) -> tuple[float, np.ndarray]:
+    """The identified C as ``a M + b K + c P`` (``pattern`` P: (d, d), a dashpot's term), least squares
+    over the upper triangle.  Returns (relative misfit, (a, b, c))."""
+    iu = np.triu_indices(result.storeys)
     c = result.C[iu]
-    e = np.zeros(d)
-    e[s] = 1.0
-    if s > 0:
-        e[s - 1] = -1.0
-    A = np.column_stack([result.M[iu], result.K[iu], np.outer(e, e)[iu]])
+    A = np.column_stack([result.M[iu], result.K[iu], pattern[iu]])
     coef, *_ = np.linalg.lstsq(A, c, rcond=None)
     return float(np.linalg.norm(c - A @ coef) / np.linalg.norm(c)), coef

@@ -3,37 +3,38 @@
 :func:`screen` gathers the screened candidates of every domain; :func:`choose` picks the verdict
 (a mechanism, ``unexplained`` or ``none``) from them; :func:`select` re-simulates the plausible
 candidates on the training runs, keeps the one that replays best, sizes it, and demotes it to
-``unexplained`` when its augmented model removes too little of the misfit.
+``unexplained`` when its augmented model removes too little of the misfit.  What it tried and why
+it decided is a :class:`Selection` (``report.json``'s ``selection``).
 """
 
 from __future__ import annotations
 
-import enum
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.locate import Localisation
-from momentid.diagnosis.refit import Augmented, Refitter, kind_of
+from momentid.diagnosis.refit import Augmented, ForceRefit, Refitter
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel
 from momentid.diagnosis.screening import (Candidate, DampingPattern, Domain, ReplayResiduals, damping_pattern,
                                           screen_attachment, screen_equation, screen_replay)
 from momentid.diagnosis.sensor_check import SensorCheck
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
+from momentid.diagnosis.verdict import Verdict
 from momentid.diagnosis.workers import run_forked
-from momentid.mechanisms.base import Refit
+from momentid.mechanisms.base import MechanismKind, Refit
+from momentid.mechanisms.place import Place, Target
 
-__all__ = ["Verdict", "Screening", "Choice", "Finding", "screen", "choose", "select", "explained_share"]
+__all__ = ["Screening", "Choice", "Tried", "Partial", "Step", "Selection", "Finding", "screen", "choose", "select",
+           "explained_share", "SHORTLIST_SIZE", "SHORTLIST_FLOOR", "EARNS"]
 
 #: Re-simulated at most: the chosen candidate and the best of up to 3 other kinds of physics ...
 SHORTLIST_SIZE = 4
 #: ... each explaining at least this share of the excess in screening.
 SHORTLIST_FLOOR = 0.15
-
-
-class Verdict(enum.Enum):
-    NONE = "none"                    # the linear model explains the recordings to the noise level
-    UNEXPLAINED = "unexplained"      # a mismatch no candidate of the library explains
-    MECHANISM = "mechanism"          # a named mechanism of the library
+#: A further mechanism of a compound diagnosis must remove at least this share of the training
+#: replays' misfit above noise that the model without it leaves (half: it does more than any
+#: one-parameter fit of noise can).
+EARNS = 0.5
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ class Screening:
     pool : tuple of Candidate
         Those the verdict may name, given which residuals show a mismatch.
     pattern : DampingPattern or None
-        A physical storey damper read from the identified C.
+        A physical dashpot read from the identified C.
     pattern_info : dict
         The damping-pattern fits (reported as ``parameter_pattern``, even when rejected).
     replay : ReplayResiduals
@@ -71,26 +72,136 @@ class Choice:
 
 
 @dataclass(frozen=True)
-class Finding:
-    """Stage 6: the diagnosed mechanism (or ``none`` / ``unexplained``), sized, with its model.
+class Tried:
+    """A candidate re-simulated at stage 6: its augmented model and the training runs' mean NRMSE
+    through it."""
 
-    ``selection`` holds the training-run NRMSE of each re-simulated candidate and the acceptance
-    test (``report.json``'s ``selection``).
+    candidate: Candidate
+    augmented: Augmented
+    nrmse: float
+
+    def to_dict(self) -> dict:
+        return {"mechanism": self.candidate.mechanism, "location": self.candidate.location, "nrmse": self.nrmse}
+
+
+@dataclass(frozen=True)
+class Partial:
+    """The best candidate of a stage-6 ``unexplained``: it removed too little of the misfit alone.
+
+    ``parameters``: its size in the lab's terms; ``augmented``: its augmented model as built.
     """
 
+    candidate: Candidate
+    parameters: dict
+    augmented: Augmented
+
+    def to_dict(self) -> dict:
+        return {"mechanism": self.candidate.mechanism, "location": self.candidate.location,
+                "parameters": self.parameters}
+
+
+@dataclass(frozen=True)
+class Step:
+    """A further mechanism tried by a compound diagnosis: the training runs' NRMSE before and with it,
+    the noise's, and the share of the misfit above noise it removes."""
+
     mechanism: str
+    location: dict
+    screening_explained: float
+    before: float
+    after: float
+    noise: float
+    explained: float
+
+    @property
+    def earned(self) -> bool:
+        """It removes at least :data:`EARNS` of the misfit above noise."""
+        return self.explained >= EARNS
+
+    def to_dict(self) -> dict:
+        return {"mechanism": self.mechanism, "location": self.location,
+                "screening_explained": self.screening_explained, "training_nrmse_before": self.before,
+                "training_nrmse_with": self.after, "training_nrmse_noise": self.noise, "explained": self.explained,
+                "earns_above": EARNS, "earned": self.earned}
+
+
+@dataclass(frozen=True)
+class Selection:
+    """How a diagnosis chose (``report.json``'s ``selection``; None and empty fields are left out).
+
+    Attributes
+    ----------
+    linear : float or None
+        Training runs' mean NRMSE through the linear model.
+    tried : tuple of Tried
+        The shortlist re-simulated at stage 6.
+    augmented, noise : float or None
+        Training NRMSE through the chosen model, and what sensor noise alone leaves.
+    explained : float or None
+        The share of the misfit above noise the chosen model removes (accepted above ``ACCEPTED``).
+    partial : Partial or None
+        The best candidate of an ``unexplained`` verdict.
+    steps : tuple of Step, or None
+        Each further mechanism a compound diagnosis tried (None: none was looked for).
+    joint, joint_explained : float or None
+        Training NRMSE through the joint model of several mechanisms, and the share it removes.
+    after_correction : Selection or None
+        The selection on the recordings with a sensor fault undone.
+    """
+
+    linear: float | None = None
+    tried: tuple[Tried, ...] = ()
+    augmented: float | None = None
+    noise: float | None = None
+    explained: float | None = None
+    partial: Partial | None = None
+    steps: tuple[Step, ...] | None = None
+    joint: float | None = None
+    joint_explained: float | None = None
+    after_correction: Selection | None = None
+
+    def to_dict(self) -> dict:
+        out = {"training_nrmse_linear": self.linear,
+               "training_nrmse": [t.to_dict() for t in self.tried] if self.tried else None,
+               "training_nrmse_augmented": self.augmented, "training_nrmse_noise": self.noise,
+               "explained": self.explained, "accepted_above": ACCEPTED if self.explained is not None else None,
+               "partial": self.partial.to_dict() if self.partial else None,
+               "compound": [s.to_dict() for s in self.steps] if self.steps is not None else None,
+               "training_nrmse_joint": self.joint, "joint_explained": self.joint_explained,
+               "after_correction": self.after_correction.to_dict() if self.after_correction else None}
+        return {k: v for k, v in out.items() if v is not None}
+
+
+@dataclass(frozen=True)
+class Finding:
+    """Stage 6: the verdict, with the mechanism it names (``kind`` at ``place``), sized, and its model.
+
+    ``location`` is the mechanism's place, or where an ``unexplained`` mismatch is.  ``refit`` and
+    ``corrected`` are the augmented model's errors-in-variables refit and corrected identification
+    (:class:`~momentid.diagnosis.refit.Augmented`), which a compound diagnosis continues from.
+    """
+
+    verdict: Verdict
+    kind: MechanismKind | None
+    place: Place | None
     location: dict
     parameters: dict
     std: dict
     structure: Structure
     records: tuple[Mechanism, ...]
-    selection: dict
+    selection: Selection = field(default_factory=Selection)
+    refit: ForceRefit | None = None
+    corrected: object | None = None
+
+    @property
+    def mechanism(self) -> str:
+        """The verdict in ``report.json``'s words: the mechanism's name, ``none`` or ``unexplained``."""
+        return self.kind.name if self.kind is not None else self.verdict.value
 
 
 def _physical(c: Candidate) -> bool:
     """A passive rig: no negative damper, friction or weight (cubic stiffness may soften)."""
-    kind = kind_of(c.mechanism)
-    return kind is None or kind.physical(c.parameters)
+    return c.kind.physical(c.parameters)
 
 
 def screen(model: LinearModel, residuals: EquationResiduals, sensors: SensorCheck) -> Screening:
@@ -147,12 +258,12 @@ def choose(screening: Screening, residuals: EquationResiduals, where: Localisati
     if not (residuals.mismatch or screening.replay.mismatch):
         return Choice(Verdict.NONE, None, {})
     if where.storeys[f"storey{where.storey}"] > EXCESS and (residuals.mismatch or residuals.nominal_mismatch):
-        location = {"storey": where.storey}     # the storey whose shear residual stands out
+        place = Place(Target.STOREY, where.storey)     # the storey whose shear residual stands out
     elif max(excess_rep.values(), default=0) > max(excess_eq.values()):
-        location = {"channel": max(excess_rep, key=excess_rep.get)}
+        place = Place(Target.CHANNEL, max(excess_rep, key=excess_rep.get))
     else:
-        location = {"floor": int(max(excess_eq, key=excess_eq.get)[len("floor"):])}
-    return Choice(Verdict.UNEXPLAINED, None, location)
+        place = Place(Target.FLOOR, int(max(excess_eq, key=excess_eq.get)[len("floor"):]))
+    return Choice(Verdict.UNEXPLAINED, None, place.location)
 
 
 def _shortlist(pool, chosen: Candidate) -> list[Candidate]:
@@ -160,12 +271,11 @@ def _shortlist(pool, chosen: Candidate) -> list[Candidate]:
     other kind of physics that explains at least ``SHORTLIST_FLOOR`` of the excess (up to
     ``SHORTLIST_SIZE`` in all; one per kind, so that a kind which screens well at several places
     cannot crowd the others out).  Sensor faults are sized on corrected data, not re-simulated."""
-    out, kinds = [chosen], {chosen.mechanism}
+    out, kinds = [chosen], {chosen.kind}
     for c in sorted(pool, key=lambda c: -c.explained):
-        kind = kind_of(c.mechanism)
-        if c.mechanism in kinds or c.explained < SHORTLIST_FLOOR or kind.refit is Refit.CORRECT_DATA:
+        if c.kind in kinds or c.explained < SHORTLIST_FLOOR or c.kind.refit is Refit.CORRECT_DATA:
             continue
-        kinds.add(c.mechanism)
+        kinds.add(c.kind)
         out.append(c)
         if len(out) == SHORTLIST_SIZE:
             break
@@ -180,53 +290,55 @@ def explained_share(before: float, after: float, noise: float) -> float:
     return float(1.0 - max(after ** 2 - noise ** 2, 0.0) / excess)
 
 
+def _tried(refitter: Refitter, c: Candidate) -> Tried:
+    """``c``'s augmented model and its training score (one job of stage 6's shortlist)."""
+    augmented = refitter.augment(c.kind, c.place, c.parameters, c.std)
+    return Tried(c, augmented, refitter.score(augmented))
+
+
 def select(model: LinearModel, choice: Choice, screening: Screening, refitter: Refitter, where: Localisation,
            *, replay: bool) -> Finding:
     """Stage 6: re-simulate the shortlist, size the winner, accept it or call the mismatch unexplained."""
-    mech = choice.candidate.mechanism if choice.candidate else choice.verdict.value
-    loc = choice.location
-    params, std = (choice.candidate.parameters, choice.candidate.std) if choice.candidate else ({}, {})
-    selection: dict = {}
-    if choice.candidate is not None and choice.candidate.domain != Domain.SENSORS and replay:
+    chosen, loc, selection, built = choice.candidate, choice.location, Selection(), None
+    if chosen is not None and chosen.domain != Domain.SENSORS and replay:
         # Screening ranks signatures on residuals; the choice among the plausible ones is made by
         # re-simulation: each augmented model replays the training runs, and the lowest NRMSE wins.
         extra = [screening.pattern.candidate] if screening.pattern else []
-        shortlist = _shortlist(list(screening.pool) + extra, choice.candidate)
+        shortlist = _shortlist(list(screening.pool) + extra, chosen)
         if len(shortlist) > 1:
             base = refitter.linear_score()
-            scores = run_forked(lambda c: refitter.score(refitter.augment(c.mechanism, c.location, c.parameters,
-                                                                          c.std), c.mechanism, c.location),
-                                shortlist, refitter)
-            scored = list(zip(scores, shortlist))
-            _, best = min(scored, key=lambda x: x[0])
-            selection = {"training_nrmse_linear": base,
-                         "training_nrmse": [{"mechanism": c.mechanism, "location": c.location, "nrmse": nrmse}
-                                            for nrmse, c in scored]}
-            mech, loc, params, std = best.mechanism, best.location, best.parameters, best.std
-    augmented = refitter.augment(mech, loc, params, std)
-    params, std = augmented.parameters, augmented.std
-    kind = kind_of(mech)
-    if kind is not None and kind.refit is Refit.DAMPING_PATTERN and not std:
+            tried = run_forked(lambda c: _tried(refitter, c), shortlist)
+            for t in tried:
+                refitter.remember(t.augmented, t.nrmse)
+            best = min(tried, key=lambda t: t.nrmse)
+            selection = Selection(linear=base, tried=tuple(tried))
+            chosen, loc, built = best.candidate, best.candidate.location, best.augmented
+    if chosen is None:
+        return Finding(choice.verdict, None, None, loc, {}, {}, refitter.linear_structure, (), selection)
+    kind, place = chosen.kind, chosen.place
+    built = built or refitter.augment(kind, place, chosen.parameters, chosen.std)
+    params, std = built.parameters, built.std
+    if kind.refit is Refit.DAMPING_PATTERN and not std:
         # From the damping pattern of the identified C: take the standard error of the same damper
         # fitted to the equation residual (noise only, given the linear model).
         key = kind.fitted.name
-        same = [c for c in screening.candidates if c.mechanism == mech and c.location == loc and c.std.get(key)]
+        same = [c for c in screening.candidates if c.same_as(chosen) and c.std.get(key)]
         if same:
             std = {key: float(max(same, key=lambda c: c.explained).std[key])}
-    if kind is not None:   # in the lab's terms (p_delta: 1 = the full weight above)
-        params, std = kind.in_lab_terms(params, std, loc, model.nominal)
-    augmented = replace(augmented, parameters=params, std=std)
-    if replay and kind is not None:
-        # Does the augmented model explain the mismatch?  Re-simulate the training runs: it must remove
-        # at least ACCEPTED of the misfit above the noise, else the best candidate is only partial.
-        linear, after, noise = refitter.linear_score(), refitter.score(augmented, mech, loc), refitter.noise_nrmse()
-        share = explained_share(linear, after, noise)
-        selection.update({"training_nrmse_linear": linear, "training_nrmse_augmented": after,
-                          "training_nrmse_noise": noise, "explained": share, "accepted_above": ACCEPTED})
-        if share < ACCEPTED:
-            selection["partial"] = {"mechanism": mech, "location": loc, "parameters": params}
-            mech, params, std = Verdict.UNEXPLAINED.value, {}, {}
-            augmented = Augmented(refitter.linear_structure, {}, {}, ())
-            if where.storeys[f"storey{where.storey}"] > EXCESS:   # where the residual says, not the guess
-                loc = {"storey": where.storey}
-    return Finding(mech, loc, params, std, augmented.structure, augmented.records, selection)
+    params, std = kind.in_lab_terms(params, std, place, model.nominal)   # p_delta: 1 = the full weight above
+    augmented = replace(built, parameters=params, std=std)
+    finding = Finding(Verdict.MECHANISM, kind, place, loc, params, std, augmented.structure, augmented.records,
+                      selection, built.refit, built.corrected)
+    if not replay:
+        return finding
+    # Does the augmented model explain the mismatch?  Re-simulate the training runs: it must remove at
+    # least ACCEPTED of the misfit above the noise, else the best candidate is only partial.
+    linear, after, noise = refitter.linear_score(), refitter.score(augmented), refitter.noise_nrmse()
+    share = explained_share(linear, after, noise)
+    selection = replace(selection, linear=linear, augmented=after, noise=noise, explained=share)
+    if share >= ACCEPTED:
+        return replace(finding, selection=selection)
+    if where.storeys[f"storey{where.storey}"] > EXCESS:   # where the residual says, not the guess
+        loc = Place(Target.STOREY, where.storey).location
+    return Finding(Verdict.UNEXPLAINED, None, None, loc, {}, {}, refitter.linear_structure, (),
+                   replace(selection, partial=Partial(chosen, params, built)))

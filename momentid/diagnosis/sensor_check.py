@@ -15,6 +15,7 @@ from momentid.diagnosis.consistency import KinematicCheck, kinematic_check
 from momentid.diagnosis.residuals import LinearModel
 from momentid.diagnosis.screening import Candidate, Domain
 from momentid.diagnosis.thresholds import EXPLAINED
+from momentid.mechanisms.place import Place, Target
 
 __all__ = ["SensorCheck", "check_sensors"]
 
@@ -48,8 +49,7 @@ class SensorCheck:
 
     def rules_out(self, candidate: Candidate) -> bool:
         """Consistent channels rule out the sensor faults the check tests."""
-        kind = mechanisms.REGISTRY.get(candidate.mechanism)
-        return self.consistent and kind is not None and kind.kinematic
+        return self.consistent and candidate.kind.kinematic
 
     def to_dict(self) -> dict:
         """``sensor_check`` of ``report.json`` (empty without a check)."""
@@ -61,11 +61,17 @@ class SensorCheck:
 
 
 def check_sensors(model: LinearModel) -> SensorCheck:
-    """Stage 3: check the training runs' channels against each other."""
+    """Stage 3: check the training runs' channels against each other.
+
+    When they disagree, the channel whose fit removes most of the disagreement is read as each sensor
+    fault the check tests (``kinematic`` kinds, :meth:`~momentid.mechanisms.base.MechanismKind.from_kinematic`);
+    the one that explains most is the candidate (the first registered on a tie).
+    """
     kin = kinematic_check(model.train.runs, model.storeys, model.f_top)
-    if kin is None or kin.consistent:
+    if kin is None or kin.consistent or not kin.fits:
         return SensorCheck(kin, None, None)
-    fit = kin.best()
-    mech, params, std, explained = fit.verdict()
-    candidate = Candidate(mech, {"channel": fit.channel}, params, std, explained, Domain.SENSORS)
+    fit, place = kin.fits[0], Place(Target.CHANNEL, kin.fits[0].channel)
+    readings = [(kind, kind.from_kinematic(fit)) for kind in mechanisms.library() if kind.kinematic]
+    kind, (params, std, explained) = max(readings, key=lambda r: r[1][2])
+    candidate = Candidate(kind, place, params, std, explained, Domain.SENSORS)
     return SensorCheck(kin, candidate, candidate if explained >= EXPLAINED else None)

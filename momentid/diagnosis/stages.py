@@ -1,7 +1,8 @@
 """Stages 1-6 of the diagnosis in one call: from an experiment to stage 6's finding.
 
-:func:`~momentid.diagnosis.pipeline.diagnose` runs them once; a compound diagnosis
-(:mod:`~momentid.diagnosis.compound`) runs them again on recordings it has corrected.
+:func:`~momentid.diagnosis.pipeline.diagnose` runs them once, and again on recordings a compound
+diagnosis (:mod:`~momentid.diagnosis.compound`) asks to have corrected: each run has its own
+:class:`~momentid.diagnosis.refit.Refitter`, nothing is shared between them.
 """
 
 from __future__ import annotations

@@ -56,10 +56,7 @@ def _damping(tab: Table, masses: tuple[float, ...], stiffness: tuple[float, ...]
         if len(masses) < 2:
             raise damp.error("damping_ratios", "rayleigh_mu/rayleigh_kappa (one storey has only one mode)")
         ratios = damp.numbers("damping_ratios", length=2, nonnegative=True)
-        modes = damp._get("modes", [1, 2])
-        if (not isinstance(modes, list) or len(modes) != 2
-                or not all(isinstance(m, int) and not isinstance(m, bool) for m in modes)):
-            raise damp.error("modes", "two mode numbers, e.g. [1, 2]")
+        modes = damp.integers("modes", (1, 2), length=2)
         M, K = np.diag(masses), analytic.shear_stiffness(stiffness)
         mu, kappa = analytic.rayleigh_coefficients(M, K, ratios, tuple(modes), file=tab.file, key=damp.prefix)
         if mu < 0 or kappa < 0:

@@ -163,6 +163,22 @@ class Table:
             out.append(float(item))
         return tuple(out)
 
+    def integers(self, name: str, default: Any = _MISSING, *, length: int | None = None,
+                 minimum: int | None = None) -> tuple[int, ...]:
+        """An array of integers (of ``length`` when given, each at least ``minimum``)."""
+        value = self._get(name, default)
+        if value is default and default is not _MISSING:
+            return value
+        key = self.key(name)
+        what = f"an array of {length} integers" if length else "an array of integers"
+        if (not isinstance(value, list) or (length is not None and len(value) != length)
+                or not all(isinstance(v, int) and not isinstance(v, bool) for v in value)):
+            self._fail(key, value, what)
+        for i, item in enumerate(value):
+            if minimum is not None and item < minimum:
+                self._fail(f"{key}[{i}]", item, f"an integer >= {minimum}")
+        return tuple(value)
+
     def strings(self, name: str, default: Any = _MISSING) -> tuple[str, ...]:
         value = self._get(name, default)
         if value is default and default is not _MISSING:

@@ -31,10 +31,11 @@ from momentid.errors import ModelError
 from momentid.core.structure import Structure
 from momentid.mechanisms.base import drifts, storey_to_floor
 from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
+from momentid.mechanisms.place import Place, Target
 
-__all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
-           "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS",
-           "stateful", "state_actuator"]
+__all__ = ["build_spec", "compile_model", "sensor_layout", "callback_forces", "storey_to_floor", "drifts",
+           "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS", "stateful",
+           "state_actuator"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -51,14 +52,14 @@ def _inertia(mass: float, half: tuple[float, float, float]) -> list[float]:
 #: acceleration by about its inverse (1e-10 relative, below RK4's error).
 TABLE_INERTIA_RATIO = 1e10
 
-#: Storey forces the MJCF cannot express, which the simulator applies in a control callback: the
-#: kinds registered when this module was imported that declare ``callback`` (for messages; code asks
+#: Forces the MJCF cannot express, which the simulator applies in a control callback: the kinds
+#: registered when this module was imported that declare ``callback`` (for messages; code asks
 #: the registry, :func:`needs_callback`, so that a kind added later counts too).
 CALLBACK_MECHANISMS = tuple(kind.name for kind in registry.REGISTRY.values() if kind.callback)
 
 
 def needs_callback(mechanisms) -> bool:
-    """True when ``mechanisms`` include storey forces the MJCF cannot express."""
+    """True when ``mechanisms`` include forces the MJCF cannot express."""
     return any(registry.get(m.type).callback for m in mechanisms)
 
 
@@ -96,10 +97,11 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         through its hooks (``storey_tendon``: the storey tendon's stiffness and
         damping, e.g. ``extra_damper``, ``p_delta``; ``added_mass_body``: the
         added mass's body, e.g. ``flexible_added_mass``); the ``callback``
-        kinds' storey forces are applied by the simulator in a control
-        callback (:func:`storey_forces`, :func:`needs_callback`), floor kinds'
-        floor forces too; a force with memory (``has_state``) keeps its state in
-        the activation of a force-free actuator (:func:`state_actuator`).
+        kinds' forces across their place (a storey, a floor against the table,
+        two floors) are applied by the simulator in a control callback
+        (:func:`callback_forces`, :func:`needs_callback`); a force with memory
+        (``has_state``) keeps its state in the activation of a force-free
+        actuator (:func:`state_actuator`).
 
     Returns
     -------
@@ -153,7 +155,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
             extra.inertia = _inertia(dm[i], (0.05, 0.05, 0.02))
             for mech in mechanisms:
                 kind = registry.get(mech.type)
-                if kind.target is registry.Target.FLOOR and mech.location == i + 1:
+                if kind.place(mech.location) == Place(Target.FLOOR, i + 1):
                     kind.added_mass_body(mech, extra, dm[i])
             extra.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
                            rgba=[0.2, 0.4, 0.8, 1], contype=0, conaffinity=0)
@@ -167,7 +169,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         c_i = kappa * k_i
         for mech in mechanisms:
             kind = registry.get(mech.type)
-            if kind.target is registry.Target.STOREY and mech.location == i + 1:
+            if kind.place(mech.location) == Place(Target.STOREY, i + 1):
                 above = sum(structure.masses[j] + dm[j] for j in range(i, d))
                 k_i, c_i = kind.storey_tendon(mech, k_i, c_i, above, structure.storey_heights[i])
         tendon.stiffness = [k_i, 0.0, 0.0]
@@ -183,7 +185,8 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     # A force with memory keeps its internal state in the activation of a force-free actuator whose
     # rate the simulator's act_dyn callback returns (RK4 integrates it with the motion).
     for k, mech in enumerate(stateful(mechanisms)):
-        spec.add_actuator(name=state_actuator(k), target=f"q{mech.location}", trntype=mujoco.mjtTrn.mjTRN_JOINT,
+        floor = registry.get(mech.type).place(mech.location).level
+        spec.add_actuator(name=state_actuator(k), target=f"q{floor}", trntype=mujoco.mjtTrn.mjTRN_JOINT,
                           dyntype=mujoco.mjtDyn.mjDYN_USER, gainprm=[0.0] * _GAIN_PARAMETERS,
                           ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
                           actlimited=mujoco.mjtLimited.mjLIMITED_FALSE)
@@ -206,15 +209,15 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     return spec
 
 
-def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, time: float = 0.0,
-                  structure: Structure | None = None) -> np.ndarray:
-    """Storey shear forces (N) the MJCF cannot express: those of the ``callback`` storey kinds
-    (:data:`CALLBACK_MECHANISMS`) without memory, each by its registered law.
+def callback_forces(mechanisms, q: np.ndarray, v: np.ndarray, time: float = 0.0,
+                    structure: Structure | None = None) -> np.ndarray:
+    """Floor forces (N) the MJCF cannot express: those of the ``callback`` kinds
+    (:data:`CALLBACK_MECHANISMS`) without memory, each by its registered law across its place.
 
     Parameters
     ----------
-    drift, drift_velocity : ndarray, shape (..., d)
-        Storey drifts ``q_i - q_(i-1)`` (m) and their rates (m/s).
+    q, v : ndarray, shape (n, d)
+        Floor displacements (m) and velocities (m/s) relative to the table.
     time : float
         Time since the run started (s), for time-dependent laws (``stiffness_loss``).
     structure : Structure, optional
@@ -222,22 +225,25 @@ def storey_forces(mechanisms, drift: np.ndarray, drift_velocity: np.ndarray, tim
 
     Returns
     -------
-    ndarray, shape (..., d)
-        The force each storey exerts against its drift (positive resists).
+    ndarray, shape (n, d)
+        The generalised force on each floor.
     """
-    f = np.zeros(np.broadcast(drift, drift_velocity).shape)
+    q, v = np.atleast_2d(q), np.atleast_2d(v)
+    f = np.zeros(np.broadcast(q, v).shape)
     for mech in mechanisms:
         kind = registry.get(mech.type)
-        if not kind.callback or kind.target is not registry.Target.STOREY:
+        if not kind.callback:
             continue
+        place = kind.place(mech.location)
         if kind.has_state(dict(mech.parameters)):
-            raise ModelError(f"{mech.type} at storey {mech.location} has memory: its force depends on the "
-                             f"history of the drift, expected a simulation (momentid.lab.simulation)")
-        s = mech.location - 1
+            raise ModelError(f"{mech.type} at {place.words} has memory: its force depends on the history of "
+                             f"the motion, expected a simulation (momentid.lab.simulation)")
         if kind.needs_stiffness and structure is None:
             raise ModelError(f"{mech.type} needs the structure's storey stiffnesses")
-        stiffness = structure.storey_stiffness[s] if kind.needs_stiffness else None
-        f[..., s] += kind.storey_force(dict(mech.parameters), drift[..., s], drift_velocity[..., s], time, stiffness)
+        stiffness = structure.storey_stiffness[place.level - 1] if kind.needs_stiffness else None
+        law = kind.storey_force if place.target is Target.STOREY else kind.floor_force
+        f += place.columns(law(dict(mech.parameters), place.stretch(q), place.stretch(v), time, stiffness),
+                           q.shape[1])
     return f
 
 
@@ -270,6 +276,3 @@ def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
     for s in range(model.nsensor):
         out[model.sensor(s).name] = int(model.sensor_adr[s])
     return out
-
-
-SENSOR_NAMES = ("zdd", "z", "zd", "a", "q", "v")

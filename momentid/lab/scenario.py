@@ -441,10 +441,12 @@ def _parse_truth(tab: Table, storeys: int) -> tuple[Mechanism, ...]:
     for m in tab.tables("mechanisms"):
         # the rig kinds of the mechanism registry, each with its parameters, units and bounds
         kind = mechanisms.get(m.string("type", choices=tuple(k.name for k in mechanisms.rig_kinds())))
-        where = kind.target.value
-        loc = m.integer(where, minimum=1)
-        if loc > storeys:
-            raise m.error(where, f"a {where} number in 1..{storeys}")
+        where = kind.target.key
+        loc = (m.integers(where, length=2, minimum=1) if kind.target is mechanisms.Target.FLOORS
+               else m.integer(where, minimum=1))
+        problem = kind.place(loc).problem(storeys)
+        if problem is not None:
+            raise m.error(where, problem)
         params = []
         for p in kind.params:
             value = m.number(p.name)

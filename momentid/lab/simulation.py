@@ -26,13 +26,15 @@ from mujoco import rollout as _rollout
 
 from momentid import mechanisms as mechanisms_registry
 from momentid.lab import rig
+from momentid.mechanisms.place import Target
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
 from momentid.lab.excitation import GroundMotion, ground_motion
 from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
 from momentid.lab.sensors import measure
 
-__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay"]
+__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay", "CallbackForces", "initial_state",
+           "table_jerk"]
 
 _CHUNK_STEPS = 50_000   # steps per rollout call: bounded memory, progress between calls
 
@@ -69,18 +71,29 @@ def ground_motion_of(scenario: Scenario) -> GroundMotion:
     return ground_motion(scenario.excitation, scenario.duration)
 
 
-class _StoreyForces:
-    """Control callback applying the storey and floor forces of ``mechanisms`` that the MJCF cannot
-    express (:func:`momentid.lab.rig.storey_forces`) to the floor joints at every RK4 stage, and
-    act_dyn callback returning the rates of their internal states (:meth:`state_rate`).
+class CallbackForces:
+    """Control callback applying the forces of ``mechanisms`` that the MJCF cannot express
+    (:func:`momentid.lab.rig.callback_forces`) to the floor joints at every RK4 stage, and act_dyn
+    callback returning the rates of their internal states (:meth:`state_rate`).
 
-    Called about 4 times a step, so it works on floats: each mechanism's storey is read from
-    two joints and pushes on two, with its kind's registered law
-    (:meth:`~momentid.mechanisms.base.MechanismKind.storey_force`, the same that
-    :func:`~momentid.lab.rig.storey_forces` applies to arrays); a floor force
-    (:meth:`~momentid.mechanisms.base.MechanismKind.floor_force`) reads its floor against the table and
-    pushes on it alone.  A force with memory reads its state from its actuator's activation
-    (:func:`momentid.lab.rig.state_actuator`), the trial value of the RK4 stage."""
+    Called about 4 times a step, so it works on floats: each mechanism's place (a storey, a floor
+    against the table, two floors) is read from its upper floor's joint and its lower one's (none for
+    the table) and pushes on both, with its kind's registered law
+    (:meth:`~momentid.mechanisms.base.MechanismKind.storey_force` for a storey,
+    :meth:`~momentid.mechanisms.base.MechanismKind.floor_force` for another link; the same that
+    :func:`~momentid.lab.rig.callback_forces` applies to arrays).  A force with memory reads its state
+    from its actuator's activation (:func:`momentid.lab.rig.state_actuator`), the trial value of the
+    RK4 stage.
+
+    Parameters
+    ----------
+    model : mujoco.MjModel
+        The rig built with ``mechanisms`` (:func:`momentid.lab.rig.build_spec`).
+    mechanisms : sequence of Mechanism
+        The rig's mechanisms (those that are not ``callback`` kinds are left to the MJCF).
+    structure : Structure, optional
+        The storey stiffnesses a ``needs_stiffness`` kind takes its fraction of.
+    """
 
     def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
         self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
@@ -91,18 +104,19 @@ class _StoreyForces:
         self.rates: dict[int, tuple] = {}   # state actuator id -> (rate law, top, below, params, act address)
         for m in self.mechanisms:
             kind = mechanisms_registry.get(m.type)
-            s = m.location - 1
-            floor = kind.target is mechanisms_registry.Target.FLOOR
-            below = dofs[s - 1] if s > 0 and not floor else -1   # a floor force: against the table
-            k = structure.storey_stiffness[s] if structure is not None and kind.needs_stiffness else None
+            place = kind.place(m.location)
+            lower, upper = place.nodes
+            top, below = dofs[upper - 1], (dofs[lower - 1] if lower > 0 else -1)   # -1: against the table
+            k = structure.storey_stiffness[upper - 1] if structure is not None and kind.needs_stiffness else None
             if kind.needs_stiffness and k is None:
                 raise SimulationError(f"{m.type} needs the structure's storey stiffnesses")
-            law, p, adr = (kind.floor_force if floor else kind.storey_force), dict(m.parameters), -1
+            law = kind.storey_force if place.target is Target.STOREY else kind.floor_force
+            p, adr = dict(m.parameters), -1
             if kind.has_state(p):
                 act = model.actuator(rig.state_actuator(len(self.rates)))
                 adr = int(model.actuator_actadr[act.id])
-                self.rates[act.id] = (kind.state_rate, dofs[s], below, p, adr)
-            self.terms.append((law, dofs[s], below, p, k, adr))
+                self.rates[act.id] = (kind.state_rate, top, below, p, adr)
+            self.terms.append((law, top, below, p, k, adr))
 
     def __call__(self, model, data) -> None:
         qpos, qvel, out = data.qpos, data.qvel, data.qfrc_applied
@@ -111,8 +125,8 @@ class _StoreyForces:
             x = qpos[top] - (qpos[below] if below >= 0 else 0.0)
             v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
             f = law(p, x, v, data.time, k) if adr < 0 else law(p, x, v, data.time, k, state=float(data.act[adr]))
-            out[top] -= f               # the storey resists its drift on the floor above it
-            if below >= 0:
+            out[top] -= f               # the link resists its stretch on its upper floor ...
+            if below >= 0:              # ... and on its lower one
                 out[below] += f
 
     def state_rate(self, model, data, actuator: int) -> float:
@@ -123,8 +137,10 @@ class _StoreyForces:
         return float(rate(p, float(data.act[adr]), float(x), float(v)))
 
 
-def _initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np.ndarray:
-    """Full physics state at t = 0: floors at rest on the table, table at (z, z', z'')."""
+def initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np.ndarray:
+    """Full physics state (``mjSTATE_FULLPHYSICS``, shape (nstate,)) at t = 0 of a rig built by
+    :func:`momentid.lab.rig.build_spec`: floors at rest on the table, the table at displacement ``z``
+    (m), velocity ``zd`` (m/s) and commanded acceleration ``zdd`` (m/s^2)."""
     data = mujoco.MjData(model)
     data.qpos[0], data.qvel[0], data.act[0] = z, zd, zdd
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -133,8 +149,10 @@ def _initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np
     return state
 
 
-def _jerk(nodes: np.ndarray, h: float) -> np.ndarray:
-    """Table control sequence: the rate of the acceleration command over each step."""
+def table_jerk(nodes: np.ndarray, h: float) -> np.ndarray:
+    """The table actuator's control sequence (n_steps,) (m/s^3): the rate of the acceleration command
+    ``nodes`` (n_steps + 1,) (m/s^2, at every step's start and the last one's end) over each step of
+    ``h`` seconds."""
     return np.ascontiguousarray(np.diff(nodes) / h)
 
 
@@ -165,7 +183,7 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     out = np.empty((n_steps // every, len(index)))
     data = mujoco.MjData(model)
     chunk = every * max(1, _CHUNK_STEPS // every)
-    callback = _StoreyForces(model, mechanisms, structure) if rig.needs_callback(mechanisms) else None
+    callback = CallbackForces(model, mechanisms, structure) if rig.needs_callback(mechanisms) else None
     act_dyn = callback.state_rate if callback is not None and callback.rates else None
     # the table's jerk drives actuator 0; state actuators (forces with memory) take no control
     control = jerk[:, None] if model.nu == 1 else np.column_stack([jerk] + [np.zeros(n_steps)] * (model.nu - 1))
@@ -215,12 +233,12 @@ def simulate_run(scenario: Scenario, run: Run, motion: GroundMotion | None = Non
     model = rig.compile_model(spec)
     n, sub, h = scenario.n_samples, scenario.substeps, scenario.timestep
     nodes = np.asarray(motion.acceleration(np.arange(n * sub + 1) * h), float)
-    state = _initial_state(model, float(motion.displacement(0.0)), float(motion.velocity(0.0)), nodes[0])
+    state = initial_state(model, float(motion.displacement(0.0)), float(motion.velocity(0.0)), nodes[0])
 
     channels = Sensors().channels(scenario.structure.storeys)   # every channel, exact; the sensor model degrades
     layout = rig.sensor_layout(model)
     index = np.array([layout[c] for c in channels])
-    out, warnings = _roll(model, state, _jerk(nodes, h), sub, index, mechanisms=scenario.truth,
+    out, warnings = _roll(model, state, table_jerk(nodes, h), sub, index, mechanisms=scenario.truth,
                           structure=scenario.structure, progress=progress)
     _check_run(warnings, out, scenario, run)
     if scenario.truth:   # the recording must not reveal the hidden physics: attach the nominal rig
@@ -518,7 +536,7 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     index = np.array([layout[c] for c in names])
     nodes = np.append(zdd, zdd[-1])            # the table holds its last acceleration
     with _quiet_warnings():
-        out, warnings = _roll(model, _initial_state(model, 0.0, 0.0, nodes[0]), _jerk(nodes, h), 1, index,
+        out, warnings = _roll(model, initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h), 1, index,
                               mechanisms=mechanisms, structure=structure)
     if warnings or not np.all(np.isfinite(out)):
         raise SimulationError(

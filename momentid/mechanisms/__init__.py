@@ -6,10 +6,12 @@ MuJoCo or sensor effect, screening signature, refit, report wording) and registe
 diagnosis screens with them.  See ``docs/mechanisms.md``.
 """
 
-from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit, Target
-from momentid.mechanisms.registry import REGISTRY, get, library, load, names, register, rig_kinds, validate
+from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit
+from momentid.mechanisms.place import Place, Target
+from momentid.mechanisms.registry import (REGISTRY, get, library, load, names, open_search_kind, register, rig_kinds,
+                                          validate)
 
 load()
 
-__all__ = ["GRAVITY", "MechanismKind", "Param", "Refit", "Target", "REGISTRY", "get", "library", "load",
-           "names", "register", "rig_kinds", "validate"]
+__all__ = ["GRAVITY", "MechanismKind", "Param", "Place", "Refit", "Target", "REGISTRY", "get", "library", "load",
+           "names", "open_search_kind", "register", "rig_kinds", "validate"]

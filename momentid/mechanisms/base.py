@@ -4,24 +4,30 @@ A mechanism kind is a subclass of :class:`MechanismKind` in its own module of
 :mod:`momentid.mechanisms`, registered with :func:`momentid.mechanisms.registry.register`.
 It declares, in one place, everything the rest of the project needs to know about it:
 
-- its **name**, **target** (a storey, a floor or a sensor channel), **parameters** with their
-  SI units and physical bounds (a scenario's ``[truth]`` record is validated against them);
+- its **name**, **target** (where it acts: a storey, a floor, a floor against the table, two floors
+  or a sensor channel; :mod:`momentid.mechanisms.place`), **parameters** with their SI units and
+  physical bounds (a scenario's ``[truth]`` record is validated against them);
 - how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
-  :meth:`MechanismKind.added_mass_body`), or the **storey force** or **floor force** (a floor
-  against the table) the simulator applies in its control callback
+  :meth:`MechanismKind.added_mass_body`), or the **storey force** or **link force** (a floor
+  against the table, or two floors) the simulator applies in its control callback
   (:meth:`MechanismKind.storey_force`, :meth:`MechanismKind.floor_force`), with an internal
   state the simulator integrates when the force has memory (:meth:`MechanismKind.has_state`,
   :meth:`MechanismKind.state_rate`), or the **sensor model**
   (:meth:`MechanismKind.distort` / :meth:`MechanismKind.correct`);
-- its **screening signature**: the columns of the equation residual it would explain
-  (:meth:`MechanismKind.screen_equation`), and for the table channel the replay residual
-  (:meth:`MechanismKind.replay_column`);
-- how the diagnosis **refits** it (:attr:`MechanismKind.refit`) and turns the fitted
-  coefficients back into a model record (:meth:`MechanismKind.as_records`);
+- its **screening signature**: the columns of the equation residual it would explain at a place
+  (:meth:`MechanismKind.screen_equation`), for the table channel the replay residual
+  (:meth:`MechanismKind.replay_column`), for a sensor fault the kinematic check's fit
+  (:meth:`MechanismKind.from_kinematic`);
+- its signature to the **damping pattern** of an identified C (:meth:`MechanismKind.damping_pattern`);
+- how the diagnosis **refits** it (:attr:`MechanismKind.refit`, :meth:`MechanismKind.force_signal`)
+  and turns the fitted coefficients back into a model record (:meth:`MechanismKind.as_records`);
 - its **report wording** (:meth:`MechanismKind.describe`).
 
 ``truth_only`` kinds can be built into a rig (hidden scenarios) but are not in the diagnosis
 library: the diagnosis must call them "unexplained".
+
+Every hook that concerns one mechanism receives its :class:`~momentid.mechanisms.place.Place`; the
+diagnosis never reads a location's keys or a kind's name.
 
 This package sits below :mod:`momentid.lab` and :mod:`momentid.diagnosis`: it imports only
 :mod:`momentid.core`, :mod:`momentid.errors`, numpy and mujoco.
@@ -39,28 +45,26 @@ import numpy as np
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.errors import ModelError
+from momentid.mechanisms.place import Place, Target
 
-__all__ = ["GRAVITY", "Target", "Refit", "Param", "MechanismKind", "Screened", "EquationSignals"]
+__all__ = ["GRAVITY", "Target", "Place", "Refit", "Param", "MechanismKind", "SensorFault", "Screened",
+           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts"]
 
 GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
-
-
-class Target(enum.Enum):
-    """What a mechanism sits on: a storey (between floors i-1 and i), a floor, or a sensor channel."""
-
-    STOREY = "storey"
-    FLOOR = "floor"
-    CHANNEL = "channel"
 
 
 class Refit(enum.Enum):
     """How the diagnosis sizes a screened candidate before it is re-simulated.
 
-    ``RESIMULATE``: a nonlinear storey force, refitted by errors-in-variables together with the
+    ``RESIMULATE``: a nonlinear force at a link, refitted by errors-in-variables together with the
     linear model, then its size searched by re-simulation.  ``ATTACHMENT``: a change of the rig the
     identified model partly absorbed, kept on the lab's nominal model.  ``DAMPING_PATTERN``: a linear
     term the identified C holds, read from its pattern.  ``CORRECT_DATA``: a sensor fault, undone on
     the recordings, which are then re-identified.
+
+    A kind states the rest of what its refit needs: :meth:`MechanismKind.force_signal` (``RESIMULATE``),
+    :meth:`MechanismKind.attachment_matrices` (``ATTACHMENT``), :meth:`MechanismKind.damping_pattern`
+    (``DAMPING_PATTERN``), :meth:`MechanismKind.correct` (``CORRECT_DATA``).
     """
 
     RESIMULATE = "resimulate"
@@ -108,9 +112,9 @@ class Param:
 
 @dataclass(frozen=True)
 class Screened:
-    """A mechanism's fitted signature at one location, before the diagnosis names it a candidate."""
+    """A mechanism's fitted signature at one place, before the diagnosis names it a candidate."""
 
-    location: dict
+    place: Place
     parameters: dict
     std: dict
     explained: float
@@ -159,24 +163,37 @@ class EquationSignals:
     def storeys(self) -> int:
         return self.a.shape[1]
 
+    def stretch(self, place: Place) -> np.ndarray:
+        """The place's stretch (n,) (m): a storey's drift, a floor's displacement against the table, ..."""
+        return place.stretch(self.q)
+
+    def stretch_rate(self, place: Place) -> np.ndarray:
+        """The rate (n,) (m/s) of :meth:`stretch`."""
+        return place.stretch(self.v)
+
+    def columns(self, phi: np.ndarray, place: Place) -> np.ndarray:
+        """Floor forces (n, d) of a force ``phi`` (n,) at ``place`` (resisting a link's stretch)."""
+        return place.columns(phi, self.storeys)
+
+    def linear_confounds(self, place: Place) -> list[np.ndarray]:
+        """A spring and a dashpot at ``place``, which the identified model may have absorbed there: the
+        confounds of a force screened at a link."""
+        return [self.columns(self.stretch(place), place), self.columns(self.stretch_rate(place), place)]
+
     def storey_columns(self, phi: np.ndarray, s: int) -> np.ndarray:
         """Floor forces (n, d) of a force ``phi`` (n,) resisting storey ``s``'s drift (0-based)."""
-        e = np.zeros((len(phi), self.storeys))
-        e[:, s] = phi
-        return storey_to_floor(e)
+        return self.columns(phi, Place(Target.STOREY, s + 1))
 
     def floor_columns(self, phi: np.ndarray, j: int) -> np.ndarray:
         """Floor forces (n, d) of a force ``phi`` (n,) on floor ``j`` alone (0-based)."""
-        e = np.zeros((len(phi), self.storeys))
-        e[:, j] = phi
-        return e
+        return self.columns(phi, Place(Target.FLOOR, j + 1))
 
 
-#: ``fit(columns, confounds, location, to_params) -> list[Screened]``: the screening's held-out least
+#: ``fit(columns, confounds, place, to_params) -> list[Screened]``: the screening's held-out least
 #: squares of the residual on signature ``columns`` and ``confounds`` (each (n, d) floor forces);
 #: ``to_params(coef, std) -> (parameters, std)`` names the fitted coefficients.  Empty when the
 #: columns cannot be fitted (one of them is zero).
-Fitter = Callable[[list, list, dict, Callable], "list[Screened]"]
+Fitter = Callable[[list, list, Place, Callable], "list[Screened]"]
 
 
 def storey_to_floor(f: np.ndarray) -> np.ndarray:
@@ -207,7 +224,7 @@ class MechanismKind:
 
     #: Identifier used in scenarios' ``[truth]``, reports and the CLI.
     name: ClassVar[str]
-    #: What the mechanism sits on.
+    #: Where it acts (:class:`~momentid.mechanisms.place.Target`).
     target: ClassVar[Target]
     #: Parameters of the model record (a scenario's ``[truth]`` entry), with bounds.
     params: ClassVar[tuple[Param, ...]] = ()
@@ -215,32 +232,50 @@ class MechanismKind:
     fitted: ClassVar[Param | None] = None
     #: Built into rigs but outside the diagnosis library (its answer is "unexplained").
     truth_only: ClassVar[bool] = False
-    #: A storey force (``Target.STOREY``) or floor force (``Target.FLOOR``) the MJCF cannot express,
-    #: applied by the simulator's control callback.
+    #: The open search's law at its target (:mod:`momentid.diagnosis.discovery` builds its records).
+    open_search: ClassVar[bool] = False
+    #: A force the MJCF cannot express (a storey force, or a link force between a floor and the table
+    #: or two floors), applied by the simulator's control callback.
     callback: ClassVar[bool] = False
     #: Its storey force takes a fraction of the storey's own stiffness (the callback needs it).
     needs_stiffness: ClassVar[bool] = False
-    #: A sensor fault the kinematic check (``a_j = zdd + q_j''``) tests: channels found consistent
-    #: rule it out.
+    #: A sensor fault the kinematic check (``a_j = zdd + q_j''``) tests (:meth:`from_kinematic`):
+    #: channels found consistent rule it out.
     kinematic: ClassVar[bool] = False
     #: How the diagnosis sizes it (None for truth-only kinds).
     refit: ClassVar[Refit | None] = None
-    #: A storey force that opposes the drift velocity: a linear identification takes it into C as an
+    #: A force that opposes its place's stretch rate: a linear identification takes it into C as an
     #: equivalent viscous damping, so where C's pattern shows a damper, this kind there is its rival.
     dissipative: ClassVar[bool] = False
     #: One line for the docs and ``describe``.
     summary: ClassVar[str] = ""
 
+    def __reduce__(self):
+        # One instance per kind: a kind sent to or from another process (a diagnosis's worker) is the
+        # registry's instance there, so that kinds compare by identity everywhere.
+        from momentid.mechanisms.registry import get
+        return get, (self.name,)
+
+    # ---------------------------------------------------------------- where
+
+    def place(self, index) -> Place:
+        """The place of this kind at ``index`` (a record's location)."""
+        return Place(self.target, tuple(index) if isinstance(index, list) else index)
+
+    def places(self, storeys: int) -> tuple[Place, ...]:
+        """Every place this kind can sit at in a rig of ``storeys`` storeys."""
+        return self.target.places(storeys)
+
     # ---------------------------------------------------------------- the record
 
     def validate(self, mech: Mechanism, storeys: int) -> None:
         """Raise :class:`ModelError` unless ``mech`` is a valid record of this kind in a rig of
-        ``storeys`` storeys (location in range, every parameter present and within bounds)."""
+        ``storeys`` storeys (place in range, every parameter present and within bounds)."""
         if self.target is Target.CHANNEL:
             raise ModelError(f"mechanism {self.name!r} is a sensor fault: it has no place in the rig's model")
-        if not 1 <= mech.location <= storeys:
-            raise ModelError(f"mechanism {self.name!r}: {self.target.value} {mech.location}, "
-                             f"expected 1..{storeys}")
+        problem = self.place(mech.location).problem(storeys)
+        if problem is not None:
+            raise ModelError(f"mechanism {self.name!r}: {self.target.key} {mech.location}, expected {problem}")
         values = dict(mech.parameters)
         for p in self.params:
             if p.name not in values or not p.admits(values[p.name]):
@@ -268,20 +303,21 @@ class MechanismKind:
     def storey_force(self, params: dict, drift, drift_velocity, time: float, stiffness: float | None):
         """Force (N) the storey exerts against its drift (positive resists); floats or arrays.
 
-        Only for ``callback`` kinds.  ``params`` maps parameter names to values; ``time`` is the
-        time since the run started (s); ``stiffness`` the storey's linear stiffness (N/m) when
-        ``needs_stiffness``.
+        Only for ``callback`` kinds on ``Target.STOREY``.  ``params`` maps parameter names to values;
+        ``time`` is the time since the run started (s); ``stiffness`` the storey's linear stiffness
+        (N/m) when ``needs_stiffness``.
         """
         raise NotImplementedError(f"{self.name} is not a callback storey force")
 
     def floor_force(self, params: dict, displacement, velocity, time: float, stiffness: float | None):
-        """Force (N) a ``callback`` kind on ``Target.FLOOR`` exerts between its floor and the table
-        (positive resists the floor's ``displacement`` relative to the table); floats or arrays.
+        """Force (N) a ``callback`` kind on ``Target.FLOOR_TABLE`` or ``Target.FLOORS`` exerts across
+        its link (positive resists the link's stretch: its floor's displacement relative to the table,
+        or its upper floor's relative to its lower one); floats or arrays.
 
-        The arguments are those of :meth:`storey_force`, with the floor's displacement (m) and
-        velocity (m/s) relative to the table in place of a storey's drift; ``stiffness`` is None.
+        The arguments are those of :meth:`storey_force`, with the link's stretch (m) and its rate
+        (m/s) in place of a storey's drift; ``stiffness`` is None.
         """
-        raise NotImplementedError(f"{self.name} is not a callback floor force")
+        raise NotImplementedError(f"{self.name} is not a callback link force")
 
     def has_state(self, params: dict) -> bool:
         """True when the force has memory: one internal state the simulator integrates with the
@@ -290,8 +326,8 @@ class MechanismKind:
         return False
 
     def state_rate(self, params: dict, state: float, displacement: float, velocity: float) -> float:
-        """Time derivative of the internal state (:meth:`has_state`) at the storey drift or floor
-        displacement ``displacement`` (m) moving at ``velocity`` (m/s)."""
+        """Time derivative of the internal state (:meth:`has_state`) at the link's stretch
+        ``displacement`` (m) changing at ``velocity`` (m/s)."""
         raise NotImplementedError(f"{self.name} has no internal state")
 
     def distort(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
@@ -302,9 +338,9 @@ class MechanismKind:
         """A sensor fault undone: the true signal (n,) from the faulty reading ``x`` (n,)."""
         raise NotImplementedError(f"{self.name} is not a sensor fault")
 
-    def correct_run(self, run: RunData, location: dict, params: dict) -> RunData:
-        """``run`` with this sensor fault undone on ``location['channel']`` (unchanged if absent)."""
-        channel = location["channel"]
+    def correct_run(self, run: RunData, place: Place, params: dict) -> RunData:
+        """``run`` with this sensor fault undone on the channel ``place`` (unchanged if not recorded)."""
+        channel = place.index
         if not run.has(channel):
             return run
         j = run.channels.index(channel)
@@ -314,8 +350,8 @@ class MechanismKind:
 
     # ---------------------------------------------------------------- the diagnosis
 
-    def screen_equation(self, signals: EquationSignals, fit: Fitter, index: int) -> list[Screened]:
-        """Fits of this kind's signature in the floor-force residual at storey/floor ``index`` (0-based).
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
+        """Fits of this kind's signature in the floor-force residual at ``place`` (one of :meth:`places`).
 
         ``fit`` (:data:`Fitter`) is the screening's held-out least squares: each column an (n, d)
         array of floor forces; confounds are linear terms the identified model may have absorbed.
@@ -332,10 +368,22 @@ class MechanismKind:
         """
         return None
 
-    def force_signal(self, params: dict, drift: np.ndarray, drift_velocity: np.ndarray,
-                     weight_above: float) -> np.ndarray:
-        """For ``RESIMULATE`` kinds: the storey force (n,) per unit of the fitted coefficient."""
-        raise NotImplementedError(f"{self.name} has no storey force signal")
+    def from_kinematic(self, fit) -> tuple[dict, dict, float] | None:
+        """For ``kinematic`` kinds: (parameters, standard errors, share explained) of this fault from the
+        kinematic check's fit on one channel (:class:`~momentid.diagnosis.consistency.SensorFit`)."""
+        return None
+
+    def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above) -> np.ndarray:
+        """For ``RESIMULATE`` kinds: the force (n,) at the place per unit of the fitted coefficient, from
+        the place's stretch (m) and its rate (m/s), each (n,), and the added mass (kg) it carries
+        (:meth:`~momentid.mechanisms.place.Place.above`)."""
+        raise NotImplementedError(f"{self.name} has no force signal")
+
+    def damping_pattern(self, place: Place, storeys: int) -> np.ndarray:
+        """For ``DAMPING_PATTERN`` kinds: its term (d, d) in the damping matrix C per unit of the fitted
+        coefficient at ``place`` (a dashpot across a link: ``w w^T``, ``w`` its direction)."""
+        w = place.direction(storeys)
+        return np.outer(w, w)
 
     def attachment_matrices(self, M, C, K, floor: int, mass: float, frequency: float, damping_ratio: float):
         """For ``ATTACHMENT`` kinds: M, C, K (d+1, d+1) of the model (d, d) with ``mass`` (kg) on floor
@@ -346,24 +394,48 @@ class MechanismKind:
         """A passive rig: the fitted coefficient within its physical bounds (absent: 0)."""
         return self.fitted is None or not self.fitted.bounded or self.fitted.within(params.get(self.fitted.name, 0.0))
 
-    def as_records(self, location: dict, params: dict) -> tuple[Mechanism, ...]:
+    def as_records(self, place: Place, params: dict) -> tuple[Mechanism, ...]:
         """The model records (for :func:`momentid.lab.rig.build_spec`) of a diagnosed candidate."""
         if self.target is Target.CHANNEL:
             return ()
-        return (Mechanism(self.name, location[self.target.value],
-                          tuple((p.name, params[p.name]) for p in self.params)),)
+        return (Mechanism(self.name, place.index, tuple((p.name, params[p.name]) for p in self.params)),)
 
-    def replay_structure(self, structure: Structure, location: dict, params: dict, static: bool) -> Structure:
+    def replay_structure(self, structure: Structure, place: Place, params: dict, static: bool) -> Structure:
         """The structure to build the augmented model on (a mechanism expressed through it)."""
         return structure
 
-    def in_lab_terms(self, params: dict, std: dict, location: dict,
+    def in_lab_terms(self, params: dict, std: dict, place: Place,
                      nominal: Structure | None) -> tuple[dict, dict]:
         """Fitted parameters and standard errors as the report states them."""
         return params, std
 
-    def describe(self, location: dict, params: dict, std: dict) -> str:
+    def describe(self, place: Place, params: dict, std: dict) -> str:
         """The report's sentence naming this mechanism with its fitted parameters."""
-        where = ", ".join(f"{k} {v}" for k, v in location.items())
         p = ", ".join(f"{k} = {v:.4g}" + (f" +/- {std[k]:.2g}" if k in std else "") for k, v in params.items())
-        return f"Best explanation: {self.name.replace('_', ' ')} at {where}: {p}."
+        return f"Best explanation: {self.name.replace('_', ' ')} at {place.words}: {p}."
+
+
+class SensorFault(MechanismKind):
+    """A fault of one sensor channel, undone on the recordings (``Refit.CORRECT_DATA``).
+
+    A subclass states its fault's term in the floor equations on a floor's accelerometer or
+    displacement channel (:meth:`channel_signature`); screening fits it on every channel.
+    """
+
+    target = Target.CHANNEL
+    refit = Refit.CORRECT_DATA
+
+    def channel_signature(self, signals: EquationSignals, group: str, floor: int):
+        """The fault's term on channel ``group`` (``"a"`` or ``"q"``) of ``floor`` (0-based) in the
+        floor-force residual: ``(column (n, d), confounds, to_params)``, or None where it has none."""
+        return None
+
+    def screen_equation(self, signals, fit, place):
+        channel = str(place.index)
+        if channel[0] not in "aq" or not channel[1:].isdigit():
+            return []
+        got = self.channel_signature(signals, channel[0], place.level - 1)
+        if got is None:
+            return []
+        column, confounds, to_params = got
+        return fit([column], confounds, place, to_params)

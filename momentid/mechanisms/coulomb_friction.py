@@ -44,12 +44,11 @@ class CoulombFriction(MechanismKind):
     def storey_force(self, params, drift, drift_velocity, time, stiffness):
         return params["force"] * smooth_sign(drift_velocity / FRICTION_SMOOTHING)
 
-    def screen_equation(self, signals, fit, index):
-        s, drift, velocity = index, signals.drift[:, index], signals.drift_velocity[:, index]
-        confounds = [signals.storey_columns(drift, s), signals.storey_columns(velocity, s)]
+    def screen_equation(self, signals, fit, place):
+        velocity = signals.stretch_rate(place)
         eps = SCREENING_SMOOTHING * float(np.sqrt(np.mean(velocity ** 2))) or _STILL
-        return fit([signals.storey_columns(np.tanh(velocity / eps), s)], confounds,
-                   {"storey": s + 1}, one_coefficient("force"))
+        return fit([signals.columns(np.tanh(velocity / eps), place)], signals.linear_confounds(place), place,
+                   one_coefficient("force"))
 
-    def force_signal(self, params, drift, drift_velocity, weight_above):
-        return np.tanh(drift_velocity / FRICTION_SMOOTHING)
+    def force_signal(self, params, stretch, rate, weight_above):
+        return np.tanh(rate / FRICTION_SMOOTHING)

@@ -21,10 +21,9 @@ class CubicStiffness(MechanismKind):
     def storey_force(self, params, drift, drift_velocity, time, stiffness):
         return params["k3"] * drift * drift * drift
 
-    def screen_equation(self, signals, fit, index):
-        s, drift = index, signals.drift[:, index]
-        confounds = [signals.storey_columns(drift, s), signals.storey_columns(signals.drift_velocity[:, s], s)]
-        return fit([signals.storey_columns(drift ** 3, s)], confounds, {"storey": s + 1}, one_coefficient("k3"))
+    def screen_equation(self, signals, fit, place):
+        return fit([signals.columns(signals.stretch(place) ** 3, place)], signals.linear_confounds(place), place,
+                   one_coefficient("k3"))
 
-    def force_signal(self, params, drift, drift_velocity, weight_above):
-        return drift ** 3
+    def force_signal(self, params, stretch, rate, weight_above):
+        return stretch ** 3

@@ -119,6 +119,7 @@ class _DataDriven(MechanismKind):
     params = tuple(p for t in TERMS for p in (Param(t.coefficient, t.unit, f"coefficient of {t.meaning}",
                                                     example=_EXAMPLES.get(t.name, 0.0)),) + t.shapes)
     truth_only = True
+    open_search = True
     callback = True
 
     def has_state(self, params):
@@ -145,5 +146,5 @@ class DataDrivenStorey(_DataDriven):
 @register
 class DataDrivenFloor(_DataDriven):
     name = "data_driven_floor"
-    target = Target.FLOOR
+    target = Target.FLOOR_TABLE
     summary = "a discovered force between a floor and the table: sum of terms of its displacement x, v, ..."

@@ -20,9 +20,8 @@ class ExtraDamper(MechanismKind):
     def storey_tendon(self, mech, stiffness, damping, weight_above, height):
         return stiffness, damping + mech.get("c")
 
-    def screen_equation(self, signals, fit, index):
-        s = index
+    def screen_equation(self, signals, fit, place):
         # A linear damper hides in an identified C: screened against the drift alone (the damping
         # pattern of the identified C is the diagnosis's other test of it).
-        return fit([signals.storey_columns(signals.drift_velocity[:, s], s)],
-                   [signals.storey_columns(signals.drift[:, s], s)], {"storey": s + 1}, one_coefficient("c"))
+        return fit([signals.columns(signals.stretch_rate(place), place)],
+                   [signals.columns(signals.stretch(place), place)], place, one_coefficient("c"))

@@ -38,13 +38,14 @@ class FlexibleAddedMass(MechanismKind):
         joint.stiffness = [mass * w * w, 0.0, 0.0]
         joint.damping = [2 * mech.get("damping_ratio") * mass * w, 0.0, 0.0]
 
-    def screen_equation(self, signals, fit, index):
-        """The attachment's force on floor ``index`` for the grid frequency that explains most.
+    def screen_equation(self, signals, fit, place):
+        """The attachment's force on floor ``place`` for the grid frequency that explains most.
 
         The attachment oscillator is driven by the measured (band-limited) floor acceleration; its
         resonance amplifies that channel's noise too, which biases the fitted amplitude low.
         """
-        j, dm, a = index, signals.added_mass[:, index], signals.a[:, index]
+        j = place.index - 1
+        dm, a = signals.added_mass[:, j], signals.a[:, j]
         if not np.any(dm > 0):
             return []
         best = None
@@ -53,7 +54,7 @@ class FlexibleAddedMass(MechanismKind):
                                 GRID_POINTS):
             rel = signals.attachment_response(a, f_a, GRID_DAMPING_RATIO) - a
             phi = np.where(dm > 0, -dm * rel, 0.0)
-            found = fit([signals.floor_columns(phi, j)], [signals.floor_columns(a, j)], {"floor": j + 1},
+            found = fit([signals.columns(phi, place)], [signals.columns(a, place)], place,
                         lambda c, e, f_a=f_a: ({"frequency": float(f_a), "damping_ratio": GRID_DAMPING_RATIO,
                                                 "amplitude": float(c[0])}, {"amplitude": float(e[0])}))
             # A later grid point replaces the best so far when its share explained exceeds the best's

@@ -32,28 +32,26 @@ class PDelta(MechanismKind):
     def storey_tendon(self, mech, stiffness, damping, weight_above, height):
         return stiffness - mech.get("factor") * GRAVITY * weight_above / height, damping
 
-    def screen_equation(self, signals, fit, index):
-        s = index
-        above = signals.added_mass[:, s:].sum(axis=1)
+    def screen_equation(self, signals, fit, place):
+        above = place.above(signals.added_mass)
         if not np.any(above > 0):   # no run adds mass above: indistinguishable from the stiffness
             return []
-        drift = signals.drift[:, s]
-        confounds = [signals.storey_columns(drift, s), signals.storey_columns(signals.drift_velocity[:, s], s)]
-        return fit([signals.storey_columns(-GRAVITY * above * drift, s)], confounds, {"storey": s + 1},
+        drift = signals.stretch(place)
+        return fit([signals.columns(-GRAVITY * above * drift, place)], signals.linear_confounds(place), place,
                    one_coefficient("weight_per_height"))
 
-    def force_signal(self, params, drift, drift_velocity, weight_above):
-        return -GRAVITY * weight_above * drift
+    def force_signal(self, params, stretch, rate, weight_above):
+        return -GRAVITY * weight_above * stretch
 
-    def as_records(self, location, params):
+    def as_records(self, place, params):
         # Built with factor 1 on a structure whose storey height is 1 / weight_per_height.
-        return (Mechanism(self.name, location["storey"], (("factor", 1.0),)),)
+        return (Mechanism(self.name, place.index, (("factor", 1.0),)),)
 
-    def replay_structure(self, structure, location, params, static):
+    def replay_structure(self, structure, place, params, static):
         """The structure whose MJCF ``p_delta`` (factor 1) loses ``weight_per_height x g x weight
         above``: the storey's height is set to 1 / weight_per_height; with ``static`` the loss of the
         floors' own weight, which an identified stiffness already holds, is added back."""
-        s = location["storey"] - 1
+        s = place.index - 1
         h_eff = 1.0 / params["weight_per_height"] if params["weight_per_height"] > 0 else float("inf")
         k = list(structure.storey_stiffness)
         if static:
@@ -61,10 +59,10 @@ class PDelta(MechanismKind):
         return replace(structure, storey_stiffness=tuple(k), storey_heights=tuple(
             h_eff if i == s else h for i, h in enumerate(structure.storey_heights)))
 
-    def in_lab_terms(self, params, std, location, nominal):
+    def in_lab_terms(self, params, std, place, nominal):
         if nominal is None:   # no stated storey height: weight_per_height it stays
             return params, std
-        h = nominal.storey_heights[location["storey"] - 1]
+        h = nominal.storey_heights[place.index - 1]
         params = {**params, "factor": params["weight_per_height"] * h}
         if "weight_per_height" in std:
             std = {**std, "factor": std["weight_per_height"] * h}

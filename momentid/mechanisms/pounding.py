@@ -22,7 +22,7 @@ __all__ = ["Pounding"]
 @register
 class Pounding(MechanismKind):
     name = "pounding"
-    target = Target.FLOOR
+    target = Target.FLOOR_TABLE
     params = (Param("gap", "m", "distance from the floor's rest position to the stop (+ side)", low=0.0,
                     low_open=True, example=0.001),
               Param("stiffness", "N/m", "contact spring of the stop", low=0.0, low_open=True, example=2e4),

@@ -13,15 +13,16 @@ from types import ModuleType
 
 from momentid.core.structure import Mechanism
 from momentid.errors import ModelError
-from momentid.mechanisms.base import MechanismKind, Target
+from momentid.mechanisms.base import MechanismKind
+from momentid.mechanisms.place import Target
 
-__all__ = ["REGISTRY", "register", "load", "get", "names", "library", "rig_kinds", "validate"]
+__all__ = ["REGISTRY", "register", "load", "get", "names", "library", "rig_kinds", "open_search_kind", "validate"]
 
 #: name -> kind, in the order the package's modules are imported (alphabetical).
 REGISTRY: dict[str, MechanismKind] = {}
 
 #: Modules of the package that declare no kind.
-_INFRASTRUCTURE = {"base", "registry"}
+_INFRASTRUCTURE = {"base", "place", "registry"}
 
 
 def register(cls: type[MechanismKind]) -> type[MechanismKind]:
@@ -64,8 +65,16 @@ def library() -> tuple[MechanismKind, ...]:
 
 
 def rig_kinds() -> tuple[MechanismKind, ...]:
-    """The kinds a rig's model can carry (a scenario's ``[truth]``): storey and floor kinds."""
+    """The kinds a rig's model can carry (a scenario's ``[truth]``): every kind but the sensor faults."""
     return tuple(k for k in REGISTRY.values() if k.target is not Target.CHANNEL)
+
+
+def open_search_kind(target: Target) -> MechanismKind:
+    """The kind whose records hold the open search's law at places of ``target``."""
+    for kind in REGISTRY.values():
+        if kind.open_search and kind.target is target:
+            return kind
+    raise ModelError(f"no open-search kind registered for the target {target.value!r}")
 
 
 def validate(mech: Mechanism, storeys: int) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
+from momentid.mechanisms.base import Param, SensorFault
 from momentid.mechanisms.registry import register
 
 __all__ = ["SensorGain"]
@@ -21,11 +21,9 @@ def _from_replay(c, e):
 
 
 @register
-class SensorGain(MechanismKind):
+class SensorGain(SensorFault):
     name = "sensor_gain"
-    target = Target.CHANNEL
     fitted = Param("gain", "1", "reading / true signal", example=1.05)
-    refit = Refit.CORRECT_DATA
     kinematic = True
     summary = "gain x(t) recorded as x(t)"
 
@@ -35,15 +33,18 @@ class SensorGain(MechanismKind):
     def correct(self, time, x, params):
         return x / params["gain"]
 
-    def screen_equation(self, signals, fit, index):
-        j, dm, a = index, signals.added_mass[:, index], signals.a[:, index]
-        out = []
-        if np.any(dm > 0):   # a floor accelerometer's gain is separable from the mass only with added mass
-            out += fit([signals.floor_columns(dm * a, j)], [signals.floor_columns(a, j)], {"channel": f"a{j + 1}"},
-                       _from_equation)
+    def channel_signature(self, signals, group, floor):
+        j = floor
+        if group == "a":
+            dm, a = signals.added_mass[:, j], signals.a[:, j]
+            if not np.any(dm > 0):   # a floor accelerometer's gain is separable from the mass only with added mass
+                return None
+            return signals.floor_columns(dm * a, j), [signals.floor_columns(a, j)], _from_equation
         column = np.outer(signals.q[:, j], signals.K[:, j]) + np.outer(signals.v[:, j], signals.C[:, j])
-        out += fit([column], [], {"channel": f"q{j + 1}"}, _from_equation)
-        return out
+        return column, [], _from_equation
 
     def replay_column(self, sim, sim_rate, step):
         return sim, _from_replay
+
+    def from_kinematic(self, fit):
+        return {"gain": fit.gain_only}, {"gain": fit.gain_std}, fit.explained["gain"]

@@ -38,7 +38,7 @@ def recording_bytes(sensors: str = "") -> tuple[bytes, tuple[int, ...]]:
         return out.read_bytes(), tuple(sizes)
 
 
-def _rec(folder: Path, cut_after: int | None = None, sensors: str = "", flip_in: int | None = None) -> Path:
+def recording_file(folder: Path, cut_after: int | None = None, sensors: str = "", flip_in: int | None = None) -> Path:
     """The simulated recording, cut after run ``cut_after`` or with a byte of run ``flip_in`` (1-based)
     flipped (a chunk CRC mismatch)."""
     data, sizes = recording_bytes(sensors)
@@ -55,7 +55,7 @@ def _rec(folder: Path, cut_after: int | None = None, sensors: str = "", flip_in:
 def _with_rec(*argv, cut_after=None, sensors="", flip_in=None):
     """``momentid <argv>`` where ``REC`` stands for a fresh copy of the simulated recording."""
     def act(folder: Path) -> CliResult:
-        rec = _rec(folder, cut_after, sensors, flip_in)
+        rec = recording_file(folder, cut_after, sensors, flip_in)
         return cli(*(rec if a == "REC" else a for a in argv))
     return act
 
@@ -105,7 +105,7 @@ def _edited(edit, *argv):
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            experiment = read_recording(_rec(folder))
+            experiment = read_recording(recording_file(folder))
         runs = tuple(edit(r) for r in experiment.runs)
         path = write_experiment(folder / "edited.mcap", dataclasses.replace(experiment, runs=runs))
         return cli("identify", path, *argv)

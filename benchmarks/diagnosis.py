@@ -14,19 +14,9 @@ case (callback physics, re-simulated).  Writes ``benchmarks/results/diagnosis.js
 
 from __future__ import annotations
 
-import argparse
 import json
-import time
-import tomllib
-from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
-import momentid as mi
-from momentid.diagnosis.pipeline import diagnose
-from momentid.lab.scenario import parse_scenario
-
-ROOT = Path(__file__).resolve().parents[1]
-BASE = ROOT / "scenarios" / "hidden" / "clean.toml"
+from benchmarks.common import hidden_rig, matrix_parser, run_cases, save, timed_diagnosis
 
 MATRIX = [  # (mechanism, truth table or channel fault, expected location), two locations x two magnitudes
     ("coulomb_friction", {"storey": 1, "force": 0.2}, {"storey": 1}),
@@ -56,54 +46,28 @@ MATRIX = [  # (mechanism, truth table or channel fault, expected location), two 
 TIMED = (16, 1, 2)   # clean, strong top-storey friction, cubic stiffness: timed alone
 
 
-def _scenario(mechanism, spec, noise, excitation=None):
-    data = tomllib.loads(BASE.read_text())
-    if excitation is None:
-        data["excitation"]["file"] = str((BASE.parent / data["excitation"]["file"]).resolve())
-    else:
-        data["excitation"] = dict(excitation)
-    data["sensors"]["accelerometer"]["relative_noise"] = noise
-    data["sensors"]["displacement"]["relative_noise"] = noise
+def scenario(mechanism: str, spec: dict, noise: float, excitation: dict | None = None):
+    """The matrix's rig with one case's hidden physics: ``spec`` is the ``[truth]`` table of ``mechanism``
+    (a stiffness loss for ``unexplained``), its per-channel faults for a sensor kind, or for ``none`` an
+    optional scenario ``seed``."""
     if mechanism.startswith("sensor_"):
-        data["sensors"]["channel"] = spec
-    elif mechanism == "unexplained":
-        data["truth"] = {"mechanisms": [{"type": "stiffness_loss", **spec}]}
-    elif mechanism != "none":
-        data["truth"] = {"mechanisms": [{"type": mechanism, **spec}]}
-    elif spec:
-        data["scenario"]["seed"] = spec["seed"]
-    return parse_scenario(data, source=BASE)
+        return hidden_rig(faults=spec, noise=noise, excitation=excitation)
+    if mechanism == "unexplained":
+        return hidden_rig([{"type": "stiffness_loss", **spec}], noise=noise, excitation=excitation)
+    if mechanism != "none":
+        return hidden_rig([{"type": mechanism, **spec}], noise=noise, excitation=excitation)
+    return hidden_rig(noise=noise, excitation=excitation, seed=spec.get("seed"))
 
 
-def _case(job):
+def case(job) -> dict:
+    """One case of the matrix: (mechanism, spec, expected location, noise[, excitation]) -> its row."""
     mechanism, spec, location, noise, *excitation = job
-    experiment = mi.simulate(_scenario(mechanism, spec, noise, *excitation))
-    start = time.perf_counter()
-    d = diagnose(experiment)
-    elapsed = time.perf_counter() - start
+    d, elapsed = timed_diagnosis(scenario(mechanism, spec, noise, *excitation))
     right = d.mechanism == mechanism and d.location == location
     return {"truth": mechanism, "spec": spec, "noise": noise, "verdict": d.mechanism, "location": d.location,
             "expected_location": location, "correct": right, "parameters": d.parameters,
             "nrmse_before": d.nrmse_before, "nrmse_after": d.nrmse_after, "seconds": elapsed,
             "excitation": (excitation[0] or {}).get("type", "record") if excitation else "record"}
-
-
-def run_cases(jobs, workers: int, case=_case) -> list[dict]:
-    """Diagnose every case (``case(job) -> row``), ``workers`` at a time, printing each row as it comes."""
-    with ProcessPoolExecutor(max_workers=workers) as pool:
-        rows = []
-        for row in pool.map(case, jobs):
-            rows.append(row)
-            print(json.dumps(row), flush=True)
-    return rows
-
-
-def save(out: Path, name: str, data, lines: list[str]) -> None:
-    """Write ``out/<name>.json`` (``data``) and ``out/<name>.md`` (``lines``), and print the table."""
-    out.mkdir(parents=True, exist_ok=True)
-    (out / f"{name}.json").write_text(json.dumps(data, indent=1))
-    (out / f"{name}.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
 
 
 def table(rows, *, spec=False) -> list[str]:
@@ -120,11 +84,8 @@ def table(rows, *, spec=False) -> list[str]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.diagnosis", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = matrix_parser("benchmarks.diagnosis", __doc__)
     p.add_argument("--quick", action="store_true", help="1 %% noise only")
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     p.add_argument("--alone-only", action="store_true",
                    help="re-time only the cases timed alone (on a quiet machine), keeping the matrix of "
                         "OUT/diagnosis.json")
@@ -134,7 +95,7 @@ def main(argv=None) -> int:
     if args.alone_only:
         rows = json.loads((args.out / "diagnosis.json").read_text())["matrix"]
     else:
-        rows = run_cases(jobs, args.workers)
+        rows = run_cases(jobs, args.workers, case)
     found = [r for r in rows if r["truth"] not in ("none", "unexplained")]
     clean = [r for r in rows if r["truth"] == "none"]
     outside = [r for r in rows if r["truth"] == "unexplained"]
@@ -149,7 +110,7 @@ def main(argv=None) -> int:
     alone = []
     for i in TIMED:
         mechanism, spec, location = MATRIX[i]
-        row = _case((mechanism, spec, location, 0.01))
+        row = case((mechanism, spec, location, 0.01))
         alone.append({"truth": mechanism, "spec": spec, "seconds": row["seconds"], "correct": row["correct"]})
         print(json.dumps(alone[-1]), flush=True)
     lines += ["", "Diagnosis time alone (one experiment, 4 runs x 20 s at 1 kHz, 1 % noise, nothing else running): "

@@ -13,16 +13,9 @@ and ``diagnosis_compound.md``.
 
 from __future__ import annotations
 
-import argparse
 import json
-import time
-import tomllib
-from pathlib import Path
 
-import momentid as mi
-from benchmarks.diagnosis import BASE, ROOT, run_cases, save
-from momentid.diagnosis.pipeline import diagnose
-from momentid.lab.scenario import parse_scenario
+from benchmarks.common import hidden_rig, matrix_parser, run_cases, save, timed_diagnosis
 
 #: Fault field of ``[sensors.channel.*]`` -> the mechanism kind that names it.
 FAULT_KINDS = {"clock_offset": "sensor_delay", "gain": "sensor_gain", "bias": "sensor_bias"}
@@ -56,23 +49,12 @@ def expected(truth: list, faults: dict) -> list[tuple[str, dict]]:
 
 def scenario(truth: list, faults: dict, noise: float = 0.01):
     """The clean rig of ``scenarios/hidden/`` with ``truth`` mechanisms and channel ``faults``."""
-    data = tomllib.loads(BASE.read_text())
-    data["excitation"]["file"] = str((BASE.parent / data["excitation"]["file"]).resolve())
-    data["sensors"]["accelerometer"]["relative_noise"] = noise
-    data["sensors"]["displacement"]["relative_noise"] = noise
-    if truth:
-        data["truth"] = {"mechanisms": [dict(m) for m in truth]}
-    if faults:
-        data["sensors"]["channel"] = {k: dict(v) for k, v in faults.items()}
-    return parse_scenario(data, source=BASE)
+    return hidden_rig(truth, faults, noise)
 
 
 def _case(job):
     truth, faults = job
-    experiment = mi.simulate(scenario(truth, faults))
-    start = time.perf_counter()
-    d = diagnose(experiment)
-    elapsed = time.perf_counter() - start
+    d, elapsed = timed_diagnosis(scenario(truth, faults))
     want = expected(truth, faults)
     named = [(m.mechanism, m.location) for m in d.mechanisms]
     both = all(w in named for w in want) and (bool(want) or (d.mechanism == "none" and not named))
@@ -98,11 +80,8 @@ def table(rows) -> list[str]:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.diagnosis_compound", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--workers", type=int, default=2)
+    p = matrix_parser("benchmarks.diagnosis_compound", __doc__)
     p.add_argument("--cases", help="comma-separated indices into PAIRS (default: all)")
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = p.parse_args(argv)
     chosen = [int(i) for i in args.cases.split(",")] if args.cases else range(len(PAIRS))
     rows = run_cases([PAIRS[i] for i in chosen], args.workers, _case)

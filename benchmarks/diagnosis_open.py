@@ -12,14 +12,9 @@ the diagnosis time.  Writes ``benchmarks/results/diagnosis_open.json`` and ``dia
 
 from __future__ import annotations
 
-import argparse
 import json
-import time
-from pathlib import Path
 
-import momentid as mi
-from benchmarks.diagnosis import ROOT, _scenario, run_cases, save
-from momentid.diagnosis.pipeline import diagnose
+from benchmarks.common import hidden_rig, matrix_parser, run_cases, save, timed_diagnosis
 
 NOISE = 0.01
 
@@ -35,10 +30,7 @@ CASES = [  # (truth kind, its [truth] table with the place), two places and magn
 
 def _case(job) -> dict:
     kind, spec = job
-    experiment = mi.simulate(_scenario(kind, spec, NOISE))   # the matrix's rig with this hidden force
-    start = time.perf_counter()
-    d = diagnose(experiment)
-    elapsed = time.perf_counter() - start
+    d, elapsed = timed_diagnosis(hidden_rig([{"type": kind, **spec}], noise=NOISE))   # the rig with this force
     place = {k: v for k, v in spec.items() if k in ("storey", "floor")}
     found = d.discovered
     return {"truth": kind, "spec": spec, "noise": NOISE, "verdict": d.mechanism, "expected_location": place,
@@ -50,11 +42,7 @@ def _case(job) -> dict:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.diagnosis_open", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
-    args = p.parse_args(argv)
+    args = matrix_parser("benchmarks.diagnosis_open", __doc__).parse_args(argv)
     rows = run_cases(CASES, args.workers, case=_case)
     lines = ["| truth | where | verdict | discovered at | right | held-out NRMSE before -> after | ratio | time |",
              "|---|---|---|---|---|---|---|---|"]

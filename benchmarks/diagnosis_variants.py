@@ -10,12 +10,9 @@ verdict rules, cases chosen after the method was fixed.  Writes
 
 from __future__ import annotations
 
-import argparse
-from pathlib import Path
+from benchmarks.common import matrix_parser, run_cases, save
+from benchmarks.diagnosis import case, table
 
-from benchmarks.diagnosis import run_cases, save, table
-
-ROOT = Path(__file__).resolve().parents[1]
 NOISE = {"type": "noise", "rms": 0.3, "band": [0.5, 20.0]}
 HARMONICS = {"type": "harmonics", "amplitudes": [0.002, 0.001, 0.0014],
              "angular_frequencies": [6.2832, 8.8858, 1.6239]}
@@ -43,12 +40,8 @@ CASES = [   # (mechanism, truth or fault, expected location, noise, excitation: 
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m benchmarks.diagnosis_variants", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
-    args = p.parse_args(argv)
-    rows = run_cases(CASES, args.workers)
+    args = matrix_parser("benchmarks.diagnosis_variants", __doc__).parse_args(argv)
+    rows = run_cases(CASES, args.workers, case)
     lines = table(rows, spec=True)
     lines += ["", f"Right verdict and location: {sum(r['correct'] for r in rows)} of {len(rows)}."]
     save(args.out, "diagnosis_variants", rows, lines)

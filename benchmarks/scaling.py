@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from benchmarks.bench import _RawRig, _machine, bench_scenario, blas_threads, stacked_regressor
+from benchmarks.common import bench_scenario, blas_threads, machine
+from benchmarks.stages import RawRig, stacked_regressor
 from momentid.errors import IdentificationError
 from momentid.estimation.identification import identify
 from momentid.io.recording import read_recording, write_experiment
@@ -51,7 +52,7 @@ def measure(scenario, *, workers: int, repeat: int, workdir: Path, max_dense_byt
             blas: int | None = 1) -> dict:
     """Time every stage on ``scenario``; seconds per stage (None where not run)."""
     t_sim, experiment = _best(repeat, lambda: simulate(scenario, workers=workers))
-    rig = _RawRig(scenario)
+    rig = RawRig(scenario)
     t_floor = rig.best_rollout(workers, repeat)
     path = workdir / "scaling.mcap"
     t_rec, _ = _best(repeat, lambda: (write_experiment(path, experiment), read_recording(path)))
@@ -201,7 +202,7 @@ def main(argv=None) -> int:
         storey_len, runs_len = 4.0, 2.0
     images = Path(args.images)
     kw = dict(workers=workers, repeat=repeat, max_dense_bytes=args.max_dense_gb * 1e9, blas=args.blas_threads)
-    out = {"machine": _machine(), "workers": workers, "repeat": repeat, "quick": args.quick,
+    out = {"machine": machine(), "workers": workers, "repeat": repeat, "quick": args.quick,
            "blas_threads": args.blas_threads}
 
     def run(label, scenarios):

@@ -61,3 +61,13 @@ def test_cli_bench_quick_writes_json(tmp_path, capsys):
     _check_rows(report["rows"])
     assert report["settings"]["quick"] and "ratio" in capsys.readouterr().out
     assert bench_main(["--stages", "nope"]) == 2
+
+
+def test_the_diagnosis_matrix_covers_the_library():
+    """``benchmarks/diagnosis.py``'s matrix names every kind the diagnosis can name (two cases each) and
+    nothing else."""
+    from benchmarks.diagnosis import MATRIX
+    from momentid import mechanisms
+    named = [m for m, _, _ in MATRIX if m not in ("none", "unexplained")]
+    assert sorted(set(named)) == sorted(k.name for k in mechanisms.library())
+    assert all(named.count(m) == 2 for m in set(named))

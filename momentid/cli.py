@@ -395,6 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     from momentid import __version__, mechanisms
     parser.add_argument("--version", action="version", version=f"momentid {__version__}")
+    parser.set_defaults(json=False)   # the commands without --json
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
     p = sub.add_parser("run", help="simulate every run of a scenario, record it, identify, compare",
@@ -522,7 +523,7 @@ def main(argv=None) -> int:
         parser.print_help()
         return 2
     try:
-        with only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings():
+        with only_json_on_stdout(args.json), warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
             warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
             return args.func(args)

@@ -287,3 +287,64 @@ def test_the_lists_of_mechanisms_are_the_registry(capsys, monkeypatch):
         main(["diagnose", "--help"])
     text = " ".join(capsys.readouterr().out.split())
     assert [name for name in sorted(library) if name not in text] == []
+
+
+@pytest.fixture
+def brace_kind():
+    """A dashpot between floors 1 and 3 (a brace over two storeys): a kind at ``Target.FLOORS``,
+    registered for the test only."""
+    from momentid.mechanisms.base import MechanismKind, Param, one_coefficient
+
+    class Brace(MechanismKind):
+        name = "test_brace"
+        target = Target.FLOORS
+        params = (Param("c", "N*s/m", "dashpot between two floors", low=0.0, low_open=True, example=3.0),)
+        fitted = params[0]
+        callback = True
+
+        def floor_force(self, params, displacement, velocity, time, stiffness):
+            return params["c"] * velocity
+
+        def screen_equation(self, signals, fit, place):
+            return fit([signals.columns(signals.stretch_rate(place), place)],
+                       [signals.columns(signals.stretch(place), place)], place, one_coefficient("c"))
+
+    registry.register(Brace)
+    try:
+        yield registry.get("test_brace")
+    finally:
+        registry.REGISTRY.pop("test_brace", None)
+
+
+def test_a_kind_between_two_floors_is_parsed_simulated_and_screened(brace_kind):
+    kind = brace_kind
+    assert [p.index for p in kind.places(4)] == [(1, 3), (1, 4), (2, 4)]   # more than a storey apart
+    data = tomllib.loads((SCENARIOS / "hidden" / "clean.toml").read_text())
+    data["truth"] = {"mechanisms": [{"type": "test_brace", "floors": [1, 3], "c": 3.0}]}
+    scenario = parse_scenario(data, source=SCENARIOS / "hidden" / "brace.toml")
+    assert scenario.truth == (Mechanism("test_brace", (1, 3), (("c", 3.0),)),)
+    with pytest.raises(ScenarioError, match=r"floors.*two floor numbers i < j in 1..3"):
+        data["truth"]["mechanisms"][0]["floors"] = [3, 1]
+        parse_scenario(data, source=SCENARIOS / "hidden" / "brace.toml")
+    structure = scenario.structure
+    rng = np.random.default_rng(7)
+    qpos, qvel = rng.normal(0, 3e-3, 3), rng.normal(0, 3e-2, 3)
+    got = (_storey_forces_on_floors(structure, scenario.truth, qpos, qvel, 0.0)
+           - _storey_forces_on_floors(structure, (), qpos, qvel, 0.0))
+    f = 3.0 * (qvel[2] - qvel[0])   # resists floor 3's velocity relative to floor 1
+    # The callback's force and the law: round-off apart; the array form of the same laws agrees.
+    assert np.allclose(got, [f, 0.0, -f], rtol=1e-9, atol=1e-12)
+    assert np.allclose(rig.callback_forces(scenario.truth, qpos, qvel, 0.0, structure)[0], [f, 0.0, -f], rtol=1e-12)
+    run = _table_run()
+    out = sim.replay(structure, scenario.truth, run)
+    signals = {"a": out["a"], "v": out["v"], "q": out["q"]}
+    model = SimpleNamespace(M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
+                            mu=structure.rayleigh_mu)
+    residual = floor_residual(model, signals, run.added_mass)
+    row = ResidualRow(run, signals, residual, np.zeros_like(residual))
+    f_top = float(modal_properties(model.M, model.C, model.K).frequency.max())
+    best = max(screen_equation(model, (row,), 1e-9 * np.sqrt(np.mean(residual ** 2, axis=0)), f_top,
+                               Domain.EQUATION), key=lambda c: c.explained)
+    assert (best.kind, best.location) == (kind, {"floors": [1, 3]})
+    # RK4 at 2 ms: 1 % on the coefficient, as the dashpot to the table.
+    assert best.explained > 0.99 and abs(best.parameters["c"] - 3.0) < 0.03

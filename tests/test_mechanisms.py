@@ -190,6 +190,21 @@ def new_kind_file(tmp_path, monkeypatch):
         sys.modules.pop("momentid.mechanisms.table_dashpot", None)
 
 
+def _best_screened(structure, truth):
+    """The candidate that explains most of the equation residual the nominal model leaves on a sweep
+    through a rig carrying ``truth`` (noise-free: the noise floor is the residual's round-off scale)."""
+    run = _table_run()
+    out = sim.replay(structure, truth, run)
+    signals = {"a": out["a"], "v": out["v"], "q": out["q"]}
+    model = SimpleNamespace(M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
+                            mu=structure.rayleigh_mu)
+    residual = floor_residual(model, signals, run.added_mass)
+    row = ResidualRow(run, signals, residual, np.zeros_like(residual))
+    f_top = float(modal_properties(model.M, model.C, model.K).frequency.max())
+    return max(screen_equation(model, (row,), 1e-9 * np.sqrt(np.mean(residual ** 2, axis=0)), f_top,
+                               Domain.EQUATION), key=lambda c: c.explained)
+
+
 def test_a_new_mechanism_file_is_all_it_takes(new_kind_file):
     kind = new_kind_file
     assert kind in mechanisms.library() and kind in mechanisms.rig_kinds()
@@ -207,17 +222,7 @@ def test_a_new_mechanism_file_is_all_it_takes(new_kind_file):
     assert np.allclose(got, [0.0, -3.0 * qvel[1], 0.0], rtol=1e-9, atol=1e-9)
     # ... and the diagnosis screens for it: in the equation residual of a rig carrying it, it is the
     # candidate that explains the most, at its place, with its coefficient.
-    run = _table_run()
-    out = sim.replay(structure, scenario.truth, run)
-    signals = {"a": out["a"], "v": out["v"], "q": out["q"]}
-    model = SimpleNamespace(M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
-                            mu=structure.rayleigh_mu)
-    residual = floor_residual(model, signals, run.added_mass)
-    row = ResidualRow(run, signals, residual, np.zeros_like(residual))
-    f_top = float(modal_properties(model.M, model.C, model.K).frequency.max())
-    # noise-free: the noise floor is the residual's own round-off scale
-    best = max(screen_equation(model, (row,), 1e-9 * np.sqrt(np.mean(residual ** 2, axis=0)), f_top,
-                               Domain.EQUATION), key=lambda c: c.explained)
+    best = _best_screened(structure, scenario.truth)
     assert (best.kind, best.place) == (kind, Place(Target.FLOOR_TABLE, 2)) and best.location == {"floor": 2}
     # The replay's residual is the force itself, up to RK4's error at 2 ms: 1 % on the coefficient.
     assert best.explained > 0.99 and abs(best.parameters["c"] - 3.0) < 0.03
@@ -335,16 +340,7 @@ def test_a_kind_between_two_floors_is_parsed_simulated_and_screened(brace_kind):
     # The callback's force and the law: round-off apart; the array form of the same laws agrees.
     assert np.allclose(got, [f, 0.0, -f], rtol=1e-9, atol=1e-12)
     assert np.allclose(rig.callback_forces(scenario.truth, qpos, qvel, 0.0, structure)[0], [f, 0.0, -f], rtol=1e-12)
-    run = _table_run()
-    out = sim.replay(structure, scenario.truth, run)
-    signals = {"a": out["a"], "v": out["v"], "q": out["q"]}
-    model = SimpleNamespace(M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
-                            mu=structure.rayleigh_mu)
-    residual = floor_residual(model, signals, run.added_mass)
-    row = ResidualRow(run, signals, residual, np.zeros_like(residual))
-    f_top = float(modal_properties(model.M, model.C, model.K).frequency.max())
-    best = max(screen_equation(model, (row,), 1e-9 * np.sqrt(np.mean(residual ** 2, axis=0)), f_top,
-                               Domain.EQUATION), key=lambda c: c.explained)
+    best = _best_screened(structure, scenario.truth)
     assert (best.kind, best.location) == (kind, {"floors": [1, 3]})
     # RK4 at 2 ms: 1 % on the coefficient, as the dashpot to the table.
     assert best.explained > 0.99 and abs(best.parameters["c"] - 3.0) < 0.03

@@ -7,14 +7,20 @@
   checked against each other, model-free (stage 3);
 - :mod:`~momentid.diagnosis.locate`: where (storey, run, time, amplitude, band) the misfit lives (4);
 - :mod:`~momentid.diagnosis.screening`: every registered mechanism's signature fitted (5);
-- :mod:`~momentid.diagnosis.refit` and :mod:`~momentid.diagnosis.selection`: the candidates re-simulated,
-  the best sized and accepted or not (6);
-- :mod:`~momentid.diagnosis.report`: the :class:`Diagnosis` record and its report folder (7);
+- :mod:`~momentid.diagnosis.refit`, :mod:`~momentid.diagnosis.replay` and
+  :mod:`~momentid.diagnosis.selection`: the candidates re-simulated, the best sized and accepted or
+  not (6); :mod:`~momentid.diagnosis.compound`: further mechanisms (6b);
+- :mod:`~momentid.diagnosis.result` and :mod:`~momentid.diagnosis.verdict`: the :class:`Diagnosis`
+  every recording gets, its :class:`Verdict`; :mod:`~momentid.diagnosis.report`: its summary and
+  report folder (7);
+- :mod:`~momentid.diagnosis.real`: recordings without added mass (the modal path, the same result);
 - :mod:`~momentid.diagnosis.thresholds`: the decision thresholds every stage shares.
 
-The mechanisms themselves live in :mod:`momentid.mechanisms`, one module per kind.
+The mechanisms themselves live in :mod:`momentid.mechanisms`, one module per kind; the stages know
+them by their contract (where they act, their signatures), never by name.
 """
 
 from momentid.diagnosis.pipeline import Diagnosis, diagnose, write_report
+from momentid.diagnosis.verdict import Verdict
 
-__all__ = ["Diagnosis", "diagnose", "write_report"]
+__all__ = ["Diagnosis", "Verdict", "diagnose", "write_report"]

@@ -178,16 +178,15 @@ def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):
 
 
 def test_mismatch_is_located_and_described(diagnoses):
-    where = diagnoses("friction_storey2").localisation
-    assert where["storey"] == 2 and where["storeys"]["storey2"] > 10 * max(where["storeys"]["storey1"],
-                                                                            where["storeys"]["storey3"])
-    assert "sign of the drift velocity" in where["words"] and "present in all runs" in where["words"]
-    assert "grows with the drift cubed" in diagnoses("cubic_storey1").localisation["words"]
-    slip = diagnoses("slip_storey2").localisation
+    where = diagnoses("friction_storey2").evidence.localisation
+    assert where.storey == 2 and where.storeys["storey2"] > 10 * max(where.storeys["storey1"], where.storeys["storey3"])
+    assert "sign of the drift velocity" in where.words and "present in all runs" in where.words
+    assert "grows with the drift cubed" in diagnoses("cubic_storey1").evidence.localisation.words
+    slip = diagnoses("slip_storey2").evidence.localisation
     # The slip starts 5 s into every run; windows are 2 s long, so the first mismatched one starts at 4 s.
-    assert slip["storey"] == 2 and "from t = 4 s on" in slip["words"]
-    assert all(w["excess"] < 1.5 for w in slip["windows"][:2])   # noise level before the slip
+    assert slip.storey == 2 and "from t = 4 s on" in slip.words
+    assert all(w["excess"] < 1.5 for w in slip.windows[:2])   # noise level before the slip
     # Sensors agree with each other on a structural mechanism.
-    assert diagnoses("friction_storey2").sensor_check["consistent"]
-    check = diagnoses("delay_a2").sensor_check
+    assert diagnoses("friction_storey2").evidence.sensor_check["consistent"]
+    check = diagnoses("delay_a2").evidence.sensor_check
     assert not check["consistent"] and check["fits"][0]["channel"] == "a2"

@@ -45,7 +45,7 @@ from momentid.core.structure import Structure
 from momentid.diagnosis.refit import SEARCH_RANGE, ForceRefit
 from momentid.diagnosis.replay import Entry, identified_structure, records
 from momentid.diagnosis.screening import Candidate, Domain, damping_pattern, pattern_fit, remaining_excess, screen_equation
-from momentid.diagnosis.selection import EARNS, SHORTLIST_FLOOR, Finding, Step, explained_share
+from momentid.diagnosis.selection import SHORTLIST_FLOOR, Finding, Step, explained_share
 from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Named, Verdict

@@ -24,7 +24,7 @@ import numpy as np
 import scipy.optimize
 
 from momentid.mechanisms.bouc_wen import bouc_wen_state
-from momentid.mechanisms.data_driven import HYSTERETIC_BETA, TERMS, term_signal
+from momentid.mechanisms.data_driven import HYSTERETIC_BETA, term_signal
 
 __all__ = ["Column", "Selected", "columns", "hysteretic_columns", "select", "refine",
            "ALWAYS", "DELTA_FRACTIONS", "YIELD_FRACTIONS", "EXPONENTS", "SWITCH_STEP", "MIN_GAIN", "MAX_TERMS"]

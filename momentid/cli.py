@@ -30,6 +30,7 @@ _EPILOG = """examples:
   momentid plan scenarios/lab_noisy.toml              # runs and masses for a target accuracy (CRLB)
   momentid import lab_data/ -o lab.mcap               # a real rig's exports (CSV, Xsens DOT) -> recording
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
+  momentid twin lab.mcap -o twin/                     # the calibrated MuJoCo twin of the rig
 """
 
 
@@ -328,6 +329,23 @@ def _cmd_diagnose(args) -> int:
     return 0
 
 
+def _cmd_twin(args) -> int:
+    from momentid.io.recording import read_recording
+    from momentid.twin import build_twin, write_twin
+
+    out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
+    experiment = read_recording(args.recording)
+    twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
+    names = write_twin(twin, experiment, out, plots=not args.no_plots)
+    if args.json:
+        print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
+    else:
+        print(twin.summary())
+        print(f"\ntwin written to {out}/ ({', '.join(names)})")
+    _warn(twin.warnings)
+    return 0
+
+
 def _cmd_plan(args) -> int:
     from momentid.estimation.design import cramer_rao, plan
     from momentid.lab.scenario import load_scenario
@@ -483,6 +501,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recordings without added mass: the run to hold out for the before/after check "
                         "(default: the last run)")
     p.set_defaults(func=_cmd_diagnose)
+
+    p = sub.add_parser("twin", help="the calibrated MuJoCo twin of a rig: MJCF, parameters, replay of every trial",
+                       description="Identify the recording (accelerometers only: the modal fit with sensor gains and "
+                                   "clock offsets; K and C from the stated floor masses, mass-normalised without), "
+                                   "build its MJCF twin on momentid's rig (identified K and C as tendons, each "
+                                   "sensor's gain, bias and clock offset as a sensor model), replay every trial "
+                                   "through MuJoCo under its recorded table acceleration and write DIR/twin.xml, "
+                                   "DIR/twin.json (parameters, per-trial NRMSE) and plots.  Refuses (exit 2) one "
+                                   "trial, a trial without table sensor, or an identification the data contradict. "
+                                   "See docs/twin.md.")
+    p.add_argument("recording", help="MCAP recording (momentid import, or momentid run)")
+    p.add_argument("-o", "--output", metavar="DIR", help="the twin's folder (default: out/<recording>_twin); "
+                                                         "written whole or not at all")
+    p.add_argument("--runs", metavar="NAMES", help="comma-separated trials to calibrate on (default: all); every "
+                                                   "trial is replayed, the others with the calibrated runs' mean sensors")
+    p.add_argument("--json", action="store_true", help="print twin.json to stdout")
+    p.add_argument("--no-plots", action="store_true", help="write twin.xml and twin.json only")
+    p.set_defaults(func=_cmd_twin)
 
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",
                        description="Evaluate the Cramér-Rao lower bound of the scenario's experiment and of "

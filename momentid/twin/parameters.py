@@ -24,7 +24,7 @@ from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
 
 __all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "from_identification",
-           "matrices_from_modes", "DEFAULT_STOREY_HEIGHT"]
+           "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
 
 #: Storey height (m) drawn when neither the recording's model nor the lab states one (drawing only).
 DEFAULT_STOREY_HEIGHT = 0.3
@@ -101,7 +101,7 @@ class TwinParameters:
     Attributes
     ----------
     masses : ndarray, shape (d,)
-        Floor masses (kg); 1 kg each for a mass-normalised twin.
+        Floor masses (kg); for a mass-normalised twin, in proportion with mean 1 (:func:`masses_from_shapes`).
     K, C : ndarray, shape (d, d)
         Symmetric stiffness (N/m) and damping (N s/m) of the floors relative to the table.
     storey_heights : ndarray, shape (d,)
@@ -113,7 +113,7 @@ class TwinParameters:
         and for runs the calibration did not use.
     extra_modes : tuple of ExtraMode
     mass_normalised : bool
-        No masses were stated: unit floor masses, K and C per kilogram of floor.
+        No masses were stated: masses, K and C are the rig's divided by its (unknown) mean floor mass.
     added_mass_damping : float
         ``mu`` (1/s): joint damping per kilogram of added mass (added-mass identification; 0 otherwise).
     source : str
@@ -230,6 +230,33 @@ def matrices_from_modes(frequency, damping_ratio, shapes, masses):
     return S @ np.diag(w ** 2) @ S.T, S @ np.diag(2 * np.asarray(damping_ratio, float) * w) @ S.T
 
 
+def masses_from_shapes(shapes) -> np.ndarray | None:
+    """Floor masses, mean 1 kg, in the proportions that make the mode shapes most nearly orthogonal.
+
+    Orthogonality ``phi_i^T M phi_k = 0`` (``i < k``) is linear in the diagonal of ``M``: its least-squares
+    null vector (the right singular vector of the smallest singular value; exact for two storeys).
+
+    Parameters
+    ----------
+    shapes : ndarray, shape (d, d)
+        One mode per column.
+
+    Returns
+    -------
+    ndarray, shape (d,), or None
+        None when the null vector is not all of one sign (no positive masses make them orthogonal).
+    """
+    phi = np.asarray(shapes, float)
+    d = phi.shape[0]
+    if d == 1:
+        return np.ones(1)
+    phi = phi / np.linalg.norm(phi, axis=0)[None, :]
+    rows = [phi[:, i] * phi[:, k] for i in range(d) for k in range(i + 1, d)]
+    m = np.linalg.svd(np.array(rows))[2][-1]
+    m = m * np.sign(m.sum())
+    return m / m.mean() if np.all(m > 0) else None
+
+
 def _heights(experiment: Experiment, d: int) -> np.ndarray:
     s, stated = experiment.structure, experiment.statement
     for heights in (s.storey_heights if s is not None else None,
@@ -292,12 +319,16 @@ def from_identification(result, experiment: Experiment) -> TwinParameters:
         if result.K is not None:
             masses, K, C, normalised = np.asarray(result.masses, float), result.K, result.C, False
         else:
-            masses = np.ones(d)
+            masses = masses_from_shapes(result.shapes)
+            how = "in the proportions that make the identified mode shapes orthogonal"
+            if masses is None:
+                masses, how = np.ones(d), "equal (no positive proportions make the identified shapes orthogonal)"
             K, C = matrices_from_modes(result.frequency, result.damping_ratio, result.shapes, masses)
             normalised = True
-            notes.append("no floor masses stated: a mass-normalised twin (1 kg floors; K in N/m and C in N s/m "
-                         "per kilogram of floor); its modes, damping ratios and sensor readings are those of the "
-                         "rig, its forces are not")
+            notes.append(f"no floor masses stated: a mass-normalised twin, floor masses {how}, "
+                         f"{', '.join(f'{m:.4g}' for m in masses)} (mean 1): its modes, damping ratios and sensor "
+                         f"readings are the rig's; its masses, K and C are the rig's divided by its mean floor mass "
+                         f"(kg), unknown")
         return TwinParameters(masses=masses, K=np.asarray(K, float), C=np.asarray(C, float), storey_heights=heights,
                               sensors=sensors, nominal=_mean_sensors(sensors, d),
                               extra_modes=_extra_modes(result, d), mass_normalised=normalised, source="modal",

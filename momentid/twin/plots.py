@@ -17,8 +17,10 @@ import scipy.signal
 
 from momentid.twin.replay import Replay, transfer
 
-__all__ = ["plot_replay", "plot_transfer", "replay_file", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
+__all__ = ["plot_replay", "plot_transfer", "replay_file", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
 
+#: Stretches a whole-trial panel is drawn as (minimum and maximum of each): about its width in pixels.
+ENVELOPE_BINS = 1500
 #: Width (s) of the zoom on the largest response.
 ZOOM_S = 4.0
 #: Least coherence of a recorded transfer estimate shown: below it the table barely drives that band
@@ -34,6 +36,25 @@ def _pyplot():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def _margins(fig, rows: int) -> None:
+    """Fixed margins (a tight layout costs a second draw of every tick)."""
+    inch = fig.get_figheight()
+    fig.subplots_adjust(left=0.07, right=0.98, bottom=0.55 / inch, top=1 - 0.6 / inch, wspace=0.12,
+                        hspace=0.45 if rows > 1 else 0.2)
+
+
+def envelope(t: np.ndarray, x: np.ndarray, bins: int = ENVELOPE_BINS):
+    """``(t, x)`` reduced to each of ``bins`` equal stretches' minimum and maximum, in time order: the
+    same picture as every sample at a plot's width (a column of pixels shows a stretch's range)."""
+    if t.size <= 2 * bins:
+        return t, x
+    edges = np.linspace(0, t.size, bins + 1).astype(int)
+    lo = np.minimum.reduceat(x, edges[:-1])
+    hi = np.maximum.reduceat(x, edges[:-1])
+    mid = t[(edges[:-1] + edges[1:]) // 2]
+    return np.repeat(mid, 2), np.column_stack([lo, hi]).ravel()
 
 
 def replay_file(run: str) -> str:
@@ -56,8 +77,9 @@ def plot_replay(replay: Replay, path: Path) -> Path:
         row = d - 1 - j                    # top floor on top
         for col, keep in enumerate((slice(s, None), zoom)):
             ax = axes[row, col]
-            ax.plot(t[keep], rec[keep, j], color=_RECORDED, lw=0.6, label="recorded")
-            ax.plot(t[keep], twin[keep, j], color=_TWIN, lw=0.6, label="twin")
+            thin = envelope if col == 0 else (lambda a, b: (a, b))
+            ax.plot(*thin(t[keep], rec[keep, j]), color=_RECORDED, lw=0.6, label="recorded")
+            ax.plot(*thin(t[keep], twin[keep, j]), color=_TWIN, lw=0.6, alpha=0.85, label="twin")
             ax.set_ylabel(f"floor {j + 1} sensor (m/s²)" if col == 0 else "")
             ax.grid(alpha=0.3)
         axes[row, 0].set_title(f"floor {j + 1} sensor: NRMSE {100 * replay.nrmse_floors[j]:.1f} %", fontsize=9,
@@ -69,7 +91,7 @@ def plot_replay(replay: Replay, path: Path) -> Path:
     sensors = "sensors calibrated on this trial" if replay.calibrated else "nominal sensors (trial not calibrated on)"
     fig.suptitle(f"trial {replay.run}: recorded and twin floor accelerations, NRMSE {100 * replay.nrmse:.1f} % "
                  f"(sensor noise alone: {100 * replay.noise_nrmse:.1f} %); {sensors}", fontsize=10)
-    fig.tight_layout()
+    _margins(fig, d)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
@@ -120,7 +142,7 @@ def plot_transfer(twin, experiment, path: Path) -> Path:
     axes[-1, 0].set_xlabel("frequency (Hz)")
     fig.suptitle(f"table-to-floor transfer functions: recorded (coherence >= {MIN_COHERENCE:g}) and twin",
                  fontsize=10)
-    fig.tight_layout()
+    _margins(fig, d)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

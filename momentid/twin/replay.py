@@ -6,15 +6,17 @@ the recording's samples joined by straight lines (first-order hold, the modal id
 assumption), exact at every RK4 stage.  The command runs the twin's sensor latency ``L`` ahead of
 the recording (see :mod:`momentid.twin.spec`), so the twin's delayed sensors read on the
 recording's clock: its table sensor reproduces the recorded table acceleration.  The floors start at
-rest on the table (the recordings start with a quiet lead-in).  Nothing is integrated outside
+rest on the table (the recordings start with a quiet lead-in), and the sensors' histories empty: for
+the first latency (a few milliseconds) they read 0.  Nothing is integrated outside
 MuJoCo, and what MuJoCo integrates cannot drift: the floors' coordinates are relative to the table
 and held by the storeys' springs; the table's own position, which a biased acceleration would carry
 away, enters no force and no reading.
 
 Score: ``NRMSE = sqrt(sum_j |a_j - a_j,twin|^2 / sum_j |a_j - mean_j|^2)`` over the floor sensors and
 the samples after the quiet lead-in (the definition of :mod:`momentid.diagnosis.modal_check`), with
-one constant per sensor fitted (its bias); beside it, the NRMSE the floor sensors' noise alone
-leaves (:func:`momentid.estimation.noise.estimate_noise`).
+one constant per sensor fitted (its bias); beside it, the NRMSE the sensors' noise alone leaves
+(levels from :func:`momentid.estimation.noise.estimate_noise`): the floor sensors' own, and the table
+sensor's, which drives the twin and reaches the floors through it.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from momentid.lab import rig
 from momentid.twin.parameters import SensorModel, TwinParameters
 from momentid.twin.spec import Timing, sensor_names, timing as make_timing, twin_spec
 
-__all__ = ["Replay", "roll", "floor_readings", "replay_run", "nrmse", "transfer", "CHUNK_STEPS"]
+__all__ = ["Replay", "roll", "floor_readings", "replay_run", "nrmse", "transfer", "table_noise_gain", "CHUNK_STEPS"]
 
 #: RK4 steps per ``mujoco.rollout`` call: memory stays bounded on long records.
 CHUNK_STEPS = 200_000
@@ -64,7 +66,7 @@ class Replay:
     nrmse_floors : ndarray, shape (d,)
         Per floor sensor.
     noise_nrmse : float
-        What the floor sensors' noise alone leaves (a perfect model's NRMSE, lower bound).
+        What the sensors' noise alone leaves: a perfect twin's expected NRMSE.
     """
 
     run: str
@@ -173,9 +175,33 @@ def floor_readings(raw: dict, params: TwinParameters, sensors: SensorModel) -> n
     return a * sensors.gain[None, :] + sensors.bias[None, :]
 
 
-def _noise_nrmse(run: RunData, recorded: np.ndarray, start: int, stated) -> float:
+def table_noise_gain(params: TwinParameters, sensors: SensorModel, sample_rate: float) -> np.ndarray:
+    """Variance of each floor sensor's twin reading per unit variance of white noise on the table
+    sensor that drives it: ``(2 / fs) int_0^(fs/2) |H_j(f)|^2 df`` (``H`` of :func:`transfer`), on a
+    grid a tenth of the narrowest half-power bandwidth fine.
+
+    Returns
+    -------
+    ndarray, shape (d,)
+    """
+    from momentid.core.analytic import modal_properties
+
+    modes = modal_properties(np.diag(params.masses), params.C, params.K)
+    widths = [*(modes.damping_ratio * modes.frequency), *(e.damping_ratio * e.frequency for e in params.extra_modes)]
+    step = max(min(widths) / 10, 1e-4 * sample_rate)
+    f = np.arange(0.0, sample_rate / 2, step)
+    power = np.abs(transfer(params, f, sensors)) ** 2
+    return 2.0 / sample_rate * np.trapezoid(power, f, axis=0)
+
+
+def _noise_nrmse(run: RunData, recorded: np.ndarray, start: int, stated, params: TwinParameters,
+                 sensors: SensorModel) -> float:
+    """Expected NRMSE of a perfect twin: the floor sensors' own noise, plus the table sensor's noise
+    that drives the twin and reaches its floors through the rig (:func:`table_noise_gain`)."""
     sigma = estimate_noise(run, stated=stated).sigma
-    power = (recorded.shape[0] - start) * sum(sigma[f"a{j + 1}"] ** 2 for j in range(recorded.shape[1]))
+    d = recorded.shape[1]
+    through = sigma["zdd"] ** 2 * table_noise_gain(params, sensors, run.sample_rate)
+    power = (recorded.shape[0] - start) * sum(sigma[f"a{j + 1}"] ** 2 + through[j] for j in range(d))
     scored = recorded[start:]
     return float(np.sqrt(power / np.sum((scored - scored.mean(axis=0)) ** 2)))
 
@@ -218,7 +244,7 @@ def replay_run(params: TwinParameters, run: RunData, *, model: mujoco.MjModel | 
                   table=raw["zdd"], q=np.column_stack([raw[c] for c in names["q"]]), start=start, sensors=sensors,
                   calibrated=run.name in params.sensors, nrmse=float(nrmse(recorded[start:], twin[start:])),
                   nrmse_floors=nrmse(recorded[start:], twin[start:], axis=0),
-                  noise_nrmse=_noise_nrmse(run, recorded, start, stated_noise))
+                  noise_nrmse=_noise_nrmse(run, recorded, start, stated_noise, params, sensors))
 
 
 def transfer(params: TwinParameters, frequency, sensors: SensorModel | None = None) -> np.ndarray:
@@ -242,11 +268,10 @@ def transfer(params: TwinParameters, frequency, sensors: SensorModel | None = No
     sensors = params.nominal if sensors is None else sensors
     w = 2 * np.pi * np.asarray(frequency, float)
     M = np.diag(params.masses)
-    ones = np.ones(params.storeys)
-    out = np.empty((w.size, params.storeys), complex)
-    for k, wk in enumerate(w):
-        out[k] = 1 + wk ** 2 * np.linalg.solve(params.K - wk ** 2 * M + 1j * wk * params.C, M @ ones)
-        for mode in params.extra_modes:
-            we = 2 * np.pi * mode.frequency
-            out[k] += mode.residues * wk ** 2 / (we ** 2 - wk ** 2 + 2j * mode.damping_ratio * we * wk)
+    dynamic = params.K[None] - w[:, None, None] ** 2 * M[None] + 1j * w[:, None, None] * params.C[None]
+    rhs = np.broadcast_to((M @ np.ones(params.storeys))[None, :, None], (w.size, params.storeys, 1))
+    out = 1 + w[:, None] ** 2 * np.linalg.solve(dynamic, rhs)[:, :, 0]
+    for mode in params.extra_modes:
+        we = 2 * np.pi * mode.frequency
+        out = out + mode.residues[None, :] * (w ** 2 / (we ** 2 - w ** 2 + 2j * mode.damping_ratio * we * w))[:, None]
     return out * sensors.gain[None, :] * np.exp(-1j * w[:, None] * sensors.clock_offset[None, :])

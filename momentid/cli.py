@@ -274,7 +274,7 @@ def _cmd_view(args) -> int:
     from momentid.report.viewer import view
 
     out = view(args.recording, save=args.save, result=args.result, exaggeration=args.exaggeration,
-               run=args.run)
+               run=args.run, twin=args.twin)
     if out is not None:
         print(f"{args.recording} -> {out} (open it with: rerun {out})")
     return 0
@@ -483,6 +483,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--run", metavar="NAME", help="the run whose tab opens first (default: the first run)")
     p.add_argument("--result", metavar="JSON",
                    help="show this result of `momentid identify --json` instead of identifying again")
+    p.add_argument("--twin", metavar="DIR",
+                   help="a folder of `momentid twin`: beside each run, the twin moving and every floor sensor "
+                        "recorded and as the twin reads it (the recording is not identified again)")
     p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("diagnose", help="locate a model/recording mismatch and name the missing physics",

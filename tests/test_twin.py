@@ -324,3 +324,34 @@ def test_shipped_rig(tmp_path):
     assert [t["calibration"] for t in data["trials"]] == [True] * 4 + [False]
     assert all(np.isfinite(t["nrmse"]) and t["nrmse"] > t["noise_nrmse"] for t in data["trials"])
     mujoco.MjModel.from_xml_path(str(out / "twin.xml"))
+
+
+def test_view_shows_the_twin_beside_the_recording(tmp_path, experiment, twin):
+    rerun_chunk = pytest.importorskip("rerun.chunk")
+    from collections import defaultdict
+    from momentid.io.recording import write_experiment
+
+    rec = write_experiment(tmp_path / "rig.mcap", experiment)
+    write_twin(twin, experiment, tmp_path / "twin", plots=False)
+    rrd = tmp_path / "view.rrd"
+    assert main(["view", str(rec), "--twin", str(tmp_path / "twin"), "--save", str(rrd)]) == 0
+    reader = rerun_chunk.RrdReader(rrd)
+    chunks = defaultdict(list)
+    for chunk in reader.store().stream().to_chunks():
+        chunks[chunk.entity_path].append(chunk.to_record_batch())
+    for replay in twin.replays:
+        batches = [b for b in chunks[f"/runs/{replay.run}/twin/a2"] if "Scalars:scalars" in b.schema.names]
+        values = np.concatenate([np.ravel(b.column("Scalars:scalars").to_pylist()) for b in batches])
+        # The overlay replays from twin.json's parameters (full precision): the twin's own readings.
+        assert np.allclose(np.sort(values), np.sort(replay.twin[:, 1]), rtol=0, atol=1e-9)
+        assert f"/runs/{replay.run}/twin/rig/base/floor2" in chunks
+    summary = [b.column("TextDocument:text").to_pylist()[0] for b in chunks["/twin/summary"]
+               if "TextDocument:text" in b.schema.names][0]
+    summary = summary[0] if isinstance(summary, list) else summary
+    assert "| small | calibrated |" in summary
+    titles = set()
+    for chunk in reader.store(store=reader.blueprints()[0]).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        titles |= {batch.column(c).to_pylist()[0][0] for c in batch.schema.names if c.endswith("display_name")}
+    assert any(t.startswith("large: the twin, displacements drawn x") for t in titles)
+    assert any(t.startswith("large: floor 1 sensor, recorded and twin") for t in titles)

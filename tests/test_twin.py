@@ -284,6 +284,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path, experiment, twin, monk
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(plots, "plot_transfer", broken)
+    monkeypatch.setattr(plots, "plot_replay", broken)
     with pytest.raises(OSError):
         write_twin(twin, experiment, tmp_path / "twin")
     assert list(tmp_path.iterdir()) == []

@@ -22,7 +22,7 @@ from momentid.twin.parameters import TwinParameters, from_identification
 from momentid.twin.replay import Replay, replay_run
 from momentid.twin.spec import Timing, model_matrices, timing, twin_spec
 
-__all__ = ["Twin", "build_twin", "check_recording", "refusals", "MIN_TRIALS", "CHECK_STEPS"]
+__all__ = ["Twin", "build_twin", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS"]
 
 #: Trials a twin is calibrated on at least: one trial cannot tell the rig from that trial.
 MIN_TRIALS = 2
@@ -206,7 +206,7 @@ def refusals(result) -> tuple[list, list]:
     return reasons, accepted
 
 
-def _check_xml(xml: str) -> object:
+def check_xml(xml: str) -> object:
     """Load ``xml`` in stock MuJoCo, step it unforced, and return its modes (matrices read back)."""
     model = mujoco.MjModel.from_xml_string(xml)
     data = mujoco.MjData(model)
@@ -240,6 +240,7 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
         What :func:`check_recording` and :func:`refusals` refuse, with the reasons in one line.
     """
     from momentid.diagnosis.plausibility import implausible
+    from momentid.diagnosis.workers import run_forked
     from momentid.estimation.identification import identify
 
     names = check_recording(experiment, runs)
@@ -253,7 +254,7 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     stated = dict(experiment.statement.noise) if experiment.statement is not None else None
     t = timing(params, experiment.runs[0].sample_rate)
     xml = twin_spec(params, t.timestep, name=f"{experiment.name}_twin").to_xml()
-    replays = tuple(replay_run(params, run, stated_noise=stated) for run in experiment.runs)
-    return Twin(parameters=params, identification=result, timing=t, xml=xml, modes=_check_xml(xml),
+    replays = tuple(run_forked(lambda run: replay_run(params, run, stated_noise=stated), experiment.runs))
+    return Twin(parameters=params, identification=result, timing=t, xml=xml, modes=check_xml(xml),
                 replays=replays, source=experiment.source, warnings=tuple(accepted))
 

@@ -39,16 +39,21 @@ def _check_out(out: Path) -> None:
 
 
 def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
-    from momentid.twin.plots import plot_replay, plot_transfer, replay_file
+    from momentid.diagnosis.workers import run_forked
+    from momentid.twin import plots as plotting
 
     (folder / TWIN_XML).write_text(twin.xml)
     text = json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False) + "\n"
     (folder / TWIN_JSON).write_text(text)
     names = [TWIN_XML, TWIN_JSON]
-    if plots:
-        for replay in twin.replays:
-            names.append(plot_replay(replay, folder / replay_file(replay.run)).name)
-        names.append(plot_transfer(twin, experiment, folder / TRANSFER_PNG).name)
+    if plots:           # each plot on its own: on the machine's cores
+
+        def plot(replay):
+            if replay is None:
+                return plotting.plot_transfer(twin, experiment, folder / TRANSFER_PNG).name
+            return plotting.plot_replay(replay, folder / plotting.replay_file(replay.run)).name
+
+        names += run_forked(plot, list(twin.replays) + [None])
     return names
 
 

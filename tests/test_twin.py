@@ -356,3 +356,37 @@ def test_view_shows_the_twin_beside_the_recording(tmp_path, experiment, twin):
         titles |= {batch.column(c).to_pylist()[0][0] for c in batch.schema.names if c.endswith("display_name")}
     assert any(t.startswith("large: the twin, displacements drawn x") for t in titles)
     assert any(t.startswith("large: floor 1 sensor, recorded and twin") for t in titles)
+
+
+def test_shipped_twin_file_matches_its_readme():
+    """models/twin/flexible_3storey.xml: loads and steps in stock MuJoCo; its modes are the README's."""
+    import re
+    from conftest import ROOT
+
+    model = mujoco.MjModel.from_xml_path(str(ROOT / "models" / "twin" / "flexible_3storey.xml"))
+    data = mujoco.MjData(model)
+    mujoco.mj_step(model, data, 1000)
+    assert all(w.number == 0 for w in data.warning)
+    modes = modal_properties(*model_matrices(model))
+    rows = re.findall(r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \|$", (ROOT / "models" / "twin" / "README.md").read_text(), re.M)
+    assert len(rows) == 3
+    for i, f, z in rows:                        # the README's 4 and 3 decimals
+        assert modes.frequency[int(i) - 1] == pytest.approx(float(f), abs=5e-5)
+        assert 100 * modes.damping_ratio[int(i) - 1] == pytest.approx(float(z), abs=5e-4)
+
+
+def test_a_mechanism_is_added_to_the_spec_before_compiling(twin, experiment):
+    """The API a diagnosis builds on: edit the twin's spec (here a damper across storey 2), compile,
+    replay through the edited model."""
+    p = twin.parameters
+    run = experiment.run("large")
+    spec = twin_spec(p, timing(p, run.sample_rate).timestep, sensors=p.sensors_of("large"))
+    damper = spec.add_tendon(name="extra_damper")
+    damper.wrap_joint("q2", 1.0)
+    damper.wrap_joint("q1", -1.0)
+    damper.damping = [2.0, 0.0, 0.0]        # N s/m: ~8 % of critical on mode 1 where the rig has 1 %
+    edited = replay_run(p, run, model=rig.compile_model(spec))
+    same = replay_run(p, run, model=rig.compile_model(twin_spec(p, timing(p, run.sample_rate).timestep,
+                                                                  sensors=p.sensors_of("large"))))
+    assert same.nrmse == pytest.approx(twin.replay("large").nrmse, rel=1e-12)
+    assert edited.nrmse > 3 * same.nrmse

@@ -10,7 +10,7 @@ each sensor's gain, and the warning is repeated.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import mujoco
 import numpy as np
@@ -122,24 +122,27 @@ class Twin:
 def check_recording(experiment: Experiment, runs=None) -> tuple:
     """The run names a twin can be calibrated on; refuses what it cannot honour.
 
+    Every trial of the recording is replayed, so every one needs the table sensor and each floor's.
+
     Raises
     ------
     SensorDataError
         A trial without the table sensor ``zdd`` or a floor sensor, or an unknown run name.
     IdentificationError
-        Fewer than :data:`MIN_TRIALS` trials selected.
+        A trial named twice, or fewer than :data:`MIN_TRIALS` trials selected.
     """
     names = [r.name for r in experiment.runs] if runs is None else list(runs)
     if len(set(names)) != len(names):
         raise IdentificationError(f"{experiment.source}: runs {names} name a trial twice: expected each once")
-    d = experiment.storeys
     for name in names:
-        run = experiment.run(name)
+        experiment.run(name)                      # an unknown name is refused with the runs there are
+    d = experiment.storeys
+    for run in experiment.runs:
         missing = [c for c in ["zdd"] + [f"a{j + 1}" for j in range(d)] if not run.has(c)]
         if missing:
             what = "no table sensor (zdd)" if "zdd" in missing else f"no {', '.join(missing)}"
-            raise SensorDataError(f"{experiment.source}: run {name!r} has {what}: a twin is driven by the recorded "
-                                  f"table acceleration and scored on every floor's accelerometer")
+            raise SensorDataError(f"{experiment.source}: run {run.name!r} has {what}: a twin is driven by the "
+                                  f"recorded table acceleration and scored on every floor's accelerometer")
     if len(names) < MIN_TRIALS:
         raise IdentificationError(f"{experiment.source}: {len(names)} trial ({', '.join(names)}): a twin is "
                                   f"calibrated on at least {MIN_TRIALS} trials (one trial cannot tell the rig "
@@ -255,6 +258,8 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     t = timing(params, experiment.runs[0].sample_rate)
     xml = twin_spec(params, t.timestep, name=f"{experiment.name}_twin").to_xml()
     replays = tuple(run_forked(lambda run: replay_run(params, run, stated_noise=stated), experiment.runs))
+    # each calibrated run's sensors with the bias its replay fitted
+    params = replace(params, sensors={r.run: r.sensors for r in replays if r.calibrated})
     return Twin(parameters=params, identification=result, timing=t, xml=xml, modes=check_xml(xml),
                 replays=replays, source=experiment.source, warnings=tuple(accepted))
 

@@ -390,3 +390,13 @@ def test_a_mechanism_is_added_to_the_spec_before_compiling(twin, experiment):
                                                                   sensors=p.sensors_of("large"))))
     assert same.nrmse == pytest.approx(twin.replay("large").nrmse, rel=1e-12)
     assert edited.nrmse > 3 * same.nrmse
+
+
+def test_simulated_recording_takes_its_masses_from_the_nominal_model(experiment, twin, truth):
+    s, _ = truth
+    simulated = Experiment(runs=experiment.runs, structure=s, source="simulated.mcap")
+    built = build_twin(simulated)
+    assert not built.parameters.mass_normalised and np.allclose(built.parameters.masses, MASSES)
+    # The same identification as with the lab's statement (same data, same masses): same K to round-off.
+    assert np.allclose(built.parameters.K, twin.parameters.K, rtol=1e-9)
+    assert any("nominal model" in n for n in built.notes)

@@ -269,6 +269,8 @@ def _heights(experiment: Experiment, d: int) -> np.ndarray:
 def _extra_modes(result, d: int) -> tuple:
     """The identification's resonances beyond the storeys, if it reports any (``extra_modes``: items
     with ``frequency`` (Hz), ``damping_ratio`` and ``residues`` (d,) per floor sensor)."""
+    # ``extra_modes`` is being added to ModalIdentification (the modal identification's resonances beyond the
+    # storeys); an identification without the field, or the added-mass one, has none.
     found = getattr(result, "extra_modes", None) or ()
     out = []
     for mode in found:

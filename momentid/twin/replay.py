@@ -217,7 +217,9 @@ def replay_run(params: TwinParameters, run: RunData, *, model: mujoco.MjModel | 
         With ``zdd`` and ``a1..ad`` (m/s^2), uniformly sampled.
     model : mujoco.MjModel, optional
         A twin compiled from :func:`momentid.twin.spec.twin_spec` for this run's sensors (edited, say,
-        with a mechanism); default: built here at :func:`momentid.twin.spec.timing`'s step.
+        with a mechanism), at :func:`momentid.twin.spec.timing`'s step; default: built here.  MuJoCo
+        integrates whatever the MJCF holds (tendons, joints, actuators with their dynamics); no Python
+        callback is installed.
     stated_noise : dict, optional
         The lab's stated noise levels (``experiment.statement.noise``).
 

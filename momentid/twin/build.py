@@ -247,12 +247,15 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     from momentid.estimation.identification import identify
 
     names = check_recording(experiment, runs)
-    result = identify(experiment, runs=list(names))
+    cannot = f"{experiment.source}: the identification of {', '.join(names)} cannot calibrate a twin: "
+    try:
+        result = identify(experiment, runs=list(names))
+    except IdentificationError as exc:
+        raise IdentificationError(cannot + str(exc) + " (leave a trial out with --runs)") from None
     reasons, accepted = refusals(result)
     reasons += implausible(experiment, result)
     if reasons:
-        raise IdentificationError(f"{experiment.source}: the identification of {', '.join(names)} cannot calibrate a "
-                                  f"twin: " + "; ".join(reasons) + " (leave a trial out with --runs)")
+        raise IdentificationError(cannot + "; ".join(reasons) + " (leave a trial out with --runs)")
     params = from_identification(result, experiment)
     stated = dict(experiment.statement.noise) if experiment.statement is not None else None
     t = timing(params, experiment.runs[0].sample_rate)

@@ -46,7 +46,8 @@ def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
     text = json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False) + "\n"
     (folder / TWIN_JSON).write_text(text)
     names = [TWIN_XML, TWIN_JSON]
-    if plots:           # each plot on its own: on the machine's cores
+    if plots:           # each plot on its own: on the machine's cores, which inherit matplotlib loaded once
+        plotting.pyplot()
 
         def plot(replay):
             if replay is None:

@@ -17,7 +17,7 @@ import scipy.signal
 
 from momentid.twin.replay import Replay, transfer
 
-__all__ = ["plot_replay", "plot_transfer", "replay_file", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
+__all__ = ["plot_replay", "plot_transfer", "replay_file", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
 
 #: Stretches a whole-trial panel is drawn as (minimum and maximum of each): about its width in pixels.
 ENVELOPE_BINS = 1500
@@ -31,7 +31,8 @@ SEGMENT = 4096
 _RECORDED, _TWIN = "0.15", "tab:orange"
 
 
-def _pyplot():
+def pyplot():
+    """``matplotlib.pyplot`` on the Agg backend (files only, no display)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -65,7 +66,7 @@ def replay_file(run: str) -> str:
 
 def plot_replay(replay: Replay, path: Path) -> Path:
     """Recorded and twin floor accelerations of one trial, whole and zoomed; returns ``path``."""
-    plt = _pyplot()
+    plt = pyplot()
     d = replay.recorded.shape[1]
     s = replay.start
     t, rec, twin = replay.time, replay.recorded, replay.twin
@@ -116,7 +117,7 @@ def _recorded_transfer(run, d: int, start: int):
 def plot_transfer(twin, experiment, path: Path) -> Path:
     """Magnitude of each floor sensor's transfer from the table: every calibration trial's estimate
     and the twin's; returns ``path``."""
-    plt = _pyplot()
+    plt = pyplot()
     p = twin.parameters
     d = p.storeys
     fs = min(r.sample_rate for r in experiment.runs)

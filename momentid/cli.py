@@ -30,6 +30,7 @@ _EPILOG = """examples:
   momentid plan scenarios/lab_noisy.toml              # runs and masses for a target accuracy (CRLB)
   momentid import lab_data/ -o lab.mcap               # a real rig's exports (CSV, Xsens DOT) -> recording
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
+  momentid twin lab.mcap -o twin/                     # the calibrated MuJoCo twin of the rig
 """
 
 
@@ -273,7 +274,7 @@ def _cmd_view(args) -> int:
     from momentid.report.viewer import view
 
     out = view(args.recording, save=args.save, result=args.result, exaggeration=args.exaggeration,
-               run=args.run)
+               run=args.run, twin=args.twin)
     if out is not None:
         print(f"{args.recording} -> {out} (open it with: rerun {out})")
     return 0
@@ -325,6 +326,23 @@ def _cmd_diagnose(args) -> int:
               + (", replay.png, diagnosis.rrd" if diag.curves else "")
               + (", locate.png" if diag.localisation else "")
               + (", discovered.png" if getattr(diag, "discovered", None) is not None else "") + ")")
+    return 0
+
+
+def _cmd_twin(args) -> int:
+    from momentid.io.recording import read_recording
+    from momentid.twin import build_twin, write_twin
+
+    out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
+    experiment = read_recording(args.recording)
+    twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
+    names = write_twin(twin, experiment, out, plots=not args.no_plots)
+    if args.json:
+        print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
+    else:
+        print(twin.summary())
+        print(f"\ntwin written to {out}/ ({', '.join(names)})")
+    _warn(twin.warnings)
     return 0
 
 
@@ -465,6 +483,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--run", metavar="NAME", help="the run whose tab opens first (default: the first run)")
     p.add_argument("--result", metavar="JSON",
                    help="show this result of `momentid identify --json` instead of identifying again")
+    p.add_argument("--twin", metavar="DIR",
+                   help="a folder of `momentid twin`: beside each run, the twin moving and every floor sensor "
+                        "recorded and as the twin reads it (the recording is not identified again)")
     p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("diagnose", help="locate a model/recording mismatch and name the missing physics",
@@ -483,6 +504,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="recordings without added mass: the run to hold out for the before/after check "
                         "(default: the last run)")
     p.set_defaults(func=_cmd_diagnose)
+
+    p = sub.add_parser("twin", help="the calibrated MuJoCo twin of a rig: MJCF, parameters, replay of every trial",
+                       description="Identify the recording (accelerometers only: the modal fit with sensor gains and "
+                                   "clock offsets; K and C from the stated floor masses, mass-normalised without), "
+                                   "build its MJCF twin on momentid's rig (identified K and C as tendons, each "
+                                   "sensor's gain, bias and clock offset as a sensor model), replay every trial "
+                                   "through MuJoCo under its recorded table acceleration and write DIR/twin.xml, "
+                                   "DIR/twin.json (parameters, per-trial NRMSE) and plots.  Refuses (exit 2) one "
+                                   "trial, a trial without table sensor, or an identification the data contradict. "
+                                   "See docs/twin.md.")
+    p.add_argument("recording", help="MCAP recording (momentid import, or momentid run)")
+    p.add_argument("-o", "--output", metavar="DIR", help="the twin's folder (default: out/<recording>_twin); "
+                                                         "written whole or not at all")
+    p.add_argument("--runs", metavar="NAMES", help="comma-separated trials to calibrate on (default: all); every "
+                                                   "trial is replayed, the others with the calibrated runs' mean sensors")
+    p.add_argument("--json", action="store_true", help="print twin.json to stdout")
+    p.add_argument("--no-plots", action="store_true", help="write twin.xml and twin.json only")
+    p.set_defaults(func=_cmd_twin)
 
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",
                        description="Evaluate the Cramér-Rao lower bound of the scenario's experiment and of "

@@ -56,7 +56,7 @@ from momentid.core.series import Experiment, RunData, channel_unit
 from momentid.errors import IdentificationError, SensorDataError, ViewerError
 
 __all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
-           "log_scene", "write_rrd", "show", "view", "rig_samples", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
+           "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
 
 #: The timeline of every run: seconds of experiment time.
 TIMELINE = "time"
@@ -102,6 +102,10 @@ class Scene:
         Equation residual (N) per run, when the run has ``a``, ``q``, ``v``.
     notes : list of str
         What could not be shown, and why.
+    overlay : object, optional
+        A layer shown beside each run and in the side column (the twin: :class:`momentid.twin.overlay.TwinOverlay`):
+        ``spatial_views(scene, run)``, ``series_views(scene, run)``, ``side_views()`` give its blueprint views,
+        ``log(rec, scene, run)`` and ``log_static(rec)`` its data.
     """
 
     experiment: Experiment
@@ -112,6 +116,7 @@ class Scene:
     residuals: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     reconstructed: dict = field(default_factory=dict)
+    overlay: object = None
 
     @property
     def heights(self) -> np.ndarray:
@@ -295,7 +300,7 @@ def check_result(result, experiment: Experiment, source: str = "result") -> None
 
 
 def prepare(experiment: Experiment, *, result=None, exaggeration: float | None = None,
-            run: str | None = None, identify_options: dict | None = None) -> Scene:
+            run: str | None = None, identify_options: dict | None = None, identify: bool = True) -> Scene:
     """Identify (unless ``result`` is given), compare and collect what to show.
 
     Parameters
@@ -309,6 +314,8 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         The run whose tab opens first (default: the first run).
     identify_options : dict, optional
         Keyword arguments of :func:`momentid.estimation.identification` (estimator, runs, times).
+    identify : bool
+        Identify when no ``result`` is given (False: show none, e.g. beside a twin that carries its own).
 
     Returns
     -------
@@ -320,7 +327,8 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         Bad exaggeration, unknown run name, or a result of another recording.
     """
     from momentid.estimation.comparison import compare
-    from momentid.estimation.identification import equation_residual, identify
+    from momentid.estimation.identification import equation_residual
+    from momentid.estimation.identification import identify as identify_experiment
 
     names = [r.name for r in experiment.runs]
     if run is not None and run not in names:
@@ -336,9 +344,11 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
                           else auto_exaggeration(experiment, scene.heights, scene.reconstructed))
     if result is not None:
         check_result(result, experiment)
+    elif not identify:
+        scene.notes.append("not identified: the twin's parameters are shown instead")
     else:
         try:
-            result = identify(experiment, **(identify_options or {}))
+            result = identify_experiment(experiment, **(identify_options or {}))
         except (IdentificationError, SensorDataError) as exc:
             scene.notes.append(f"not identified: {exc}")
     scene.result = result
@@ -412,10 +422,13 @@ def blueprint(scene: Scene):
         if run.name in scene.residuals:
             views.append(rrb.TimeSeriesView(name=f"{run.name}: equation residual of the identified model (N)",
                                             origin=f"{root}/residual", plot_legend=legend(True)))
+        spatial = [rrb.Spatial3DView(origin=f"{root}/rig", eye_controls=eye,
+                                     name=f"{run.name}: building, displacements drawn x{scene.exaggeration:g}")]
+        if scene.overlay is not None:
+            spatial += scene.overlay.spatial_views(scene, run, eye)
+            views += scene.overlay.series_views(scene, run)
         tabs.append(rrb.Horizontal(
-            rrb.Spatial3DView(origin=f"{root}/rig", eye_controls=eye,
-                              name=f"{run.name}: building, displacements drawn x{scene.exaggeration:g}"),
-            rrb.Vertical(*views),
+            rrb.Vertical(*spatial) if len(spatial) > 1 else spatial[0], rrb.Vertical(*views),
             column_shares=[2, 3], name=f"run {run.name}",
         ))
     side = [rrb.Tabs(rrb.TextDocumentView(origin="/identification/parameters", name="identified vs. analytic"),
@@ -428,6 +441,9 @@ def blueprint(scene: Scene):
                                      name="relative error per parameter (bar k = row k)",
                                      plot_legend=rrb.PlotLegend(visible=False)))
     shares = [3.0, 1.3, 1.6][:len(side)]
+    if scene.overlay is not None:
+        extra = scene.overlay.side_views()
+        side, shares = side + extra, shares + [2.0] * len(extra)
     layout = rrb.Horizontal(rrb.Tabs(*tabs, active_tab=scene.active_run),
                             rrb.Vertical(*side, row_shares=shares), column_shares=[5, 2])
     return rrb.Blueprint(layout, rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
@@ -441,19 +457,22 @@ def rig_samples(run: RunData) -> np.ndarray:
     return np.arange(0, run.n_samples, step)
 
 
-def _log_rig(rec, scene: Scene, run: RunData) -> None:
+def log_rig(rec, scene: Scene, run: RunData, root: str | None = None, motion=None) -> None:
+    """Draw the rig of ``run`` moving: table and floors, at ``root`` (default ``/runs/<run>/rig``),
+    with ``motion = (z, q)`` (table displacement (n,), floors relative to it (n, d), m; default: the
+    recording's, :meth:`Scene.drawn`)."""
     import rerun as rr
 
     d, X = scene.experiment.storeys, scene.exaggeration
     h = scene.heights
     level = np.concatenate([[0.0], np.cumsum(h)])
     w = float(h.max())
-    root = f"{_run_path(run.name)}/rig"
+    root = root or f"{_run_path(run.name)}/rig"
     idx = rig_samples(run)
     n = idx.size
     time = rr.TimeColumn(TIMELINE, duration=run.time[idx])
     zero = np.zeros(n)
-    z, q = scene.drawn(run)
+    z, q = scene.drawn(run) if motion is None else motion
     z = zero if z is None else z[idx]
     q = np.zeros((n, d)) if q is None else q[idx]
     rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -574,6 +593,8 @@ def log_scene(rec, scene: Scene) -> None:
     rec.log("/identification/parameters", rr.TextDocument(_parameters_markdown(scene), media_type=md), static=True)
     if scene.result is not None:
         rec.log("/identification/modes", rr.TextDocument(_modes_markdown(scene), media_type=md), static=True)
+    if scene.overlay is not None:
+        scene.overlay.log_static(rec)
     if scene.comparison is not None:
         errors = np.array([e.rel_error for e in scene.comparison.entries])
         rec.log("/identification/rel_error",
@@ -581,7 +602,9 @@ def log_scene(rec, scene: Scene) -> None:
                 static=True)
     for run in scene.experiment.runs:
         root = _run_path(run.name)
-        _log_rig(rec, scene, run)
+        log_rig(rec, scene, run)
+        if scene.overlay is not None:
+            scene.overlay.log(rec, scene, run)
         time = rr.TimeColumn(TIMELINE, duration=run.time)
         for channel in run.channels:
             name, color = _channel_label(channel)
@@ -699,7 +722,7 @@ def show(scene: Scene, *, port: int = 9876) -> None:
 
 
 def view(recording, *, save=None, result=None, exaggeration: float | None = None, run: str | None = None,
-         identify_options: dict | None = None, port: int = 9876) -> Path | None:
+         identify_options: dict | None = None, port: int = 9876, twin=None) -> Path | None:
     """Read ``recording``, then show it in the viewer or, with ``save``, write a ``.rrd``.
 
     Parameters
@@ -715,6 +738,9 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
         See :func:`prepare`.
     port : int
         Port of the viewer to connect to or spawn.
+    twin : str or Path, optional
+        A folder of ``momentid twin``: each run's twin floor accelerations beside the recorded ones
+        and the twin moving (:mod:`momentid.twin.overlay`); the recording is then not identified again.
 
     Returns
     -------
@@ -734,7 +760,11 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
     if isinstance(result, (str, Path)):
         result = load_result(result, experiment)
     scene = prepare(experiment, result=result, exaggeration=exaggeration, run=run,
-                    identify_options=identify_options)
+                    identify_options=identify_options, identify=twin is None)
+    if twin is not None:
+        from momentid.twin.overlay import TwinOverlay
+
+        scene.overlay = TwinOverlay.from_folder(twin, experiment)
     if save is not None:
         return write_rrd(scene, save)
     show(scene, port=port)

@@ -39,7 +39,6 @@ Entity paths::
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
@@ -54,6 +53,7 @@ import scipy.signal
 
 from momentid.core.series import Experiment, RunData, channel_unit
 from momentid.errors import IdentificationError, SensorDataError, ViewerError
+from momentid.io.exclusive import write_whole
 
 __all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
            "log_scene", "write_rrd", "show", "view", "rig_samples", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
@@ -638,17 +638,9 @@ def write_rrd(experiment, path, **options) -> Path:
 
 def _write_file(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` whole or not at all (a temporary file renamed into place)."""
-    partial = path.with_name(path.name + ".partial")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(partial, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(partial, path)
+        write_whole(path, data)   # locked: a second writer of the same file is refused
     except OSError as exc:
-        with contextlib.suppress(OSError):
-            partial.unlink(missing_ok=True)
         raise ViewerError(f"{path}: cannot write the rerun recording ({exc.strerror or exc}); "
                           f"expected a writable path with {len(data) / 1e6:.3g} MB free; nothing was written"
                           ) from None

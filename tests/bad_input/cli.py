@@ -94,6 +94,42 @@ def _json_notes(*argv, cut_after=None, flip_in=None):
     return act
 
 
+def _aborted_rec(folder: Path) -> Path:
+    """The simulated recording as a Ctrl-C'd `momentid run` leaves it: two of its three planned runs,
+    then the writer's abort record."""
+    import warnings
+
+    from momentid.io.recording import RecordingWriter, read_recording
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        experiment = read_recording(_rec(folder))
+    path = folder / "aborted.mcap"
+    try:
+        with RecordingWriter(path, structure=experiment.structure, scenario=experiment.scenario,
+                             scenario_text=THREE_RUNS) as writer:
+            for run in experiment.runs[:2]:
+                writer.write_run(run)
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        pass
+    return path
+
+
+def _aborted_notes(*argv):
+    """``momentid identify <aborted recording> <argv> --json``: the note of the lost run must be in the
+    JSON, worded as the whole-file read words it (one way to say it, streamed or not)."""
+    def act(folder: Path) -> CliResult:
+        path = _aborted_rec(folder)
+        whole = json.loads(cli("identify", path, "--json").stdout).get("notes")
+        result = cli("identify", path, *argv, "--json")
+        notes = json.loads(result.stdout).get("notes")
+        if not notes or notes != whole:
+            return CliResult(result.code, result.stdout, "")   # no note, or another one than the whole read's
+        return CliResult(result.code, result.stdout, "note: " + json.dumps(notes))
+    return act
+
+
 def _edited(edit, *argv):
     """``momentid identify REC <argv>`` on the simulated recording with its runs edited by
     ``edit(run) -> RunData`` (a lab's slip: wrong units, swapped columns)."""
@@ -154,6 +190,14 @@ CASES = [
          _in("run", "s.toml", "-q", "-o", "/proc/momentid_x", setup=_scenario), ("/proc/momentid_x",)),
     Case(Group.CLI, "run-output-is-a-file", Outcome.ERROR,
          _in("run", "s.toml", "-o", "taken", setup=lambda f: (_scenario(f), _file("taken")(f))), ("taken",)),
+    Case(Group.CLI, "run-mass-1e308", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: write(f, "masses = [10.0, 12.0]",
+                                                                           "masses = [1e308, 12.0]")),
+         ("s.toml", "structure.masses[0]", "1e+308")),
+    Case(Group.CLI, "run-stiffness-1e308", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: write(f, "storey_stiffness = [2000.0, 1500.0]",
+                                                                           "storey_stiffness = [2000.0, 1e308]")),
+         ("s.toml", "storey_stiffness[1]", "1e+308")),
     Case(Group.CLI, "run-workers-zero", Outcome.ERROR, _in("run", "-j", "0"), ("-j", "'0'")),
     Case(Group.CLI, "run-workers-word", Outcome.ERROR, _in("run", "-j", "many"), ("'many'",)),
     Case(Group.CLI, "run-sample-rate-1e12", Outcome.REFUSAL,
@@ -181,6 +225,19 @@ CASES = [
          ("corrupted after run 'm1'", "(m2)")),
     Case(Group.CLI, "identify-stream-crc-damaged-json", Outcome.RECOVERY,
          _json_notes("identify", "REC", "--stream", "--json", flip_in=3), ("CRCValidationError", "m2")),
+    # issue 22: a run named twice counted twice (every standard error shrank by sqrt 2)
+    Case(Group.CLI, "identify-runs-twice", Outcome.ERROR, _with_rec("identify", "REC", "--runs", "ref,m1,ref"),
+         ("--runs", "'ref'", "twice")),
+    Case(Group.CLI, "identify-runs-empty-name", Outcome.ERROR, _with_rec("identify", "REC", "--runs", "ref,,m1"),
+         ("--runs", "empty")),
+    Case(Group.CLI, "identify-per-run-twice", Outcome.ERROR,
+         _with_rec("identify", "REC", "--per-run", "--runs", "ref,ref"), ("'ref'", "twice")),
+    Case(Group.CLI, "run-runs-unknown", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "--runs", "ref,nope", "-o", "o.mcap", setup=_scenario), ("'nope'", "s.toml")),
+    # issue 22: after a Ctrl-C'd run, --stream said nothing of the lost run (the whole read did)
+    Case(Group.CLI, "identify-aborted-json", Outcome.RECOVERY, _aborted_notes(), ("aborted", "(m2)")),
+    Case(Group.CLI, "identify-stream-aborted-json", Outcome.RECOVERY, _aborted_notes("--stream"),
+         ("aborted", "(m2)")),
     Case(Group.CLI, "identify-stream-estimator-eiv", Outcome.ERROR,
          _with_rec("identify", "REC", "--stream", "--estimator", "eiv"), ("--stream", "--estimator eiv")),
     Case(Group.CLI, "identify-stream-runs", Outcome.ERROR,

@@ -30,5 +30,9 @@ class FullDisk:
 
 
 def fill_disk_at(monkeypatch, module, limit: int) -> None:
-    """Every file ``module`` opens (by the builtin ``open``) sits on a disk that is full at ``limit`` bytes."""
+    """Every file ``module`` opens (by the builtin ``open``, or locked for writing by
+    :func:`momentid.io.exclusive.open_locked`) sits on a disk that is full at ``limit`` bytes."""
     monkeypatch.setattr(module, "open", lambda *a, **k: FullDisk(builtins.open(*a, **k), limit), raising=False)
+    locked = getattr(module, "open_locked", None)
+    if locked is not None:
+        monkeypatch.setattr(module, "open_locked", lambda path: FullDisk(locked(path), limit))

@@ -80,6 +80,10 @@ def _grid_items(node: Any, prefix: str, source: Path) -> list[tuple[str, list]]:
         if not node:
             raise ScenarioError(f"{source}: key 'grid.{prefix}' = []: expected a non-empty array of "
                                 "values to sweep")
+        twice = [v for i, v in enumerate(node) if v in node[:i]]
+        if twice:   # the same case twice would count twice in any statistic over the table
+            raise ScenarioError(f"{source}: key 'grid.{prefix}' = {node!r}: {twice[0]!r} is listed twice; "
+                                "expected each value once")
         return [(prefix, node)]
     if not isinstance(node, dict) or not node:
         raise ScenarioError(f"{source}: key 'grid.{prefix}' = {node!r}: expected an array of values "

@@ -113,6 +113,7 @@ def test_sigterm_of_diagnose_is_an_interrupt_and_leaves_no_worker(friction_recor
     proc = _diagnose(friction_recording, tmp_path / "report")
     _kill_and_check(proc, _workers_of(proc, 2), signal.SIGTERM)
     assert proc.returncode == 143 and proc.stderr.read() == "error: terminated (SIGTERM)\n"
+    assert not (tmp_path / "report").exists()   # the report folder made for it, still empty, is gone
 
 
 @pytest.mark.slow

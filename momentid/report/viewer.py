@@ -191,6 +191,12 @@ def _nice(x: float) -> float:
     return next(m * decade for m in (5, 2, 1) if m * decade <= x)
 
 
+#: Largest exaggeration / the default one (which draws the largest displacement at about a fifth of
+#: the building height): 1e4 draws it 2000 building heights away, where nothing is left to see (and
+#: beyond, the viewer's float32 positions overflow).
+MAX_EXAGGERATION = 1e4
+
+
 def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict | None = None) -> float:
     """A 1-2-5 factor that draws the largest recorded displacement at about a
     fifth of the building height (never below 1).
@@ -332,8 +338,12 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         got = _reconstruct(r, experiment.storeys)
         if got is not None:
             scene.reconstructed[r.name] = got
-    scene.exaggeration = (exaggeration if exaggeration is not None
-                          else auto_exaggeration(experiment, scene.heights, scene.reconstructed))
+    default = auto_exaggeration(experiment, scene.heights, scene.reconstructed)
+    if exaggeration is not None and exaggeration > MAX_EXAGGERATION * default:
+        raise ViewerError(f"exaggeration = {exaggeration!r}: would draw the largest displacement at about "
+                          f"{exaggeration / default / 5:.3g} building heights; expected at most "
+                          f"{MAX_EXAGGERATION * default:g} (the default here is {default:g})")
+    scene.exaggeration = exaggeration if exaggeration is not None else default
     if result is not None:
         check_result(result, experiment)
     else:
@@ -720,8 +730,14 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
     ViewerError
         See :func:`load_result`, :func:`prepare`, :func:`write_rrd`, :func:`show`.
     """
+    from momentid.io.mcap_check import MCAP_MAGIC
     from momentid.io.recording import read_recording
 
+    if save is not None and Path(save).is_file():
+        with open(save, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) == MCAP_MAGIC:   # `view rec.mcap --save rec.mcap` destroyed the recording
+                raise ViewerError(f"--save {save}: that file is an MCAP recording; expected a new path or an "
+                                  f"existing .rrd (a rerun file written over it would destroy it)")
     experiment = recording if isinstance(recording, Experiment) else read_recording(recording)
     if isinstance(result, (str, Path)):
         result = load_result(result, experiment)

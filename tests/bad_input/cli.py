@@ -77,6 +77,12 @@ def _scenario(folder: Path):
     write(folder)
 
 
+def _noisy_scenario(folder: Path) -> None:
+    """The three-run scenario with 1 % sensor noise (a plan needs noise), as ``noisy.toml``."""
+    (folder / "noisy.toml").write_text(THREE_RUNS + '[sensors]\nset = "accel+disp"\n[sensors.accelerometer]\n'
+                                       'relative_noise = 0.01\n[sensors.displacement]\nrelative_noise = 0.01\n')
+
+
 def _lab_with(r1: str):
     return lambda folder: lab_folder(folder, r1=r1)
 
@@ -127,6 +133,41 @@ def _aborted_notes(*argv):
         if not notes or notes != whole:
             return CliResult(result.code, result.stdout, "")   # no note, or another one than the whole read's
         return CliResult(result.code, result.stdout, "note: " + json.dumps(notes))
+    return act
+
+
+#: Another process writing an output now, the way momentid's writers hold it: ``flock`` on the file,
+#: on a whole-file output's ``.partial`` file, or on a folder (plain Python: it starts at once).
+_HOLDER = """
+import fcntl, os, sys
+kind, path = sys.argv[1], sys.argv[2]
+if kind == "folder":
+    os.makedirs(path, exist_ok=True)
+fd = os.open(path + (".partial" if kind == "whole" else ""), os.O_RDONLY if kind == "folder" else os.O_RDWR | os.O_CREAT)
+fcntl.flock(fd, fcntl.LOCK_EX)
+print("locked", flush=True)
+sys.stdin.read()
+"""
+
+
+def _while_held(kind: str, output: str, *argv, setup=None, rec=False):
+    """``momentid <argv>`` while another process holds ``output`` (``file``, ``whole`` or ``folder``);
+    ``REC`` in ``argv`` stands for the simulated recording."""
+    def act(folder: Path) -> CliResult:
+        import subprocess
+        import sys
+
+        if setup is not None:
+            setup(folder)
+        path = _rec(folder) if rec else None
+        holder = subprocess.Popen([sys.executable, "-c", _HOLDER, kind, str(folder / output)],
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        try:
+            assert holder.stdout.readline().strip() == "locked"
+            return cli(*(path if a == "REC" else a for a in argv))
+        finally:
+            holder.stdin.close()
+            holder.wait(timeout=30)
     return act
 
 
@@ -266,16 +307,49 @@ CASES = [
          ("r.json",)),
     Case(Group.CLI, "view-unknown-run", Outcome.ERROR, _with_rec("view", "REC", "--save", "v.rrd", "--run", "nope"),
          ("nope",)),
+    Case(Group.CLI, "view-save-onto-its-recording", Outcome.ERROR, _with_rec("view", "REC", "--save", "REC"),
+         ("rec.mcap", "MCAP recording")),
+    Case(Group.CLI, "view-exaggeration-1e308", Outcome.ERROR,
+         _with_rec("view", "REC", "--save", "v.rrd", "--exaggeration", "1e308"), ("exaggeration", "1e+308")),
     Case(Group.CLI, "view-exaggeration-word", Outcome.ERROR, _in("view", "x.mcap", "--exaggeration", "big"),
          ("'big'",)),
     Case(Group.CLI, "diagnose-missing-file", Outcome.ERROR, _in("diagnose", "none.mcap"), ("none.mcap",)),
     Case(Group.CLI, "diagnose-output-is-a-file", Outcome.ERROR,
          _with_rec("diagnose", "REC", "-o", "rec.mcap"), ("rec.mcap", "a file of that name exists")),
+    # issue 22: two writers of one output both exited 0 and left an unreadable file
+    Case(Group.CLI, "run-output-being-written", Outcome.ERROR,
+         _while_held("file", "o.mcap", "run", "s.toml", "-q", "-o", "o.mcap", setup=_scenario),
+         ("o.mcap", "another process is writing it")),
+    Case(Group.CLI, "import-output-being-written", Outcome.ERROR,
+         _while_held("file", "lab.mcap", "import", "lab", "-o", "lab.mcap", setup=lab_folder),
+         ("lab.mcap", "another process is writing it")),
+    Case(Group.CLI, "view-save-being-written", Outcome.ERROR,
+         _while_held("whole", "v.rrd", "view", "REC", "--save", "v.rrd", rec=True),
+         ("v.rrd", "another process is writing it")),
+    Case(Group.CLI, "diagnose-folder-being-written", Outcome.ERROR,
+         _while_held("folder", "report", "diagnose", "REC", "-o", "report", rec=True),
+         ("report", "another process is writing it")),
+    Case(Group.CLI, "sweep-table-being-written", Outcome.ERROR,
+         _while_held("whole", "t.csv", "sweep", "w.toml", "-q", "-o", "t.csv", setup=lambda f: (_scenario(f), _file(
+             "w.toml", '[sweep]\nbase = "s.toml"\n[grid]\n"scenario.seed" = [0]\n')(f))),
+         ("t.csv", "another process is writing it")),
     Case(Group.CLI, "plan-missing-scenario", Outcome.ERROR, _in("plan", "none.toml"), ("none.toml",)),
     Case(Group.CLI, "plan-target-zero", Outcome.ERROR, _in("plan", "s.toml", "--target", "0"), ("'0'",)),
     Case(Group.CLI, "plan-target-nan", Outcome.ERROR, _in("plan", "s.toml", "--target", "nan"), ("'nan'",)),
     Case(Group.CLI, "plan-max-runs-zero", Outcome.ERROR, _in("plan", "s.toml", "--max-runs", "0"), ("'0'",)),
+    # issue 22: plan --max-runs 1000000 ran for hours without a word
+    Case(Group.CLI, "plan-max-runs-1e6", Outcome.REFUSAL,
+         _in("plan", "noisy.toml", "--max-runs", "1000000", setup=_noisy_scenario), ("9999990 designs", "refused")),
+    Case(Group.CLI, "plan-beyond-time-limit", Outcome.REFUSAL,
+         _in("plan", "noisy.toml", "--max-runs", "5000", "--time-limit", "10", setup=_noisy_scenario),
+         ("5000 runs", "--max-runs", "--time-limit", "refused")),
+    Case(Group.CLI, "plan-max-runs-one", Outcome.ERROR,
+         _in("plan", "noisy.toml", "--max-runs", "1", setup=_noisy_scenario), ("--max-runs 1",)),
     Case(Group.CLI, "sweep-missing-spec", Outcome.ERROR, _in("sweep", "none.toml"), ("none.toml",)),
+    Case(Group.CLI, "sweep-grid-value-twice", Outcome.ERROR,
+         _in("sweep", "w.toml", setup=lambda f: (_scenario(f), _file(
+             "w.toml", '[sweep]\nbase = "s.toml"\n[grid]\n"scenario.seed" = [0, 1, 0]\n')(f))),
+         ("w.toml", "scenario.seed", "twice")),
     Case(Group.CLI, "sweep-bad-spec", Outcome.ERROR, _in("sweep", "w.toml", setup=_file("w.toml", "[sweep]\nbase = 3\n")),
          ("w.toml", "base")),
 ]

@@ -3,7 +3,6 @@ with one line naming it, and the first finishes intact."""
 
 from __future__ import annotations
 
-import contextlib
 import os
 import subprocess
 import sys
@@ -17,6 +16,8 @@ from momentid.errors import OutputBusyError
 from momentid.io.exclusive import exclusive, open_locked, partial_path, reserve, write_whole
 from momentid.io.recording import read_recording
 
+from bad_input.faults import held
+
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -24,33 +25,6 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 #: a second command starts while the first is still writing.
 LONG = (ROOT / "momentid" / "lab" / "default_scenario.toml").read_text().replace(
     "duration = 10.0 ", "duration = 60.0 ")
-
-#: Another process holding an output the way momentid's writers do (``flock`` on the file, on a
-#: whole-file output's ``.partial`` file, or on a folder), in plain Python: it starts in milliseconds.
-_HOLD = """
-import fcntl, os, sys
-kind, path = sys.argv[1], sys.argv[2]
-if kind == "folder":
-    os.makedirs(path, exist_ok=True)
-fd = os.open(path + (".partial" if kind == "reserve" else ""), os.O_RDONLY if kind == "folder" else os.O_RDWR | os.O_CREAT)
-fcntl.flock(fd, fcntl.LOCK_EX)
-print("locked", flush=True)
-sys.stdin.read()            # hold until the test closes our stdin
-"""
-
-
-@contextlib.contextmanager
-def held(kind: str, path: Path):
-    """Another process holding ``path`` (``file``, ``folder`` or ``reserve``) for the ``with`` block."""
-    proc = subprocess.Popen([sys.executable, "-c", _HOLD, kind, str(path)], env=ENV, stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
-    try:
-        assert proc.stdout.readline().strip() == "locked"
-        yield proc
-    finally:
-        proc.stdin.close()
-        proc.wait(timeout=30)
-
 
 def _cli(capsys, *argv) -> tuple[int, str]:
     code = main([str(a) for a in argv])
@@ -96,7 +70,7 @@ def test_sweep_refused_before_it_starts_while_another_process_writes_its_table(t
     table = tmp_path / "t.csv"
     spec = tmp_path / "w.toml"
     spec.write_text(f'[sweep]\nbase = "{ROOT / "scenarios" / "default.toml"}"\n[grid]\n"scenario.seed" = [0]\n')
-    with held("reserve", table):
+    with held("whole", table):
         code, err = _cli(capsys, "sweep", spec, "-o", table, "-q")
     assert code == 2 and str(table) in err and err.count("\n") == 1, err
     assert not table.exists()
@@ -108,7 +82,7 @@ def test_view_save_refused_while_another_process_writes_the_file(tmp_path, capsy
     rec = write_experiment(tmp_path / "rec.mcap", simulated("default", ideal=True))
     rrd = tmp_path / "v.rrd"
     rrd.write_bytes(b"old")
-    with held("reserve", rrd):
+    with held("whole", rrd):
         code, err = _cli(capsys, "view", rec, "--save", rrd)
     assert code == 2 and str(rrd) in err and err.count("\n") == 1, err
     assert rrd.read_bytes() == b"old"   # the holder's output is not disturbed

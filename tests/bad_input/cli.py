@@ -11,6 +11,7 @@ import momentid as mi
 
 from ._core import Case, CliResult, Group, Outcome, cli
 from .csv_import import lab_folder
+from .faults import held
 from .scenario import BASE, write
 
 #: Three runs (two with added mass) of the tiny scenario: enough for every estimator.
@@ -136,38 +137,15 @@ def _aborted_notes(*argv):
     return act
 
 
-#: Another process writing an output now, the way momentid's writers hold it: ``flock`` on the file,
-#: on a whole-file output's ``.partial`` file, or on a folder (plain Python: it starts at once).
-_HOLDER = """
-import fcntl, os, sys
-kind, path = sys.argv[1], sys.argv[2]
-if kind == "folder":
-    os.makedirs(path, exist_ok=True)
-fd = os.open(path + (".partial" if kind == "whole" else ""), os.O_RDONLY if kind == "folder" else os.O_RDWR | os.O_CREAT)
-fcntl.flock(fd, fcntl.LOCK_EX)
-print("locked", flush=True)
-sys.stdin.read()
-"""
-
-
 def _while_held(kind: str, output: str, *argv, setup=None, rec=False):
-    """``momentid <argv>`` while another process holds ``output`` (``file``, ``whole`` or ``folder``);
-    ``REC`` in ``argv`` stands for the simulated recording."""
+    """``momentid <argv>`` while another process holds ``output`` (``file``, ``whole`` or ``folder``:
+    :func:`.faults.held`); ``REC`` in ``argv`` stands for the simulated recording."""
     def act(folder: Path) -> CliResult:
-        import subprocess
-        import sys
-
         if setup is not None:
             setup(folder)
         path = _rec(folder) if rec else None
-        holder = subprocess.Popen([sys.executable, "-c", _HOLDER, kind, str(folder / output)],
-                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        try:
-            assert holder.stdout.readline().strip() == "locked"
+        with held(kind, folder / output):
             return cli(*(path if a == "REC" else a for a in argv))
-        finally:
-            holder.stdin.close()
-            holder.wait(timeout=30)
     return act
 
 

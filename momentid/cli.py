@@ -17,6 +17,7 @@ import sys
 import warnings
 from pathlib import Path
 
+from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_interrupt
 from momentid.core.series import json_safe
 from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
@@ -353,13 +354,13 @@ def _cmd_diagnose(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from momentid.estimation.design import cramer_rao, plan
+    from momentid.estimation.design import cramer_rao, plan, plan_progress_bar
     from momentid.lab.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
     if args.max_runs < 2:
         raise MomentidError(f"--max-runs {args.max_runs}: expected at least 2 (a reference run and one with added mass)")
-    with _plan_progress(not args.quiet and sys.stderr.isatty()) as progress:
+    with plan_progress_bar(not args.quiet and sys.stderr.isatty()) as progress:
         designs, best = plan(scenario, target=args.target, max_runs=args.max_runs, time_limit=args.time_limit,
                              progress=progress)
     as_designed = cramer_rao(scenario)
@@ -394,21 +395,6 @@ def _cmd_plan(args) -> int:
     for r in best.runs:
         print(f"  {r.name}: {[round(float(x), 4) for x in r.added_mass]}")
     return 0
-
-
-@contextlib.contextmanager
-def _plan_progress(enabled: bool):
-    """``progress(done, total)`` for :func:`~momentid.estimation.design.plan`: a bar on stderr."""
-    if not enabled:
-        yield None
-        return
-    from tqdm import tqdm
-
-    with tqdm(unit="design", desc="plan", leave=False, dynamic_ncols=True) as bar:
-        def progress(done: int, total: int) -> None:
-            bar.total = total
-            bar.update(done - bar.n)
-        yield progress
 
 
 def _add_identify_options(p: argparse.ArgumentParser) -> None:
@@ -564,45 +550,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, handled like Ctrl-C: outputs are closed as on an interrupt (a recording keeps its
-    completed runs and notes the signal), worker processes are stopped, and the command exits 143
-    (128 + SIGTERM)."""
-
-    def __str__(self) -> str:
-        return "SIGTERM"
-
-
-def _raise_terminated(signum, frame) -> None:
-    raise Terminated
-
-
-@contextlib.contextmanager
-def _sigterm_as_interrupt():
-    """While a command runs, SIGTERM raises :class:`Terminated` (main thread only: elsewhere Python
-    cannot install handlers, and the default, dying at once, stays)."""
-    try:
-        old = signal.signal(signal.SIGTERM, _raise_terminated)
-    except ValueError:   # not the main thread
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, old)
-
-
-def _quiet_broken_pipe() -> int:
-    """The reader of stdout went away (``momentid identify --json | head -c 10``): no text, exit 141
-    (128 + SIGPIPE, what a shell shows for a pipeline's writer), and nothing more is written there:
-    stdout points at /dev/null so the interpreter's last flush cannot complain either."""
-    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    return 141
-
-
 def main(argv=None) -> int:
     try:
         parser = build_parser()
@@ -610,10 +557,10 @@ def main(argv=None) -> int:
         if args.command is None:
             parser.print_help()
             return 2
-        with _sigterm_as_interrupt():
+        with sigterm_as_interrupt():
             return _run_command(args)
     except BrokenPipeError:
-        return _quiet_broken_pipe()
+        return quiet_broken_pipe()
 
 
 def _run_command(args) -> int:
@@ -636,7 +583,7 @@ def _run_command(args) -> int:
         return 2
     except Terminated:
         print("error: terminated (SIGTERM)", file=sys.stderr)
-        return 143
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130

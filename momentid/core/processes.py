@@ -1,4 +1,4 @@
-"""Worker processes that die with their parent.
+"""Processes: workers that die with their parent, and the signals a command handles.
 
 A forked worker blocked on its task queue outlives a parent killed by SIGTERM or SIGKILL: it is
 re-parented to init and waits forever, holding its memory (120-170 MB for a diagnosis trial).
@@ -6,12 +6,17 @@ re-parented to init and waits forever, holding its memory (120-170 MB for a diag
 runs with callback physics, sweep cases): every worker asks the kernel to kill it when its parent
 dies (:func:`die_with_parent`), and leaving the pool by an exception (Ctrl-C, or SIGTERM, which the
 command line turns into Ctrl-C) kills the workers at once instead of waiting for their tasks.
+
+A command (:func:`momentid.cli.main`) handles SIGTERM like Ctrl-C (:func:`sigterm_as_interrupt`:
+outputs are closed as on an interrupt, and it exits 143), and a reader of its output that goes away
+ends it quietly (:func:`quiet_broken_pipe`: exit 141, no text).
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import io
 import multiprocessing
 import os
 import signal
@@ -21,7 +26,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator
 
-__all__ = ["die_with_parent", "forked_pool", "PARENT_POLL_S"]
+__all__ = ["die_with_parent", "forked_pool", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
+           "quiet_broken_pipe"]
 
 #: ``prctl`` option asking for a signal when the parent dies (linux/prctl.h).
 PR_SET_PDEATHSIG = 1
@@ -91,3 +97,42 @@ def forked_pool(workers: int, initializer: Callable | None = None, initargs: tup
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C: outputs are closed as on an interrupt (a recording keeps its
+    completed runs and notes the signal), worker processes are stopped, and the command exits 143
+    (128 + SIGTERM)."""
+
+    def __str__(self) -> str:
+        return "SIGTERM"
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While the block runs, SIGTERM raises :class:`Terminated` (main thread only: elsewhere Python
+    cannot install handlers, and the default, dying at once, stays)."""
+    try:
+        old = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:   # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def quiet_broken_pipe() -> int:
+    """The reader of stdout went away (``momentid identify --json | head -c 10``): nothing more is
+    written there (stdout now points at /dev/null, so the interpreter's last flush cannot complain
+    either); returns 141 (128 + SIGPIPE, what a shell shows for a pipeline's writer)."""
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    return 128 + signal.SIGPIPE

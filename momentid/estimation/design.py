@@ -15,9 +15,10 @@ deviation.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass, replace
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -30,7 +31,7 @@ from momentid.lab.scenario import BandLimitedNoise, Run, Scenario
 from momentid.lab.sensors import noise_std
 from momentid.lab.simulation import ground_motion_of
 
-__all__ = ["Bound", "cramer_rao", "plan", "Design", "PLAN_TIME_LIMIT_S"]
+__all__ = ["Bound", "cramer_rao", "plan", "plan_progress_bar", "Design", "PLAN_TIME_LIMIT_S"]
 
 #: The Fisher information sums frequency bins up to this multiple of the top
 #: natural frequency: above it the structure's response is below the noise.
@@ -335,3 +336,18 @@ def _affordable(scenario: Scenario, reference: Run, cache: dict, total: int, n_e
         raise TimeLimitError(f"{scenario.source}: plan of up to {max_runs} runs ({total} candidate runs, "
                              f"{each:.2g} s each)", estimate, time_limit,
                              f"{fits}; raise the limit to go past it (momentid plan --time-limit SECONDS)")
+
+
+@contextlib.contextmanager
+def plan_progress_bar(enabled: bool) -> Iterator[Callable[[int, int], None] | None]:
+    """A ``progress(done, total)`` for :func:`plan` that draws a bar on stderr (None when not ``enabled``)."""
+    if not enabled:
+        yield None
+        return
+    from tqdm import tqdm
+
+    with tqdm(unit="design", desc="plan", leave=False, dynamic_ncols=True) as bar:
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+        yield progress

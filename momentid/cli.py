@@ -12,11 +12,14 @@ import io
 import json
 import math
 import os
+import signal
 import sys
 import warnings
 from pathlib import Path
 
+from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_interrupt
 from momentid.core.series import json_safe
+from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
 
 __all__ = ["main"]
@@ -62,6 +65,20 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
     return value
+
+
+def _run_names(text: str | None) -> list[str] | None:
+    """``--runs a,b``: the names, each once (a run named twice would count its data twice)."""
+    if text is None:
+        return None
+    names = [n.strip() for n in text.split(",")]
+    if not all(names):
+        raise MomentidError(f"--runs {text!r}: expected comma-separated run names, got an empty one")
+    twice = [n for i, n in enumerate(names) if n in names[:i]]
+    if twice:
+        raise MomentidError(f"--runs {text}: run {twice[0]!r} is named twice; expected each run once (the same "
+                            f"data counted twice would shrink every standard error by sqrt(2))")
+    return names
 
 
 def _output_path(out: str | None, name: str) -> Path:
@@ -147,7 +164,7 @@ def _report(experiment, args) -> int:
     from momentid.estimation.scaled import ModalIdentification
 
     times = args.time if args.time else None
-    runs = args.runs.split(",") if args.runs else None
+    runs = _run_names(args.runs)
     try:
         result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
     except IdentificationError as exc:
@@ -183,6 +200,10 @@ def _cmd_run(args) -> int:
 
     path = Path(args.scenario) if args.scenario else default_scenario_path()
     scenario = load_scenario(path)
+    unknown = [n for n in _run_names(args.runs) or () if n not in {r.name for r in scenario.runs}]
+    if unknown:   # before minutes of simulation, not after
+        raise MomentidError(f"--runs {args.runs}: {path} has no run named {unknown[0]!r}; its runs are "
+                            f"{', '.join(r.name for r in scenario.runs)}")
     out = _output_path(args.output, scenario.name)
     progress = not args.quiet and sys.stderr.isatty()
     experiment = run_experiment(scenario, out, progress=progress, workers=args.workers)
@@ -194,7 +215,7 @@ def _cmd_run(args) -> int:
         from momentid.report.viewer import view
 
         view(experiment, identify_options={"estimator": args.estimator, "times": args.time or None,
-                                           "runs": args.runs.split(",") if args.runs else None})
+                                           "runs": _run_names(args.runs)})
     return status
 
 
@@ -204,7 +225,7 @@ def _cmd_identify(args) -> int:
     if args.stream:
         return _identify_stream(args)
     experiment = read_recording(args.recording)
-    runs = args.runs.split(",") if args.runs else None
+    runs = _run_names(args.runs)
     if args.per_run:
         from momentid.estimation.scaled import amplitude_trend, identify_per_run
 
@@ -281,21 +302,23 @@ def _cmd_view(args) -> int:
 
 
 def _cmd_sweep(args) -> int:
-    from momentid.sweep import load_sweep, run_sweep, write_table
+    from momentid.io.exclusive import reserve
+    from momentid.sweep import load_sweep, run_sweep, table_path, table_text
 
     sweep = load_sweep(args.spec)
-    out = Path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
+    out = table_path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
     where = f"Dask scheduler {args.address}" if args.address else "local cores"
-    print(f"sweep {args.spec}: {len(sweep.cases)} cases of {sweep.base} over "
-          f"{', '.join(sweep.keys)} on {where}", file=sys.stderr)
     show = not args.quiet and sys.stderr.isatty()
 
     def done(row):
         if show:
             print(f"  case {row['case']}: {row['status']}", file=sys.stderr)
 
-    rows = run_sweep(sweep, workers=args.workers, address=args.address, on_case=done)
-    write_table(rows, out)
+    with reserve(out) as slot:   # one writer per table, refused before the sweep starts
+        print(f"sweep {args.spec}: {len(sweep.cases)} cases of {sweep.base} over "
+              f"{', '.join(sweep.keys)} on {where}", file=sys.stderr)
+        rows = run_sweep(sweep, workers=args.workers, address=args.address, on_case=done)
+        slot.commit(table_text(rows, out).encode("utf-8"))
     widths = [max(len(k), 8) for k in sweep.keys]
     print(f"{'case':>5}  " + "  ".join(f"{k:>{w}}" for k, w in zip(sweep.keys, widths))
           + f"  {'max rel err':>11}  status")
@@ -311,12 +334,14 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_diagnose(args) -> int:
     from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
-    diag = diagnose(experiment, hold_out=args.hold_out)
-    write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
+    with exclusive(out):   # one writer per report folder, refused before minutes of work
+        diag = diagnose(experiment, hold_out=args.hold_out)
+        write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
@@ -347,11 +372,15 @@ def _cmd_twin(args) -> int:
 
 
 def _cmd_plan(args) -> int:
-    from momentid.estimation.design import cramer_rao, plan
+    from momentid.estimation.design import cramer_rao, plan, plan_progress_bar
     from momentid.lab.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
-    designs, best = plan(scenario, target=args.target, max_runs=args.max_runs)
+    if args.max_runs < 2:
+        raise MomentidError(f"--max-runs {args.max_runs}: expected at least 2 (a reference run and one with added mass)")
+    with plan_progress_bar(not args.quiet and sys.stderr.isatty()) as progress:
+        designs, best = plan(scenario, target=args.target, max_runs=args.max_runs, time_limit=args.time_limit,
+                             progress=progress)
     as_designed = cramer_rao(scenario)
     if args.json:
         payload = {
@@ -533,6 +562,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target", type=_positive_float, default=0.01,
                    help="target relative standard deviation of every parameter (default 0.01)")
     p.add_argument("--max-runs", type=_positive_int, default=4, help="largest number of runs to consider")
+    p.add_argument("--time-limit", type=_positive_float, default=PLAN_TIME_LIMIT_S, metavar="SECONDS",
+                   help=f"refuse, before it starts, a plan estimated to take longer on this machine (default "
+                        f"{PLAN_TIME_LIMIT_S:g} s; the estimate times its first candidate run)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_plan)
 
@@ -557,27 +590,42 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
-        return 2
     try:
-        with _only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings():
+        parser = build_parser()
+        args = parser.parse_args(argv)   # --help and usage errors print too
+        if args.command is None:
+            parser.print_help()
+            return 2
+        with sigterm_as_interrupt():
+            return _run_command(args)
+    except BrokenPipeError:
+        return quiet_broken_pipe()
+
+
+def _run_command(args) -> int:
+    """Run the chosen command; every expected failure is one ``error:`` line and an exit code."""
+    try:
+        from momentid.lab.rig import mujoco_warnings_counted_not_printed
+
+        with (_only_json_on_stdout(getattr(args, "json", False)), warnings.catch_warnings(),
+              mujoco_warnings_counted_not_printed()):
             warnings.showwarning = _one_line_warning
             warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
             return args.func(args)
+    except BrokenPipeError:
+        raise   # an OSError, but no error of the command: main() keeps it quiet
     except MomentidError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # disk full, an output folder that cannot exist (/proc/x), permissions
         print(f"error: {_os_error(exc)}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("error: terminated (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:
-        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -539,7 +539,7 @@ def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "di
 
 
 def _adds_mass(experiment: Experiment, runs) -> bool:
-    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    selected = experiment.select(runs)
     return any(np.any(r.added_mass) for r in selected)
 
 
@@ -562,7 +562,7 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     if estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator = {estimator!r}: expected one of {', '.join(ESTIMATORS)}")
     ideal = _ideal(experiment)
-    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    selected = experiment.select(runs)
     names = tuple(r.name for r in selected)
     if len(selected) < 2:
         raise IdentificationError(

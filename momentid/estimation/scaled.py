@@ -262,7 +262,7 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     """
     from momentid.lab.sensors import check_run
 
-    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    selected = experiment.select(runs)
     if not selected:
         raise IdentificationError(f"{experiment.source}: no runs to identify from")
     d = experiment.storeys
@@ -406,8 +406,7 @@ class AmplitudeTrend:
 
 def identify_per_run(experiment: Experiment, runs=None) -> tuple:
     """:func:`identify_modal` on every run on its own; tuple of results in run order."""
-    names = [r.name for r in experiment.runs] if runs is None else list(runs)
-    return tuple(identify_modal(experiment, runs=[n]) for n in names)
+    return tuple(identify_modal(experiment, runs=[r.name]) for r in experiment.select(runs))
 
 
 def weighted_line(x, y, s):

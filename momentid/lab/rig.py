@@ -23,6 +23,8 @@ TABLE_INERTIA_RATIO`` (a stiff servo table).
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import mujoco
 
@@ -34,7 +36,7 @@ from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
            "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS",
-           "stateful", "state_actuator"]
+           "stateful", "state_actuator", "mujoco_warnings_counted_not_printed"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -261,7 +263,8 @@ def compile_model(spec: mujoco.MjSpec) -> mujoco.MjModel:
     try:
         return spec.compile()
     except Exception as exc:  # mujoco raises ValueError with the compiler's text
-        raise ModelError(f"MuJoCo could not compile model '{spec.modelname}': {exc}") from None
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())   # one line
+        raise ModelError(f"MuJoCo could not compile model '{spec.modelname}': {text}") from None
 
 
 def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
@@ -273,3 +276,18 @@ def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
 
 
 SENSOR_NAMES = ("zdd", "z", "zd", "a", "q", "v")
+
+
+@contextlib.contextmanager
+def mujoco_warnings_counted_not_printed():
+    """MuJoCo prints each warning (``Nan, Inf or huge value in QPOS ...``) and appends it to
+    ``MUJOCO_LOG.TXT`` in the working folder.  momentid reads the warning counters of ``MjData``
+    instead and refuses the run in one line (or, replaying a trial model that goes unstable, takes
+    that as an answer), so the text is dropped meanwhile (a process-wide MuJoCo setting: forked
+    workers inherit it; the command line sets it for the whole command)."""
+    old = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(old)

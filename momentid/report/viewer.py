@@ -39,7 +39,6 @@ Entity paths::
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
@@ -54,6 +53,7 @@ import scipy.signal
 
 from momentid.core.series import Experiment, RunData, channel_unit
 from momentid.errors import IdentificationError, SensorDataError, ViewerError
+from momentid.io.exclusive import write_whole
 
 __all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
            "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
@@ -194,6 +194,12 @@ def _nice(x: float) -> float:
     """Largest 1-2-5 number not above ``x``."""
     decade = 10.0 ** math.floor(math.log10(x))
     return next(m * decade for m in (5, 2, 1) if m * decade <= x)
+
+
+#: Largest exaggeration / the default one (which draws the largest displacement at about a fifth of
+#: the building height): 1e4 draws it 2000 building heights away, where nothing is left to see (and
+#: beyond, the viewer's float32 positions overflow).
+MAX_EXAGGERATION = 1e4
 
 
 def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict | None = None) -> float:
@@ -340,8 +346,12 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         got = _reconstruct(r, experiment.storeys)
         if got is not None:
             scene.reconstructed[r.name] = got
-    scene.exaggeration = (exaggeration if exaggeration is not None
-                          else auto_exaggeration(experiment, scene.heights, scene.reconstructed))
+    default = auto_exaggeration(experiment, scene.heights, scene.reconstructed)
+    if exaggeration is not None and exaggeration > MAX_EXAGGERATION * default:
+        raise ViewerError(f"exaggeration = {exaggeration!r}: would draw the largest displacement at about "
+                          f"{exaggeration / default / 5:.3g} building heights; expected at most "
+                          f"{MAX_EXAGGERATION * default:g} (the default here is {default:g})")
+    scene.exaggeration = exaggeration if exaggeration is not None else default
     if result is not None:
         check_result(result, experiment)
     elif not identify:
@@ -661,17 +671,9 @@ def write_rrd(experiment, path, **options) -> Path:
 
 def _write_file(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` whole or not at all (a temporary file renamed into place)."""
-    partial = path.with_name(path.name + ".partial")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(partial, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(partial, path)
+        write_whole(path, data)   # locked: a second writer of the same file is refused
     except OSError as exc:
-        with contextlib.suppress(OSError):
-            partial.unlink(missing_ok=True)
         raise ViewerError(f"{path}: cannot write the rerun recording ({exc.strerror or exc}); "
                           f"expected a writable path with {len(data) / 1e6:.3g} MB free; nothing was written"
                           ) from None
@@ -754,8 +756,14 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
     ViewerError
         See :func:`load_result`, :func:`prepare`, :func:`write_rrd`, :func:`show`.
     """
+    from momentid.io.mcap_check import MCAP_MAGIC
     from momentid.io.recording import read_recording
 
+    if save is not None and Path(save).is_file():
+        with open(save, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) == MCAP_MAGIC:   # `view rec.mcap --save rec.mcap` destroyed the recording
+                raise ViewerError(f"--save {save}: that file is an MCAP recording; expected a new path or an "
+                                  f"existing .rrd (a rerun file written over it would destroy it)")
     experiment = recording if isinstance(recording, Experiment) else read_recording(recording)
     if isinstance(result, (str, Path)):
         result = load_result(result, experiment)

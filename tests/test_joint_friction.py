@@ -67,7 +67,7 @@ def test_mujoco_sliders_follow_the_ideal_jenkins_law():
     params = {"stiffness": 60.0, "slip_drift": 1.5e-3, "exponent": -0.4}
     rig1 = resim.RigModel(np.array([0.16]), np.array([[520.0]]), np.array([0.004]),
                           resim.friction_records([1], [params]))
-    substeps = resim.TIMESTEP_PER_SAMPLE
+    substeps = 4
     model = resim.compile_models([rig1], 1.0 / FS / substeps)[0]
     drift, force = _step_storey(model, _table(8.0, 6.0), substeps)
     k, delta = jf.slider_elements(**params)

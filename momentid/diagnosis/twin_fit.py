@@ -25,6 +25,7 @@ from momentid.core.series import RunData
 from momentid.diagnosis import modal_check as mc
 from momentid.errors import IdentificationError, MomentidError
 from momentid.lab import resim
+from momentid.mechanisms import joint_friction as jf
 
 __all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "FIT_ENERGY", "friction_start",
            "twin_modes"]
@@ -35,12 +36,17 @@ FIT_ENERGY = 0.99
 DIFF_STEP = 1e-3
 #: Optimiser's evaluation cap per fit (each evaluation re-simulates the training trials once).
 MAX_NFEV = 40
-#: Bounds of the friction parameters in the fit: stiffness (N/m), slip drift (m), exponent.
-FRICTION_BOUNDS = ((1e-2, 1e3), (2e-5, 0.05), (-0.9, 1.0))
+#: Drift (m) at which the fit states a joint's stiffness loss (storey drifts of a bench rig: 0.1-10 mm).
+REFERENCE_DRIFT = 1e-3
+#: Bounds of the friction parameters in the fit: stiffness lost at REFERENCE_DRIFT (N/m), slip drift (m),
+#: exponent.
+FRICTION_BOUNDS = ((1e-3, 300.0), (2e-4, 0.05), (-0.9, 1.0))
 #: Bounds of the modal damping ratios and the sensors' log-gains and clock offsets (s).
 DAMPING_BOUNDS = (-0.01, 0.1)
 GAIN_BOUNDS = (-0.2, 0.2)
 OFFSET_BOUNDS = (-0.02, 0.02)
+#: Share of the linear twin's viscous damping an augmented fit starts from.
+START_DAMPING_SHARE = 0.3
 _INVALID = 10.0     # residual of a parameter set whose stiffness is not positive definite
 
 
@@ -106,8 +112,11 @@ class FitResult:
 
 
 class _Layout:
-    """The parameter vector: K's upper triangle (N/m), damping ratios, per friction storey (log stiffness,
-    log slip drift, exponent), then log-gains and clock offsets of the sensors."""
+    """The parameter vector: K's upper triangle (N/m), damping ratios, per friction storey (log of the
+    stiffness its secant has lost at :data:`REFERENCE_DRIFT`, log slip drift, exponent), then log-gains and
+    clock offsets of the sensors.  Below the slip drift a joint's loss grows as a power of the drift, so
+    its stiffness and slip drift are nearly interchangeable; the loss at a drift the rig reaches is what
+    the trials determine."""
 
     def __init__(self, template: resim.RigModel, storeys: tuple):
         self.template = template
@@ -121,7 +130,8 @@ class _Layout:
         parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
         for s in self.storeys:
             p = friction[s]
-            parts.append([np.log(p["stiffness"]), np.log(p["slip_drift"]), p["exponent"]])
+            lost = p["stiffness"] * jf.lost_fraction(REFERENCE_DRIFT, p["slip_drift"], p["exponent"])
+            parts.append([np.log(lost), np.log(p["slip_drift"]), p["exponent"]])
         parts += [np.log(model.gain), model.offset]
         return np.concatenate([np.ravel(p) for p in parts])
 
@@ -134,8 +144,9 @@ class _Layout:
         i = k + d
         params = []
         for _ in self.storeys:
-            params.append({"stiffness": float(np.exp(theta[i])), "slip_drift": float(np.exp(theta[i + 1])),
-                           "exponent": float(theta[i + 2])})
+            slip, chi = float(np.exp(theta[i + 1])), float(theta[i + 2])
+            stiffness = float(np.exp(theta[i])) / jf.lost_fraction(REFERENCE_DRIFT, slip, chi)
+            params.append({"stiffness": stiffness, "slip_drift": slip, "exponent": chi})
             i += 3
         return replace(self.template, stiffness=K, damping_ratio=zeta,
                        friction=resim.friction_records(self.storeys, params),
@@ -148,6 +159,7 @@ class _Layout:
         for _ in self.storeys:
             lo += [np.log(FRICTION_BOUNDS[0][0]), np.log(FRICTION_BOUNDS[1][0]), FRICTION_BOUNDS[2][0]]
             hi += [np.log(FRICTION_BOUNDS[0][1]), np.log(FRICTION_BOUNDS[1][1]), FRICTION_BOUNDS[2][1]]
+        # (the first friction bound is on the stiffness lost at REFERENCE_DRIFT, N/m)
         lo += [GAIN_BOUNDS[0]] * self.d + [OFFSET_BOUNDS[0]] * self.d
         hi += [GAIN_BOUNDS[1]] * self.d + [OFFSET_BOUNDS[1]] * self.d
         return np.array(lo), np.array(hi)
@@ -296,14 +308,18 @@ def twin_modes(model: resim.RigModel):
     return np.sqrt(w2), np.asarray(model.damping_ratio, float), gamma[:, None] * phi.T
 
 
-def friction_start(linear: resim.RigModel, storeys, fraction: float, slip_drift: float,
+def friction_start(linear: resim.RigModel, storeys, loss: float, slip_drift: float,
                    exponent: float) -> resim.RigModel:
-    """A start for the augmented fit: ``linear`` with joint friction of ``fraction`` of each storey's stiffness,
-    fully slipping at ``slip_drift`` (m), exponent ``exponent``."""
+    """A start for the augmented fit: ``linear`` with joint friction in ``storeys`` that has lost ``loss``
+    of the storey's stiffness at :data:`REFERENCE_DRIFT`, fully slipping at ``slip_drift`` (m), exponent
+    ``exponent``; K stiffened by that loss (K is the stuck joints' stiffness) and the viscous damping
+    lowered by :data:`START_DAMPING_SHARE` (the friction dissipates the rest)."""
     K = np.asarray(linear.stiffness)
-    params = [{"stiffness": fraction * _storey_stiffness(K, s), "slip_drift": slip_drift, "exponent": exponent}
+    share = jf.lost_fraction(REFERENCE_DRIFT, slip_drift, exponent)
+    params = [{"stiffness": loss * _storey_stiffness(K, s) / share, "slip_drift": slip_drift, "exponent": exponent}
               for s in storeys]
     if any(p["stiffness"] <= 0 for p in params):
         raise MomentidError(f"storeys {list(storeys)} of stiffness {K.tolist()}: a storey with no positive stiffness "
                             f"cannot carry joint friction")
-    return replace(linear, friction=resim.friction_records(storeys, params))
+    return replace(linear, stiffness=K * (1.0 + loss), damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
+                   friction=resim.friction_records(storeys, params))

@@ -33,8 +33,11 @@ from momentid.mechanisms import registry
 
 __all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE"]
 
-#: Integrator steps per recorded sample (a 120 Hz recording: 2.1 ms steps).
-TIMESTEP_PER_SAMPLE = 4
+#: Integrator steps per recorded sample (a 120 Hz recording: 2.8 ms steps, within joint_friction.MAX_TIMESTEP).
+TIMESTEP_PER_SAMPLE = 3
+#: Rollout threads when a call does not say (None: one per core); a caller running several fits side by
+#: side on forked processes sets it to 1.
+ROLLOUT_THREADS: int | None = None
 #: Steps per rollout call: bounds the state buffer (batch x steps x state) to tens of MB.
 _CHUNK_STEPS = 4096
 _PLATEN = (0.3, 0.2, 0.01)     # drawing only (m)
@@ -190,7 +193,7 @@ def simulate(models, zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SA
     dt : float
         Sample interval (s).
     threads : int, optional
-        Rollout threads (default: the machine's cores, at most one per model).
+        Rollout threads (default: :data:`ROLLOUT_THREADS`, else the machine's cores; at most one per model).
 
     Returns
     -------
@@ -208,7 +211,7 @@ def simulate(models, zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SA
     n = len(zdd)
     jerk = np.repeat(np.diff(zdd) / dt, substeps)
     jerk = np.append(jerk, 0.0)                       # one step more: the last sample's sensors
-    nthread = max(1, min(threads or os.cpu_count() or 1, len(models)))
+    nthread = max(1, min(threads or ROLLOUT_THREADS or os.cpu_count() or 1, len(models)))
     datas = [mujoco.MjData(first) for _ in range(nthread)]
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
     states = []

@@ -34,7 +34,8 @@ import numpy as np
 from momentid.mechanisms.base import MechanismKind, Param, Target
 from momentid.mechanisms.registry import register
 
-__all__ = ["JointFriction", "SLIDERS", "SPAN", "slider_elements", "add_sliders", "backbone", "MAX_TIMESTEP"]
+__all__ = ["JointFriction", "SLIDERS", "SPAN", "slider_elements", "add_sliders", "backbone", "lost_fraction",
+           "MAX_TIMESTEP"]
 
 #: Jenkins elements per joint: enough for a smooth backbone over the two decades of drift a rig shows.
 SLIDERS = 6
@@ -46,7 +47,7 @@ SLIDER_STEP_PHASE = 1.5
 #: Damping ratio of each slider's spring-mass oscillation (joint damping; implicit in ``implicitfast``).
 SLIDER_DAMPING_RATIO = 0.3
 #: Largest integrator step (s) the elements are tested at.
-MAX_TIMESTEP = 1.0 / 400.0
+MAX_TIMESTEP = 1.0 / 300.0
 #: Impedance of the sliders' friction constraints (MuJoCo's ``solimp``): as stiff as MuJoCo allows, so
 #: that a stuck slider does not creep.
 _SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)
@@ -88,6 +89,12 @@ def backbone(params: dict, drift) -> np.ndarray:
     k, delta = slider_elements(params["stiffness"], params["slip_drift"], params["exponent"])
     x = np.asarray(drift, float)[..., None]
     return np.sum(k * np.minimum(x, delta), axis=-1)
+
+
+def lost_fraction(drift: float, slip_drift: float, exponent: float) -> float:
+    """Share of the joint's stiffness its secant has lost at ``drift`` (m) on first loading (0: stuck, 1: all
+    slipping), for a joint of slip drift ``slip_drift`` (m) and exponent ``exponent``."""
+    return 1.0 - float(backbone({"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}, drift)) / drift
 
 
 def add_sliders(spec, params: dict, storey: int, lower_body, upper_joint: str, lower_joint: str | None,

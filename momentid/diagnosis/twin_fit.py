@@ -32,7 +32,7 @@ __all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "FIT_E
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
-#: Relative step of the physical parameters' forward differences.
+#: Forward-difference step, relative to each parameter's typical size.
 DIFF_STEP = 1e-3
 #: Optimiser's evaluation cap per fit (each evaluation re-simulates the training trials once).
 MAX_NFEV = 40
@@ -124,6 +124,13 @@ class _Layout:
         self.storeys = tuple(storeys)
         self.iu = np.triu_indices(self.d)
         self.n_phys = len(self.iu[0]) + self.d + 3 * len(self.storeys)
+        # each parameter's typical size, for the difference steps: K's entries (N/m), damping ratios,
+        # the friction's logs and exponents, the sensors' log-gains and clock offsets (s)
+        k = len(self.iu[0])
+        K = np.abs(np.asarray(template.stiffness))
+        self.scale = np.concatenate([np.maximum(K[self.iu], 0.01 * K.max()), np.full(self.d, 0.01),
+                                     np.ones(3 * len(self.storeys)), np.full(self.d, 0.01), np.full(self.d, 1e-3)])
+        assert self.scale.size == k + self.d + 3 * len(self.storeys) + 2 * self.d
 
     def pack(self, model: resim.RigModel) -> np.ndarray:
         friction = {m.location: dict(m.parameters) for m in model.friction}
@@ -226,7 +233,7 @@ class _Problem:
         steps = np.empty(n)
         perturbed = []
         for i in range(n):
-            h = DIFF_STEP * max(abs(theta[i]), 1e-2 if i >= self.layout.n_phys else 1.0)
+            h = DIFF_STEP * self.layout.scale[i]
             if theta[i] + h > hi[i]:
                 h = -h
             steps[i] = h

@@ -33,8 +33,8 @@ from momentid.mechanisms import registry
 
 __all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE"]
 
-#: Integrator steps per recorded sample (a 120 Hz recording: 2.8 ms steps, within joint_friction.MAX_TIMESTEP).
-TIMESTEP_PER_SAMPLE = 3
+#: Integrator steps per recorded sample (a 120 Hz recording: 4.2 ms steps, within joint_friction.MAX_TIMESTEP).
+TIMESTEP_PER_SAMPLE = 2
 #: Rollout threads when a call does not say (None: one per core); a caller running several fits side by
 #: side on forked processes sets it to 1.
 ROLLOUT_THREADS: int | None = None

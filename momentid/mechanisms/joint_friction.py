@@ -21,7 +21,7 @@ Each slider's mass and damping make its own spring-mass oscillation fast and dam
 step (:data:`SLIDER_STEP_PHASE`, :data:`SLIDER_DAMPING_RATIO`).  MuJoCo integrates the sliders'
 springs explicitly, so a slipping element lags the ideal Jenkins element by about one step: at 2 ms
 steps and drifts of 3-4 slip drifts the joint's force is off the ideal law by 13 % of its RMS (7 % at
-1 ms; tests/test_joint_friction.py).  A twin fitted through MuJoCo is sized with this element, at its
+1 ms, about 25 % at 4 ms; tests/test_joint_friction.py).  A twin fitted through MuJoCo is sized with this element, at its
 own step.  Use a step of at most :data:`MAX_TIMESTEP`.
 """
 
@@ -47,7 +47,7 @@ SLIDER_STEP_PHASE = 1.5
 #: Damping ratio of each slider's spring-mass oscillation (joint damping; implicit in ``implicitfast``).
 SLIDER_DAMPING_RATIO = 0.3
 #: Largest integrator step (s) the elements are tested at.
-MAX_TIMESTEP = 1.0 / 300.0
+MAX_TIMESTEP = 1.0 / 240.0
 #: Impedance of the sliders' friction constraints (MuJoCo's ``solimp``): as stiff as MuJoCo allows, so
 #: that a stuck slider does not creep.
 _SOLIMP = (0.9999, 0.9999, 0.001, 0.5, 2.0)

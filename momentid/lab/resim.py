@@ -171,7 +171,7 @@ def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujo
     for i in range(d):
         spec.add_sensor(name=f"a{i + 1}", type=mujoco.mjtSensor.mjSENS_ACCELEROMETER, objname=f"floor{i + 1}_imu",
                         objtype=site)
-    rig.explicit_inertials(spec)
+    spec.compiler.saveinertial = True       # spec.to_xml() writes the bodies' masses (stock MuJoCo needs them)
     return spec
 
 

@@ -35,7 +35,7 @@ from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 __all__ = ["build_spec", "compile_model", "SENSOR_NAMES", "sensor_layout", "storey_forces", "storey_to_floor",
            "drifts", "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS",
            "stateful", "state_actuator", "add_storey_elements",
-           "explicit_inertials", "empty_spec"]
+           "empty_spec"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -190,7 +190,6 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     def sensor(kind, name, target, objtype):
         spec.add_sensor(name=name, type=kind, objname=target, objtype=objtype)
 
-    explicit_inertials(spec)
 
     site, joint = mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_JOINT
     acc, pos, vel = (mujoco.mjtSensor.mjSENS_ACCELEROMETER, mujoco.mjtSensor.mjSENS_JOINTPOS,
@@ -216,16 +215,6 @@ def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
     spec.option.integrator = integrator
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     return spec
-
-
-def explicit_inertials(spec: mujoco.MjSpec) -> None:
-    """Mark every body's stated mass and inertia explicit, at the body's origin, so that ``spec.to_xml()``
-    writes them (a body built through MjSpec has no inertial position, and the writer then leaves out its
-    ``<inertial>``: stock MuJoCo refuses the written model's massless bodies)."""
-    for body in spec.bodies:
-        if body.name != "world":
-            body.explicitinertial = True
-            body.ipos = [0.0, 0.0, 0.0]
 
 
 def add_storey_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:

@@ -7,10 +7,11 @@ From one run's table and floor accelerations (no model fit) this module estimate
 * the **resonances**: peaks of the first singular value of ``S(f)``, each with its operating shape
   (the first singular vector, rotated to real: a lightly damped mode moves every sensor in or out of
   phase), the shape's scatter, and how well one mode holds the peak (the shapes one bin either side);
-* the **first mode**: the lowest frequency where the channels' powers differ by
-  :data:`MIN_POWER_RATIO` or more with two or more channels moving: there the floors resonate and the
-  table, which drives them, barely moves.  Its shape grows from the table up the building, whatever
-  the labels say;
+* the **first mode**: the lowest resonance where the channels' powers differ by
+  :data:`MIN_POWER_RATIO` or more, with two or more channels moving and all in phase (a sensor
+  mounted reversed counted by its low-frequency sign): there the floors resonate and the table,
+  which drives them, barely moves.  Its shape grows from the table up the building, whatever the
+  labels say;
 * the **low-frequency gains** ``G[t, j]``: channel j's response per unit of channel t's below the
   first mode, where every sensor on a shear building reads the table's motion (gain ~1; a floor
   sensor turned off the shaking axis reads less, one mounted reversed reads -1).
@@ -56,10 +57,13 @@ MIN_POWER_RATIO = 30.0
 MOVING = 0.25
 #: Bins searched either side of a peak for its half-power points.
 HALF_POWER_BINS = 20
+#: The first mode moves every sensor in phase (the table, nearly still, may lag): an entry below
+#: -IN_PHASE (fraction of the largest) makes a peak a higher mode, or not the building's.
+IN_PHASE = 0.1
 #: Coherence (squared) a low-frequency bin needs to count in a gain: 0.9 (the sensors' noise at most
 #: a third of the motion) leaves the gain's scatter at a few percent per bin.
 GAIN_COHERENCE = 0.9
-#: The gains are read up to this fraction of the first mode's frequency: the floors' quasi-static
+#: The gains are read up to this fraction of the lowest resonance's frequency: the floors' quasi-static
 #: amplification there is below (0.5)^2 = 25 % of the first mode's participation (~1.3 at the top
 #: of a uniform shear building), small against the factor 2 that marks a turned or missing axis.
 GAIN_BAND = 0.5
@@ -154,11 +158,10 @@ def _shape(S: np.ndarray) -> np.ndarray:
     return real / real[np.argmax(np.abs(real))]
 
 
-def _half_power(S: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
-    """Shapes at the bins where the first singular value falls to half its peak's, either side (at
-    least one bin away): one mode holds its whole half-power band, a second mode beside it holds
+def _half_power(S: np.ndarray, top: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
+    """Shapes at the bins where the first singular value ``top`` falls to half its peak's, either side
+    (at least one bin away): one mode holds its whole half-power band, a second mode beside it holds
     the centre or a flank."""
-    top = np.linalg.eigvalsh(S)[:, -1]
     lo, hi = p - 1, p + 1
     while lo > 0 and top[lo] > 0.5 * top[p] and p - lo < HALF_POWER_BINS:
         lo -= 1
@@ -167,17 +170,17 @@ def _half_power(S: np.ndarray, p: int) -> tuple[np.ndarray, np.ndarray]:
     return _shape(S[max(lo, 0)]), _shape(S[min(hi, S.shape[0] - 1)])
 
 
-def _resonance(f: np.ndarray, S: np.ndarray, halves: list[np.ndarray], power: np.ndarray, p: int) -> Resonance:
+def _resonance(f: np.ndarray, S: np.ndarray, halves: list[np.ndarray], power: np.ndarray, top: np.ndarray,
+               p: int) -> Resonance:
     lo, hi = max(p - 1, 0), min(p + 2, S.shape[0])
     shape = _shape(S[lo:hi].sum(axis=0))
-    top = float(np.linalg.eigvalsh(S[p])[-1])
     parts = [_shape(H[lo:hi].sum(axis=0)) for H in halves]
     parts = [s * (1.0 if s @ shape >= 0 else -1.0) for s in parts]
-    below, above = _half_power(S, p)
+    below, above = _half_power(S, top, p)
     centre = _shape(S[p])
     return Resonance(frequency=float(f[p]), shape=shape, scatter=np.abs(parts[0] - parts[1]) / 2,
                      single=min(mac(centre, below), mac(centre, above)), power_ratio=float(power[p].max() / max(power[p].min(), 1e-300)),
-                     power=top)
+                     power=float(top[p]))
 
 
 def _gains(f: np.ndarray, S: np.ndarray, power: np.ndarray, top: float) -> np.ndarray:
@@ -229,16 +232,17 @@ def run_spectra(values: np.ndarray, rate: float) -> RunSpectra | None:
     top = np.linalg.eigvalsh(S)[:, -1]
     log_top = np.log10(np.maximum(top, 1e-300))
     peaks, _ = signal.find_peaks(np.where(band, log_top, log_top[band].min()), prominence=PEAK_PROMINENCE)
-    resonances = tuple(_resonance(f, S, halves, power, int(p)) for p in peaks)
-    ratio = power.max(axis=1) / np.maximum(power.min(axis=1), 1e-300)
-    log_ratio = np.log10(ratio)
+    resonances = tuple(_resonance(f, S, halves, power, top, int(p)) for p in peaks)
+    building = [r for r in resonances if r.moving() >= 2 or c == 2]
+    if not building:
+        return RunSpectra(resolution=float(f[1]), resonances=resonances, first=None, gains=np.full((c, c), np.nan))
+    gains = _gains(f, S, power, GAIN_BAND * building[0].frequency)
+    signs = np.where(gains[0] < 0, -1.0, 1.0)  # below the modes every sensor moves with the table
     first = None
-    for p in signal.find_peaks(np.where(band, log_ratio, 0.0), prominence=PEAK_PROMINENCE)[0]:
-        if ratio[p] < MIN_POWER_RATIO:
-            continue
-        candidate = _resonance(f, S, halves, power, int(p))
-        if candidate.moving() >= 2 or (c == 2 and np.argmax(power[p]) == 1):
-            first = candidate
+    for res, p in zip(resonances, peaks):
+        in_phase = np.min(res.shape * signs) >= -IN_PHASE
+        moving = res.moving() >= 2 if c > 2 else np.argmax(power[p]) == 1  # the floor of a 1-storey rig
+        if res.power_ratio >= MIN_POWER_RATIO and in_phase and moving:
+            first = res
             break
-    gains = _gains(f, S, power, GAIN_BAND * first.frequency) if first is not None else np.full((c, c), np.nan)
     return RunSpectra(resolution=float(f[1]), resonances=resonances, first=first, gains=gains)

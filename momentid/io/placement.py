@@ -121,9 +121,15 @@ class Finding:
 
 @dataclass(frozen=True)
 class _Run:
+    """A run's spectra, its files (for messages) and the sign of each channel (-1: mounted reversed)."""
+
     name: str
     spectra: RunSpectra
     files: tuple[str, ...]
+    signs: np.ndarray
+
+    def shape(self, res: Resonance, perm) -> np.ndarray:
+        return (res.shape * self.signs)[list(perm)]
 
 
 def _channels(run: RunData, d: int) -> tuple[str, ...]:
@@ -178,7 +184,7 @@ def _untangle_greedily(shape: np.ndarray, margin: float, keep: list[int]) -> lis
         order[i], order[j] = order[j], order[i]
 
 
-def _structural(spectra: RunSpectra, perm, clean: bool = False) -> list[tuple[float, np.ndarray]]:
+def _structural(run: _Run, perm, clean: bool = False) -> list[tuple[float, np.ndarray]]:
     """(frequency, relative shape) of the resonances of the building under the labelling ``perm``:
     the table still, two or more channels moving (floors minus table, largest entry +-1); of peaks
     within :data:`FREQUENCY_MATCH` of each other (a mode and a harmonic of the drive beside it, or a
@@ -186,8 +192,8 @@ def _structural(spectra: RunSpectra, perm, clean: bool = False) -> list[tuple[fl
     (:data:`SINGLE_MODE`), for comparing runs: two modes sharing a peak mix in proportions that
     change with each run's excitation and resolution."""
     kept: list[Resonance] = []
-    for res in spectra.resonances:
-        s = res.shape[list(perm)]
+    for res in run.spectra.resonances:
+        s = run.shape(res, perm)
         if abs(s[0]) > TABLE_STILL or (res.moving() < 2 and s.size > 2) or (clean and res.single < SINGLE_MODE):
             continue
         if kept and res.frequency - kept[-1].frequency <= FREQUENCY_MATCH * kept[-1].frequency:
@@ -197,7 +203,7 @@ def _structural(spectra: RunSpectra, perm, clean: bool = False) -> list[tuple[fl
         kept.append(res)
     out = []
     for res in kept:
-        s = res.shape[list(perm)]
+        s = run.shape(res, perm)
         rel = s[1:] - s[0]
         out.append((res.frequency, rel / rel[np.argmax(np.abs(rel))]))
     return out
@@ -271,7 +277,7 @@ def _order_finding(run: _Run, d: int, keep: list[int], masses) -> Finding | None
     first = run.spectra.first
     if first is None or len(keep) < 2:
         return None
-    shape = first.shape
+    shape = run.shape(first, range(d + 1))
     if np.min(shape[keep]) < -NEGATIVE:
         return None  # no clean first mode: a sensor reads another motion; the gains said so, if so
     margin = ORDER_MARGIN + SCATTER_FACTOR * float(np.max(first.scatter[keep]))
@@ -280,7 +286,7 @@ def _order_finding(run: _Run, d: int, keep: list[int], masses) -> Finding | None
     if perm == tuple(range(d + 1)):
         return None
     ident = tuple(range(d + 1))
-    before, after = _structural(run.spectra, ident), _structural(run.spectra, perm)
+    before, after = _structural(run, ident), _structural(run, perm)
     nodes = (_nodal_misfit(before, d), _nodal_misfit(after, d))
     cross = (_cross_term(before, masses), _cross_term(after, masses))
     evidence = (f"the first mode ({first.frequency:.2f} Hz) moves the channels {_fmt(shape)} (table first), not "
@@ -354,7 +360,7 @@ def _grows(run: _Run, perm: tuple[int, ...], d: int) -> bool:
     if first is None:
         return True
     margin = ORDER_MARGIN + SCATTER_FACTOR * float(np.max(first.scatter))
-    _, worst = _untangle(first.shape[list(perm)], margin, list(range(d + 1)))
+    _, worst = _untangle(run.shape(first, perm), margin, list(range(d + 1)))
     return worst <= margin
 
 
@@ -362,7 +368,7 @@ def _cross_run(runs: list[_Run], perms: dict[str, tuple[int, ...]], d: int) -> l
     """Runs whose shapes match the others' only under another labelling of the floors."""
     if len(runs) < 2 or d < 2:
         return []
-    shapes = {r.name: _structural(r.spectra, perms.get(r.name, tuple(range(d + 1))), clean=True) for r in runs}
+    shapes = {r.name: _structural(r, perms.get(r.name, tuple(range(d + 1))), clean=True) for r in runs}
     candidates = _floor_permutations(d)
     findings = []
     for run in runs:
@@ -416,7 +422,9 @@ def check_placement(runs, masses=None, files=None) -> tuple[Finding, ...]:
             continue
         spectra = run_spectra(np.column_stack([run[c] for c in channels]), run.sample_rate)
         if spectra is not None:
-            usable.append(_Run(run.name, spectra, tuple((files or {}).get(run.name, ()))))
+            reversed_ = (spectra.gains[0] <= -GAIN_RANGE[0]) & (spectra.gains[0] >= -GAIN_RANGE[1])
+            usable.append(_Run(run.name, spectra, tuple((files or {}).get(run.name, ())),
+                               np.where(reversed_, -1.0, 1.0)))
     if not usable:
         return ()
     d = runs[0].added_mass.shape[0]
@@ -443,12 +451,12 @@ def _with_peers(finding: Finding, runs: list[_Run], perms: dict, d: int) -> Find
         return finding
     run = next(r for r in runs if r.name == finding.run)
     ident = tuple(range(d + 1))
-    others = [_structural(r.spectra, perms.get(r.name, ident), clean=True) for r in runs if r is not run]
+    others = [_structural(r, perms.get(r.name, ident), clean=True) for r in runs if r is not run]
     others = [o for o in others if len(o) >= 2]
     if not others:
         return finding
-    before = _agreement(_structural(run.spectra, ident, clean=True), others, tuple(range(d)))
-    after = _agreement(_structural(run.spectra, finding.permutation, clean=True), others, tuple(range(d)))
+    before = _agreement(_structural(run, ident, clean=True), others, tuple(range(d)))
+    after = _agreement(_structural(run, finding.permutation, clean=True), others, tuple(range(d)))
     if not (np.isfinite(before) and np.isfinite(after)):
         return finding
     peers = f"the mode shapes match the other runs' with MAC {after:.2f} (was {before:.2f})"

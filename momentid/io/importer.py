@@ -14,9 +14,12 @@ and ``docs/real-data.md``):
   CSV per run, format ``csv``) or ``table`` and ``floors`` (one file per
   sensor, e.g. ``xsens-dot``).  Files may be gzip-compressed (read by
   content); a named file that exists only as ``<name>.gz`` is read from there.
-* a one-file-per-run format is taken as it is; one file per sensor goes
-  through :func:`momentid.io.align.align_sensors` (clocks, shaking axis,
-  sign, gravity and offset), whose per-sensor reports go into ``run.meta``.
+* a one-file-per-run format is taken as it is (``nan`` cells interpolated, at
+  most 5 in a row, with a note); one file per sensor goes through
+  :func:`momentid.io.align.align_sensors` (clocks, shaking axis, sign, gravity
+  and offset), whose per-sensor reports go into ``run.meta``;
+* every run's sensors are checked against physics for their floors
+  (:mod:`momentid.io.placement`): relabelled with a note, or refused.
 
 Who is to blame decides the error class: a mistake in ``experiment.toml``
 (key, type, value, a run file that does not exist) is a
@@ -320,7 +323,7 @@ def write_import(experiment: Experiment, out_path) -> Path:
     return write_experiment(out, experiment)
 
 
-def import_recording(folder, out_path) -> Path:
+def import_recording(folder, out_path, *, relabel: bool = True) -> Path:
     """Import a lab folder (see :func:`import_folder`) and write it to ``out_path``.
 
     Parameters
@@ -329,6 +332,9 @@ def import_recording(folder, out_path) -> Path:
         The lab's folder: ``experiment.toml`` and the files it names.
     out_path : str or Path
         The MCAP recording to write.
+    relabel : bool
+        As in :func:`import_folder`: relabel sensors physics places on other floors (default), or
+        refuse.
 
     Returns
     -------
@@ -336,7 +342,7 @@ def import_recording(folder, out_path) -> Path:
         ``out_path``, an MCAP recording that :func:`momentid.read_recording`
         reads and :func:`momentid.identify` identifies.
     """
-    return write_import(import_folder(folder), out_path)
+    return write_import(import_folder(folder, relabel=relabel), out_path)
 
 
 def report(experiment: Experiment) -> list[str]:

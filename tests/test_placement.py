@@ -159,6 +159,22 @@ def test_a_floor_sensor_reading_another_axis_is_named_not_relabelled():
     assert re.match(r"run 'r1': floor 2's sensor reads 0\.0\d of the table's motion", got[0].message) and not got[0].fixable
 
 
+def test_runs_settle_a_swap_the_first_mode_cannot_and_two_runs_only_disagree():
+    """A top storey twice as stiff: floors 2 and 3 move within the margin of each other in the first
+    mode, so a swap of them shows only in the higher modes' shapes, against the other runs'."""
+    rig = Rig(MASSES, (160.0, 160.0, 320.0), 0.005)
+    runs = _runs(rig, 120.0, 60.0, 3, seed=11)
+    swapped = relabelled(runs[1], (0, 1, 3, 2))
+    assert findings([runs[0], swapped, runs[2]]) == [("r1", Fault.ORDER, (0, 1, 3, 2))]
+    (finding,) = check_placement([runs[0], swapped], MASSES)
+    assert finding.fault is Fault.DISAGREE and not finding.fixable
+    # Two runs are symmetric: either may be the wrong one, and the warning says which relabelling would
+    # make them agree.
+    assert finding.message.startswith("runs 'r0', 'r1' disagree on which sensor is on which floor: run 'r")
+    assert "(the sensors of floor 2 and floor 3 appear swapped in it)" in finding.message
+    assert findings(runs) == []
+
+
 # ----------------------------------------------------------------------------- rigs that are right
 
 def _rig(storeys: int, rate: float, damping: float, extra: str | None, rng) -> Rig:

@@ -244,13 +244,15 @@ def test_rigs_that_are_right_are_not_flagged_and_a_swap_is_found():
 
 @pytest.mark.slow
 def test_the_validation_rigs_raise_no_false_alarm_and_no_wrong_fix():
-    """108 rigs x 3 runs, each run right and then with one pair swapped.  Measured (seeds 5, 11, 23 of
-    the development battery): 0 false alarms in 540 rigs, 375 of 405 swaps found, 0 wrong fixes; the
-    misses are floors whose first-mode amplitudes differ by less than the margin (stiff top or soft
-    bottom storeys) or first peaks shared with a mode beyond the storeys."""
+    """108 rigs x 3 runs, each run right and then with one pair swapped.  Measured on this seed: no
+    rig flagged, 79 of 81 swaps found, 2 missed (one named as a disagreement of the runs), none fixed
+    wrongly; on the development battery (540 rigs, three seeds, stiff-top and soft-bottom rigs
+    too): 0 flagged, 378 of 405 found, 0 wrong.  The misses are floors whose first-mode amplitudes
+    differ by less than the margin, or first peaks shared with a mode beyond the storeys."""
     flagged, found, missed, wrong = _validate(VALIDATION, seed=5)
     assert flagged == 0 and wrong == 0
-    assert found >= 0.85 * (found + missed)  # 0.92 measured on this seed
+    # At least 90 % found: the measured 98 % less the few borderline swaps a change of BLAS could tip.
+    assert found >= 0.9 * (found + missed)
 
 
 # ----------------------------------------------------------------------------- identification

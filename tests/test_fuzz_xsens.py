@@ -24,7 +24,7 @@ from momentid.io.formats import MAX_ABS_SAMPLE
 from momentid.io.formats.xsens_dot import read_xsens_dot
 from momentid.io.importer import import_folder
 
-from bad_input.import_faults import IMU_TOML, _motion
+from bad_input.import_faults import IMU_TOML, rig_motion
 
 PROFILES = [pytest.param("fuzz-fast", id="fast"), pytest.param("fuzz-slow", id="long", marks=pytest.mark.slow)]
 #: Lab folders per profile: each imports three sensor files of 30 s (~0.3 s apiece).
@@ -194,7 +194,7 @@ def _lab(tmp_path, faults: list[tuple[str, int, int]], counter: int) -> object:
     lab.mkdir()
     (lab / "experiment.toml").write_text(IMU_TOML)
     for r, run in enumerate(("run1", "run2")):
-        x = _motion(3, r)
+        x = rig_motion(3, r)
         for k, name in enumerate(("table", "f1", "f2", "f3")):
             n = x.shape[0]
             rows = [[str(i % 65536), str(1_000_000 * (r + 1) + i * 8333), "0", "0", "0",

@@ -123,7 +123,7 @@ _DOT_CASES = [
 # ----------------------------------------------------------------------------- Xsens folders
 
 @functools.lru_cache(maxsize=None)
-def _motion(storeys: int, seed: int) -> np.ndarray:
+def rig_motion(storeys: int, seed: int) -> np.ndarray:
     """Absolute accelerations along the shaking axis (n, 1 + d) of RIG (its first ``storeys`` floors)
     under an earthquake-like table motion: most of it at 0.3-2 Hz, some up to 0.4 x the sample rate."""
     rig = Rig(RIG.masses[:storeys], RIG.stiffness[:storeys], RIG.damping)
@@ -169,7 +169,7 @@ def imu_lab(folder: Path, toml: str = IMU_TOML, order=(0, 1, 2, 3), rows: int | 
     lab.mkdir()
     (lab / "experiment.toml").write_text(toml)
     for r, run in enumerate(("run1", "run2")):
-        x = _motion(3, 0 if copy else r)
+        x = rig_motion(3, 0 if copy else r)
         for k, name in enumerate(("table", "f1", "f2", "f3")):
             channel = order[k] if r == 1 else k
             series = x[:rows, channel] if rows else x[:, channel]
@@ -261,7 +261,7 @@ def _csv_swapped(folder: Path):
     """Two runs of RIG's first two floors as run files; run r2's a1 and a2 columns swapped."""
     lab = folder / "lab"
     lab.mkdir()
-    x = {name: _motion(2, seed) for name, seed in (("r1", 0), ("r2", 1))}
+    x = {name: rig_motion(2, seed) for name, seed in (("r1", 0), ("r2", 1))}
     (lab / "experiment.toml").write_text(CSV_EXPERIMENT.replace("[10.0, 12.0]", "[0.16, 0.16]"))
     for name, header in (("r1", "t,zdd,a1,a2"), ("r2", "t,zdd,a2,a1")):
         t = np.arange(x[name].shape[0]) / RATE

@@ -283,7 +283,7 @@ def _warn(warnings, run: str | None = None) -> None:
 def _cmd_import(args) -> int:
     from momentid.io.importer import import_folder, report, summary, write_import
 
-    experiment = import_folder(args.folder)
+    experiment = import_folder(args.folder, relabel=not args.refuse_mislabelled)
     out = write_import(experiment, _output_path(args.output, Path(args.folder).resolve().name))
     for line in report(experiment):
         print(line)
@@ -492,6 +492,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "offset found per sensor and reported.  Files may be gzip-compressed.  "
                                    "See docs/recording-format.md and docs/real-data.md.")
     p.add_argument("folder", metavar="DIR", help="folder with experiment.toml and the runs' data files")
+    p.add_argument("--refuse-mislabelled", action="store_true",
+                   help="refuse the import when physics places a sensor on another floor than listed (or "
+                        "finds it mounted reversed), instead of relabelling it with a note (the default)")
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<folder name>.mcap) or a .mcap file "
                         "(default: out/)")

@@ -34,6 +34,7 @@ from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_
 from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
 from momentid.io.mcap_check import DAMAGE, MCAP_MAGIC, Bounded, summary_damage
 from momentid.io.exclusive import open_locked
+from momentid.io.structure_table import MASS_RANGE, implausible_mass
 from momentid.core.structure import LabStatement, Structure
 
 __all__ = [
@@ -759,6 +760,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
         raise RecordingError(f"{where}: storeys = {storeys}; expected {structure.storeys} as in the structure")
     storeys = structure.storeys if structure is not None else storeys
     statement = _statement(_loads(exp.get("statement", "null"), where, "statement"), where, exp)
+    _plausible_masses(where, structure, statement)
     if statement is not None and storeys not in (None, statement.storeys):
         raise RecordingError(f"{where}: storeys = {storeys}; expected {statement.storeys} as in the statement")
     scenario = _loads(exp.get("scenario", "{}"), where, "scenario")
@@ -825,6 +827,17 @@ def _lost_runs(experiment: dict, kept) -> str:
         return "later runs are lost"
     lost = [n for n in planned if n not in kept]
     return f"lost {len(lost)} of the {len(planned)} planned runs ({', '.join(lost) or 'none'})"
+
+
+def _plausible_masses(where: str, structure: Structure | None, statement: LabStatement | None) -> None:
+    """Floor masses outside :data:`~momentid.io.structure_table.MASS_RANGE` (written before imports
+    checked them) are refused here, before identification overflows on them or prints K as 0 +- 0."""
+    for key, masses in (("structure.masses", structure.masses if structure is not None else None),
+                        ("statement.masses", statement.masses if statement is not None else None)):
+        bad = None if masses is None else implausible_mass(masses)
+        if bad is not None:
+            raise RecordingError(f"{where}: {key}[{bad}] = {masses[bad]!r}: expected a floor mass between "
+                                 f"{MASS_RANGE[0]:g} and {MASS_RANGE[1]:g} kg (re-import with the masses in kg)")
 
 
 def _statement_dict(statement: LabStatement | None) -> dict | None:

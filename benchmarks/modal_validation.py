@@ -14,15 +14,18 @@ exactly as ``momentid identify`` does:
 * accelerometers with white noise (5-20 mm/s^2, an IMU's), a bias on every channel, and on each floor
   sensor a gain error (up to +-3 %) and a clock offset (up to +-0.6 sample); a 4th-order anti-alias filter
   at 0.45 x the sample rate on half of the cases;
-* in a third of the cases an appendage: a small mass (0.3-3 % of a floor's) on its own spring and damper
-  (the ``flexible_added_mass`` mechanism, attached for the whole record and stated nowhere), tuned 2-8 %
-  off a storey mode with 0.1-1 % damping: one extra, lightly damped mode close to a storey mode, seen on
-  the shaking axis.
+* in a third of the cases an appendage: a small mass (0.01-3 % of a floor's, log-uniform) on its own
+  spring and damper (the ``flexible_added_mass`` mechanism, attached for the whole record and stated
+  nowhere), tuned 0.5-8 % off a storey mode with 0.1-1 % damping: one extra, lightly damped mode close
+  to a storey mode, seen on the shaking axis (the lightest appendages leave two modes about 1 % apart,
+  the heaviest couple with the storey mode).
 
 Truth: the complex eigenvalues of the simulated rig's M, C, K (appendage included); the storey modes are
 the d modes with the least kinetic energy in the appendage.  Criterion on every case (issue 18 point 1):
-each storey mode's frequency within 0.2 % and its damping ratio within 20 % (or the truth within 2
-standard errors), and no fit ended at its evaluation cap.  Writes ``benchmarks/results/modal_validation.md``
+each storey mode's frequency within 0.2 % and its damping ratio within 20 % (each, or the truth within
+2 standard errors: a weakly excited mode of a short record is not known to 0.2 %, and its standard
+error says so), and no fit ended at its evaluation cap.  The table gives the errors and, in brackets,
+how many standard errors they are.  Writes ``benchmarks/results/modal_validation.md``
 and ``.json``.
 """
 
@@ -86,7 +89,8 @@ class Case:
                 f"{self.duration:g}s{extra}")
 
 
-def _shear_modes(masses, stiffness):
+def shear_modes(masses, stiffness) -> np.ndarray:
+    """Undamped natural frequencies (Hz) of the shear building, ascending."""
     from momentid.core.analytic import shear_stiffness
     import scipy.linalg
 
@@ -103,7 +107,7 @@ def draw_case(index: int, seed: int, *, storeys=None, sample_rate=None, excitati
     masses = tuple(float(m) for m in rng.uniform(0.12, 0.2, d))
     k_shape = rng.uniform(0.7, 1.3, d)
     top_fraction = rng.uniform(0.1, 0.4)
-    f = _shear_modes(masses, k_shape)
+    f = shear_modes(masses, k_shape)
     scale = (top_fraction * fs / f[-1]) ** 2
     f = f * math.sqrt(scale)
     if f[0] < 1.0:                       # keep mode 1 above 1 Hz: a minute of record holds 60 cycles
@@ -118,11 +122,11 @@ def draw_case(index: int, seed: int, *, storeys=None, sample_rate=None, excitati
     if appendage:
         floor = int(rng.integers(1, d + 1))
         near = int(rng.integers(d))
-        detune = rng.choice([-1, 1]) * rng.uniform(0.02, 0.08)
+        detune = rng.choice([-1, 1]) * np.exp(rng.uniform(np.log(0.005), np.log(0.08)))
         f_app = f[near] * (1 + detune)
         if f_app > 0.4 * fs:             # keep the appendage below 40 % of the sample rate too
             f_app = f[near] * (1 - abs(detune))
-        app = (floor, float(masses[floor - 1] * rng.uniform(0.003, 0.03)), float(f_app),
+        app = (floor, float(masses[floor - 1] * np.exp(rng.uniform(np.log(1e-4), np.log(0.03)))), float(f_app),
                float(np.exp(rng.uniform(np.log(0.001), np.log(0.01)))))
     length = duration or float(rng.uniform(60.0, 160.0))
     offsets = tuple(float(x) for x in rng.uniform(-0.6, 0.6, d) / fs)
@@ -145,7 +149,7 @@ def _rayleigh(case: Case):
     from momentid.core.analytic import shear_stiffness
 
     M, K = np.diag(case.masses), shear_stiffness(case.stiffness)
-    w = 2 * np.pi * _shear_modes(case.masses, case.stiffness)
+    w = 2 * np.pi * shear_modes(case.masses, case.stiffness)
     if case.storeys == 1:
         return 0.0, 2 * case.damping[0] / w[0]
     A = 0.5 * np.array([[1 / w[0], w[0]], [1 / w[-1], w[-1]]])
@@ -345,21 +349,23 @@ def evaluate(case: Case) -> dict:
         return row
     row["seconds"] = time.perf_counter() - start
     f_err = r.frequency / true.frequency - 1
+    f_sig = np.abs(r.frequency - true.frequency) / np.maximum(r.frequency_std, 1e-300)
     z_err = r.damping_ratio / true.damping_ratio - 1
     z_sig = np.abs(r.damping_ratio - true.damping_ratio) / np.maximum(r.damping_ratio_std, 1e-300)
+    frequency_ok = (np.abs(f_err) <= FREQUENCY_TOLERANCE) | (f_sig <= STD_TOLERANCE)
     damping_ok = (np.abs(z_err) <= DAMPING_TOLERANCE) | (z_sig <= STD_TOLERANCE)
     capped = any("evaluation cap" in w for w in r.warnings)
     extra = getattr(r, "extra_modes", ())
-    row.update(frequency=r.frequency.tolist(), damping=r.damping_ratio.tolist(),
-               damping_std=r.damping_ratio_std.tolist(), frequency_error=f_err.tolist(),
+    row.update(frequency=r.frequency.tolist(), frequency_std=r.frequency_std.tolist(), damping=r.damping_ratio.tolist(),
+               damping_std=r.damping_ratio_std.tolist(), frequency_error=f_err.tolist(), frequency_sigmas=f_sig.tolist(),
                damping_error=z_err.tolist(), damping_sigmas=z_sig.tolist(),
                extra=[m.frequency for m in extra], warnings=list(r.warnings), capped=capped,
-               ok=bool(np.all(np.abs(f_err) <= FREQUENCY_TOLERANCE) and np.all(damping_ok) and not capped))
+               ok=bool(np.all(frequency_ok) and np.all(damping_ok) and not capped))
     return row
 
 
 def _table(rows) -> str:
-    lines = ["| case | storeys | fs (Hz) | excitation | s | appendage (Hz) | worst f error (%) | "
+    lines = ["| case | storeys | fs (Hz) | excitation | s | appendage (Hz) | worst f error (%) [sigmas] | "
              "worst zeta error (%) [sigmas] | true zeta (%) | extra modes found (Hz) | capped | pass |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for row in rows:
@@ -370,11 +376,12 @@ def _table(rows) -> str:
             lines.append(f"| {c['index']} | {c['storeys']} | {c['sample_rate']:g} | {c['excitation']} | "
                          f"{c['duration']:g} | {app} | refused: {row['error'][:80]} | | {zt} | | | no |")
             continue
-        fe = max(row["frequency_error"], key=abs)
+        i = int(np.argmax(np.abs(row["frequency_error"])))
         k = int(np.argmax(np.abs(row["damping_error"])))
         extra = " ".join(f"{f:.3f}" for f in row["extra"]) or "-"
         lines.append(f"| {c['index']} | {c['storeys']} | {c['sample_rate']:g} | {c['excitation']} | "
-                     f"{c['duration']:g} | {app} | {100 * fe:+.3f} | {100 * row['damping_error'][k]:+.1f} "
+                     f"{c['duration']:g} | {app} | {100 * row['frequency_error'][i]:+.3f} [{row['frequency_sigmas'][i]:.1f}] | "
+                     f"{100 * row['damping_error'][k]:+.1f} "
                      f"[{row['damping_sigmas'][k]:.1f}] | {zt} | {extra} | {'yes' if row['capped'] else 'no'} | "
                      f"{'yes' if row['ok'] else 'NO'} |")
     return "\n".join(lines)
@@ -403,8 +410,9 @@ def main(argv=None) -> int:
             rows = [evaluate(c) for c in cases]
     table = _table(rows)
     passed = sum(r["ok"] for r in rows)
-    summary = (f"{passed} of {len(rows)} cases pass (frequency within {FREQUENCY_TOLERANCE:.1%}, damping within "
-               f"{DAMPING_TOLERANCE:.0%} or {STD_TOLERANCE:g} standard errors, no capped fit); seed {args.seed}, "
+    summary = (f"{passed} of {len(rows)} cases pass (every storey mode's frequency within {FREQUENCY_TOLERANCE:.1%} "
+               f"and damping ratio within {DAMPING_TOLERANCE:.0%}, each or the truth within {STD_TOLERANCE:g} standard "
+               f"errors; no capped fit); seed {args.seed}, "
                f"{time.perf_counter() - start:.0f} s on {args.workers} workers")
     print(table)
     print("\n" + summary)

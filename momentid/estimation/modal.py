@@ -201,7 +201,7 @@ def _solve(lik: Likelihood, theta0, lo, hi, max_nfev: int) -> _Outcome:
 
 
 def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: float, free=None,
-           fix_nuisance: bool = True, hold: Hold = Hold.BAND_LIMITED) -> ModalFit:
+           fix_nuisance: bool = True, hold: Hold = Hold.BAND_LIMITED, frequency_bounds=None) -> ModalFit:
     """Fit ``model`` from the best of ``starts``, restarting from the others when capped.
 
     Parameters
@@ -221,6 +221,8 @@ def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: floa
         Fix the sensor gains and clock offsets the data do not determine, then fit again.
     hold : Hold
         How the table acceleration behaves between samples.
+    frequency_bounds : dict of int to (float, float), optional
+        Per mode, a narrower frequency range (Hz) than the model's (a mode tried near a candidate).
 
     Raises
     ------
@@ -228,6 +230,8 @@ def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: floa
         The information matrix is singular (a mode the table never excites).
     """
     lo, hi = model.bounds(sample_rates)
+    for i, (f_lo, f_hi) in (frequency_bounds or {}).items():
+        lo[i], hi[i] = np.log(2 * np.pi * f_lo), np.log(2 * np.pi * f_hi)
     free = np.ones(model.p, bool) if free is None else np.asarray(free, bool).copy()
     lik = Likelihood(model, spectra_list, free=free, hold=hold)
     ranked = sorted(starts, key=lambda s: _cost(lik, s[1]))
@@ -253,7 +257,8 @@ def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: floa
                 theta[s.start:s.start + model.d][fixed[s.start:s.start + model.d]] = 0.0     # log g = 0
                 theta[s.start + model.d:s.stop][fixed[s.start + model.d:s.stop]] = 0.0       # tau = 0
             again = refine(model, spectra_list, [("previous fit", theta)], sample_rates=sample_rates,
-                           f_max=f_max, free=free & ~fixed, fix_nuisance=False, hold=hold)
+                           f_max=f_max, free=free & ~fixed, fix_nuisance=False, hold=hold,
+                           frequency_bounds=frequency_bounds)
             return ModalFit(**{**again.__dict__, "nfev": again.nfev + fit.nfev,
                                "notes": fit.notes + tuple(why)})
     return fit
@@ -355,5 +360,5 @@ def fit_modal(model: ModalModel, runs, frequency_hz, *, masses=None, stated=None
         pick = [int(np.argmin(np.abs(pf / f - 1))) for f in f0]
         if len(set(pick)) == model.n:
             starts.append(("subspace poles", linear_start(model, spectra_list, 2 * np.pi * pf[pick],
-                                                          np.array([poles[k].damping_ratio for k in pick]), hold)))
+                                                          np.array([poles[k].start_damping for k in pick]), hold)))
     return refine(model, spectra_list, starts, sample_rates=[r.sample_rate for r in runs], f_max=f_max, hold=hold)

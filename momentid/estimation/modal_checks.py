@@ -5,7 +5,8 @@ notes of :class:`~momentid.estimation.scaled.ModalIdentification`:
 
 * a floor sensor whose gain reached the 0.5 or 2 bound of the fit reads the table's motion wrongly
   (a turned sensor, a wrong unit or channel): the run is **refused** with the sensor named and its
-  low-frequency ratio to the table (:func:`low_frequency_ratio`);
+  low-frequency ratio to the table (:func:`low_frequency_ratio`); so is one whose clock offset reached
+  the 1.5-sample bound (clocks not aligned);
 * a mode whose damping ratio differs from the subspace estimate of the same data by more than
   :data:`DAMPING_DISAGREEMENT` is printed with that cause named, flagged as not an answer;
 * a capped fit (after its restarts), an unstable or a poorly determined mode, a suspect gain, shapes
@@ -19,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from momentid.errors import IdentificationError
+from momentid.estimation.modal_model import GAIN_RANGE, OFFSET_BOUND
 
 __all__ = ["ExtraMode", "extra_modes", "check", "low_frequency_ratio", "DAMPING_DISAGREEMENT", "SUSPECT_GAIN",
            "POOR_FREQUENCY", "POOR_DAMPING", "ORTHOGONALITY_WARNING", "GAIN_BOUNDS"]
@@ -30,8 +32,12 @@ POOR_DAMPING = 0.5
 #: A floor sensor whose fitted gain differs from the table sensor's by more than this fraction is
 #: suspect (a real accelerometer is calibrated to ~1-2 %).
 SUSPECT_GAIN = 0.05
-#: The fit's gain bounds; a gain at one of them is refused.
-GAIN_BOUNDS = (0.5, 2.0)
+#: The fit's gain bounds and clock-offset bound (samples, see
+#: :meth:`~momentid.estimation.modal_model.ModalModel.bounds`); a sensor at one of them is refused.
+GAIN_BOUNDS = GAIN_RANGE
+OFFSET_BOUND_SAMPLES = OFFSET_BOUND
+#: "At a bound": within this fraction of it (log gain, or offset).
+BOUND_TOLERANCE = 1e-3
 #: Shapes further than this from M-orthogonal (largest off-diagonal of the normalised modal mass
 #: matrix) contradict the stated masses.
 ORTHOGONALITY_WARNING = 0.2
@@ -85,7 +91,7 @@ def extra_modes(selection) -> tuple:
     model, fit = selection.model, selection.fit
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
     w, z, R = model.omega(fit.theta), model.zeta(fit.theta), model.residues(fit.theta)
-    R_sd = sd[2 * model.n:model.n_modal].reshape(model.n, model.d)
+    R_sd = sd[model.residue_slice].reshape(model.n, model.d)
     out = []
     for i in selection.extra:
         f = float(w[i] / (2 * np.pi))
@@ -111,11 +117,12 @@ def low_frequency_ratio(run, d: int, f1: float) -> np.ndarray:
     return np.real(np.conj(U) @ Y) / power
 
 
-def _gain_refusal(runs, gain, gain_std, storey_f1: float) -> None:
+def _sensor_refusal(runs, gain, offset, storey_f1: float) -> None:
+    """Refuse a run whose floor sensor's gain or clock offset sits at the fit's bound."""
     lo, hi = np.log(GAIN_BOUNDS[0]), np.log(GAIN_BOUNDS[1])
     for r, run in enumerate(runs):
         g = np.log(gain[r])
-        at = np.flatnonzero((np.abs(g - lo) < 1e-3) | (np.abs(g - hi) < 1e-3))
+        at = np.flatnonzero((np.abs(g - lo) < BOUND_TOLERANCE) | (np.abs(g - hi) < BOUND_TOLERANCE))
         if at.size:
             ratio = low_frequency_ratio(run, len(gain[r]), storey_f1)
             said = ", ".join(f"a{j + 1} ({gain[r][j]:.2f} at the bound; below {LOW_FREQUENCY_FRACTION:g} x mode 1 "
@@ -124,9 +131,18 @@ def _gain_refusal(runs, gain, gain_std, storey_f1: float) -> None:
                 f"run {run.name!r}: refused: floor sensor(s) {said}: expected a gain within {GAIN_BOUNDS[0]:g}-"
                 f"{GAIN_BOUNDS[1]:g} of the table sensor's: a sensor turned off the shaking axis, a wrong unit, "
                 f"or the wrong channel; check the import (axis, sign, unit, which file is which floor)")
+        limit = OFFSET_BOUND_SAMPLES / run.sample_rate
+        late = np.flatnonzero(np.abs(np.abs(offset[r]) - limit) < BOUND_TOLERANCE * limit)
+        if late.size:
+            raise IdentificationError(
+                f"run {run.name!r}: refused: the clock offset of floor sensor(s) "
+                f"{', '.join(f'a{j + 1} ({1e3 * offset[r][j]:+.1f} ms)' for j in late)} reached the fit's bound of "
+                f"{OFFSET_BOUND_SAMPLES:g} samples: expected the sensors aligned to the table's clock within about "
+                f"a sample (a larger offset bends the damping ratios); align the clocks (`momentid import` aligns "
+                f"separately clocked sensors from the data) or check which file is which floor")
 
 
-def check(selection, values: dict, std: dict, runs, gain, gain_std, offset, masses) -> tuple[list, list, np.ndarray]:
+def check(selection, values: dict, std: dict, runs, gain, offset, masses) -> tuple[list, list, np.ndarray]:
     """Warnings, notes and, per storey mode, whether its damping ratio is an answer.
 
     Raises
@@ -136,7 +152,7 @@ def check(selection, values: dict, std: dict, runs, gain, gain_std, offset, mass
     """
     fit, storey = selection.fit, selection.storey
     f, z = values["frequency"], values["damping_ratio"]
-    _gain_refusal(runs, gain, gain_std, float(f[0]))
+    _sensor_refusal(runs, gain, offset, float(f[0]))
     out, notes = [], []
     independent = selection.independent[list(storey)]
     answer = np.ones(f.size, bool)

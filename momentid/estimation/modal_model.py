@@ -33,8 +33,13 @@ import numpy as np
 
 from momentid.estimation.eiv import Spectra
 
-__all__ = ["ModalModel", "Likelihood", "Hold", "mode_response", "MAX_ABS_DAMPING"]
+__all__ = ["ModalModel", "Likelihood", "Hold", "mode_response", "MAX_ABS_DAMPING", "OFFSET_BOUND", "GAIN_RANGE"]
 
+#: Clock offsets are bounded to this many samples: separately clocked sensors aligned by the import sit
+#: within a sample of the table's clock, and a wider offset trades with the damping ratios.
+OFFSET_BOUND = 1.5
+#: Gains are bounded to this range (a floor sensor reading half or twice the table is not a gain error).
+GAIN_RANGE = (0.5, 2.0)
 #: Damping ratios are bounded to ``(-MAX_ABS_DAMPING, 1 - ...)``: an unstable fit still shows (negative),
 #: but never one past critical where the mode has no frequency.
 MAX_ABS_DAMPING = 0.5
@@ -60,13 +65,20 @@ class ModalModel:
         Runs fitted together (each gets its own sensor gains and clock offsets).
     extra : int
         Modes beyond the ``d`` storey modes (``n = d + extra``).
+    quadrature : sequence of int
+        Modes with non-classical damping: besides ``R_ij`` they get a quadrature residue ``Q_ij``
+        (their contribution is ``s^2 (R_ij + Q_ij s / w_i) / (s^2 + 2 zeta_i w_i s + w_i^2)``, a complex
+        mode's), stored after the residues (``theta = [.., R, Q (c x d), sensors]``).  Two modes closer
+        than their half-power bands whose damping differs (an appendage tuned near a storey mode) are
+        complex modes; a classical fit of them bends their damping ratios.
     """
 
-    def __init__(self, d: int, n_runs: int = 1, extra: int = 0):
+    def __init__(self, d: int, n_runs: int = 1, extra: int = 0, quadrature=()):
         self.d = d
         self.n_runs = n_runs
         self.n = d + extra
-        self.n_modal = 2 * self.n + self.n * d
+        self.quadrature = tuple(sorted(int(i) for i in quadrature))
+        self.n_modal = 2 * self.n + (self.n + len(self.quadrature)) * d
         self.p = self.n_modal + 2 * d * n_runs
 
     def omega(self, theta) -> np.ndarray:
@@ -77,9 +89,20 @@ class ModalModel:
         """Damping ratios, shape (n,)."""
         return np.asarray(theta[self.n:2 * self.n], float)
 
+    @property
+    def residue_slice(self) -> slice:
+        """Where ``R`` (n x d, row-major) sits in theta."""
+        return slice(2 * self.n, 2 * self.n + self.n * self.d)
+
     def residues(self, theta) -> np.ndarray:
         """``R``, shape (n modes, d floors)."""
-        return np.asarray(theta[2 * self.n:self.n_modal], float).reshape(self.n, self.d)
+        return np.asarray(theta[self.residue_slice], float).reshape(self.n, self.d)
+
+    def quadrature_residues(self, theta) -> np.ndarray:
+        """``Q``, shape (n modes, d floors): zero rows for the classical modes."""
+        Q = np.zeros((self.n, self.d))
+        Q[list(self.quadrature)] = np.asarray(theta[2 * self.n + self.n * self.d:self.n_modal]).reshape(-1, self.d)
+        return Q
 
     def sensor_slice(self, run: int) -> slice:
         """Where run ``run``'s ``log g`` (d) then ``tau`` (d) sit in theta."""
@@ -91,16 +114,20 @@ class ModalModel:
         x = theta[self.sensor_slice(run)]
         return np.exp(x[:self.d]), np.asarray(x[self.d:])
 
-    def pack(self, omega, zeta, residues, gains=None, offsets=None) -> np.ndarray:
-        """theta from its parts (gains 1 and offsets 0 by default; per run (n_runs, d))."""
+    def pack(self, omega, zeta, residues, gains=None, offsets=None, quadrature=None) -> np.ndarray:
+        """theta from its parts (gains 1, offsets 0 and quadrature residues 0 by default; gains and
+        offsets per run (n_runs, d), quadrature residues (n, d) of which the quadrature modes' rows count)."""
         gains = np.ones((self.n_runs, self.d)) if gains is None else np.asarray(gains, float)
         offsets = np.zeros((self.n_runs, self.d)) if offsets is None else np.asarray(offsets, float)
         sensors = np.hstack([np.log(gains), offsets]).ravel()
-        return np.concatenate([np.log(omega), zeta, np.asarray(residues, float).ravel(), sensors])
+        Q = np.zeros((self.n, self.d)) if quadrature is None else np.asarray(quadrature, float)
+        return np.concatenate([np.log(omega), zeta, np.asarray(residues, float).ravel(),
+                               Q[list(self.quadrature)].ravel(), sensors])
 
     def select_indices(self, modes) -> np.ndarray:
-        """Indices into theta of the model restricted to ``modes`` (in that order), sensors kept:
-        ``theta[select_indices(modes)]`` is a theta of ``ModalModel(d, n_runs, len(modes) - d)``."""
+        """Indices into theta of the model restricted to ``modes`` (in that order), sensors kept, the
+        quadrature residues left out: ``theta[select_indices(modes)]`` is a theta of
+        ``ModalModel(d, n_runs, len(modes) - d)``."""
         modes = np.asarray(list(modes), int)
         residues = (2 * self.n + modes[:, None] * self.d + np.arange(self.d)[None, :]).ravel()
         return np.concatenate([modes, self.n + modes, residues, np.arange(self.n_modal, self.p)])
@@ -114,8 +141,8 @@ class ModalModel:
         lo[self.n:2 * self.n], hi[self.n:2 * self.n] = -MAX_ABS_DAMPING, MAX_ABS_DAMPING
         for r, fs in enumerate(sample_rates):
             s = self.sensor_slice(r)
-            lo[s.start:s.start + self.d], hi[s.start:s.start + self.d] = np.log(0.5), np.log(2.0)
-            lo[s.start + self.d:s.stop], hi[s.start + self.d:s.stop] = -1.5 / fs, 1.5 / fs
+            lo[s.start:s.start + self.d], hi[s.start:s.start + self.d] = np.log(GAIN_RANGE[0]), np.log(GAIN_RANGE[1])
+            lo[s.start + self.d:s.stop], hi[s.start + self.d:s.stop] = -OFFSET_BOUND / fs, OFFSET_BOUND / fs
         return lo, hi
 
 
@@ -244,8 +271,18 @@ class _State:
         d, n = model.d, model.n
         w, z, R = model.omega(theta), model.zeta(theta), model.residues(theta)
         gain, offset = model.sensors(theta, k)
-        self.run, self.R = run, R
+        self.run, self.R, self.quad = run, R, list(model.quadrature)
         self.H, self.dH = mode_response(hold, run.w, run.h, w, z)
+        self.Qr = Qr = model.quadrature_residues(theta)
+        if self.quad:
+            if hold is not Hold.BAND_LIMITED:
+                raise ValueError("quadrature residues are implemented for the band-limited response only")
+            ratio = (run.s[:, None] / w[None, self.quad])                # s / w_i of the quadrature modes
+            self.Hq = ratio * self.H[:, self.quad]
+            self.dHq = (ratio * (self.dH[0][:, self.quad] - self.H[:, self.quad]), ratio * self.dH[1][:, self.quad])
+        # A classical mode's transient is shared by the floors through R_ij; a quadrature mode's is
+        # free per floor (its floors' free decays differ in phase).
+        self.classical = np.array([i not in self.quad for i in range(n)])
         root = np.sqrt(1 - z ** 2)
         lam = w * (-z + 1j * root)
         p = np.exp(lam * run.h)
@@ -259,8 +296,19 @@ class _State:
             dAb = zi * Ab ** 2 * run.h * np.conj(p) * np.conj(dl)
             self.dbasis.append(np.stack([dA + dAb, 1j * (dA - dAb)], axis=2))
         self.S = gain[None, :] * np.exp(-1j * run.w[:, None] * offset[None, :]) * run.inv_sd[None, :]
-        self.G = G = self.S * (1 - self.H @ R)                       # (m, d), noise-normalised
-        T = (self.S[:, :, None, None] * R.T[None, :, :, None] * self.basis[:, None, :, :]).reshape(-1, d, 2 * n)
+        F = 1 - self.H @ R
+        if self.quad:
+            F = F - self.Hq @ Qr[self.quad]
+        self.G = G = self.S * F                                      # (m, d), noise-normalised
+        weight = np.where(self.classical[None, :], R.T, 1.0)         # (d, n)
+        T = self.S[:, :, None, None] * weight[None, :, :, None] * self.basis[:, None, :, :]     # (m, d, n, 2)
+        cols = [T[:, :, i, :] for i in range(n) if self.classical[i]]
+        for i in self.quad:                                          # per floor: d column pairs
+            for j in range(d):
+                block = np.zeros_like(T[:, :, i, :])
+                block[:, j, :] = T[:, j, i, :]
+                cols.append(block)
+        T = np.concatenate(cols, axis=2) if cols else np.zeros((run.w.size, d, 0), complex)
         e = run.Y - G * run.U[:, None]
         # Whitening W = I + phi g g^H per bin, phi = -s_u / (q (1 + q)), q = sqrt(1 + s_u |g|^2).
         q = np.sqrt(1 + run.s_u * np.sum(np.abs(G) ** 2, axis=1))
@@ -273,11 +321,19 @@ class _State:
         self.Q, Rq = np.linalg.qr(B[:, keep] / norms[keep])
         coef = self.Q.T @ rw
         self.r = rw - self.Q @ coef
-        beta = np.zeros(2 * n)
+        beta = np.zeros(T.shape[2])
         beta[keep] = np.linalg.lstsq(Rq, coef, rcond=None)[0] / norms[keep]
-        self.beta = beta.reshape(n, 2)
-        self.bb = np.einsum("mnc,nc->mn", self.basis, self.beta)     # each mode's transient
-        self.Tb = self.S * (self.bb @ R)
+        # Per mode and floor, the transient coefficients: classical beta_i R_ij, quadrature beta_ij.
+        n_classical = int(self.classical.sum())
+        coeff = np.zeros((n, d, 2))
+        coeff[self.classical] = beta[:2 * n_classical].reshape(-1, 2)[:, None, :] * R[self.classical][:, :, None]
+        if self.quad:
+            coeff[self.quad] = beta[2 * n_classical:].reshape(len(self.quad), d, 2)
+        self.beta_shared = np.zeros((n, 2))
+        self.beta_shared[self.classical] = beta[:2 * n_classical].reshape(-1, 2)
+        self.coeff = coeff
+        self.bb = np.einsum("mnc,nc->mn", self.basis, self.beta_shared)     # classical modes' transients
+        self.Tb = self.S * np.einsum("mnc,njc->mj", self.basis, coeff)
         self.v = e - self.Tb                                         # unwhitened residual, beta fixed
         self.gv = np.einsum("md,md->m", np.conj(G), self.v)          # g^H v
 
@@ -320,15 +376,21 @@ def _jacobian(model: ModalModel, st: _State, k: int, cols) -> np.ndarray:
         dr[:, :, j] += coef * a - b
         return dr
 
-    S, R = st.S, st.R
+    S, R, quad, Qr = st.S, st.R, st.quad, st.Qr
     for a in range(2):                                                # log w, zeta of every mode
         idx = np.arange(n) + a * n
-        dbb = np.einsum("mnc,nc->nm", st.dbasis[a], st.beta)
-        out[idx] = finish(-S[None] * (st.dH[a].T[:, :, None] * R[:, None, :]),
-                          S[None] * (dbb[:, :, None] * R[:, None, :]))
+        dG = -S[None] * (st.dH[a].T[:, :, None] * R[:, None, :])
+        if quad:
+            dG[quad] -= S[None] * (st.dHq[a].T[:, :, None] * Qr[quad][:, None, :])
+        dTb = S[None] * np.einsum("mnc,njc->nmj", st.dbasis[a], st.coeff)
+        out[idx] = finish(dG, dTb)
+    bb = st.bb.T * st.classical[:, None]                              # a quadrature mode's transient is free
     for j in range(d):                                                # residues of floor j
         idx = 2 * n + np.arange(n) * d + j
-        out[idx] = finish_column(j, -S[:, j][None] * st.H.T, S[:, j][None] * st.bb.T)
+        out[idx] = finish_column(j, -S[:, j][None] * st.H.T, S[:, j][None] * bb)
+        if quad:
+            idx = 2 * n + n * d + np.arange(len(quad)) * d + j
+            out[idx] = finish_column(j, -S[:, j][None] * st.Hq.T, np.zeros((len(quad), m), complex))
     sl = model.sensor_slice(k)
     for j in range(d):                                                # gain and clock offset of sensor j
         a = np.stack([G[:, j], -1j * run.w * G[:, j]])

@@ -10,9 +10,12 @@ too large (one mode fitted to two 1 % apart).  :func:`select_modes`:
    stable over model orders (:func:`~momentid.estimation.subspace.stable_poles`).
 2. **Storey-mode fit.**  ``d`` modes from the ``d`` most prominent peaks (started from the matching
    subspace poles), band up to :data:`~momentid.estimation.modal.FIT_BAND_FACTOR` x the top one.
-3. **Extra modes.**  Every stable subspace pole in the band that no fitted mode claims is tried as one
-   more mode (a peak of the residual alone is not enough: a rig that is not linear leaves peaks at the
-   harmonics of its modes, which no linear input-output model holds stable over orders); the one that lowers
+3. **Extra modes.**  Every stable subspace pole in the band that no fitted mode claims, and the peak
+   of the residual beside each fitted mode (within :data:`NEIGHBOURHOOD`: a close mode too weakly
+   excited for the subspace estimate; only when the fit explains the data to the noise level, since a
+   rig that is not linear leaves residual beside every mode), is tried as one more mode (a residual peak elsewhere is not
+   enough: a rig that is not linear leaves peaks at the harmonics of its modes, which no linear
+   input-output model holds stable over orders); the one that lowers
    the cost most is kept when the decrease is significant (:func:`f_test`: an F-test of nested models
    against the larger model's residual variance, at :data:`SIGNIFICANCE`) *and* the new mode is a
    mode: damping ratio in (0, :data:`EXTRA_MAX_DAMPING`), frequency and damping determined (standard
@@ -20,20 +23,24 @@ too large (one mode fitted to two 1 % apart).  :func:`select_modes`:
    sensor, and separated from every other mode by more than the larger half-power half-width (closer
    than that, two poles describe one resonance's shape, not two modes).  Repeat, up to
    :data:`MAX_EXTRA` extra modes.
-4. **Which are the storeys'.**  Among the ``n`` modes, the ``d`` whose shapes (residue rows) are
+4. **Complex pairs.**  Two modes closer than :data:`CLOSE_PAIR` half-power half-widths, an
+   appendage's and a storey's, share their damping in proportions the classical model cannot hold
+   (their floors move out of phase): each such pair is tried with quadrature residues (complex modes),
+   kept when the F-test asks for them.
+5. **Which are the storeys'.**  Among the ``n`` modes, the ``d`` whose shapes (residue rows) are
    closest to orthogonal with the stated masses (equal masses when none are stated), and among
    those equally orthogonal (within :data:`ORTHOGONALITY_SLACK`) the ones with the largest effective
    mass ``sum_j m_j R_ij``.  A storey mode and an extra mode near it share a shape, so orthogonality
    cannot tell them apart; the effective mass can: an appendage or a leaking out-of-plane mode moves
    little of the rig's mass along the shaking axis.
-5. **Second opinion.**  Each fitted mode's damping ratio is compared with the subspace estimate of
+6. **Second opinion.**  Each fitted mode's damping ratio is compared with the subspace estimate of
    the same data (the stable pole nearest in frequency, median over the runs).
 """
 
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.stats
@@ -60,8 +67,22 @@ SEEN_SIGMAS = 3.0
 #: An extra mode's frequency and damping ratio must be known to these fractions of themselves.
 EXTRA_FREQUENCY_STD = 0.01
 EXTRA_DAMPING_STD = 0.5
+#: Two modes closer than this many half-power half-widths (of the wider) are a pair whose damping may be
+#: non-classical (tried with quadrature residues).
+CLOSE_PAIR = 10.0
 #: A fitted mode claims a subspace pole within this relative distance (log frequency).
 CLAIM_DISTANCE = 0.03
+#: The residual is searched for a neighbour of each fitted mode within this fraction of its frequency
+#: (outside its own half-power band), smoothed over this many bins; the neighbour starts at this damping.
+NEIGHBOURHOOD = 0.08
+NEIGHBOUR_SMOOTHING = 5
+NEIGHBOUR_START_DAMPING = 0.003
+#: ... when the fit leaves a residual variance factor below NEIGHBOUR_SEARCH_SCALE, and such a mode is
+#: kept only when it removes NEIGHBOUR_MIN_SHARE of the misfit above the noise level: a rig that is not
+#: linear leaves residual beside every mode (its frequency moves with amplitude), which one more linear
+#: mode lowers significantly (the F-test) but by a sliver; a missed linear mode takes most of it away.
+NEIGHBOUR_SEARCH_SCALE = 5.0
+NEIGHBOUR_MIN_SHARE = 0.3
 #: Subsets of modes within this much of the most orthogonal are equally orthogonal (then the effective
 #: mass decides).
 ORTHOGONALITY_SLACK = 0.1
@@ -114,7 +135,7 @@ def _is_mode(model: ModalModel, fit: ModalFit, i: int) -> str:
     w, z = model.omega(fit.theta), model.zeta(fit.theta)
     f = w / (2 * np.pi)
     R = model.residues(fit.theta)
-    R_sd = sd[2 * model.n:model.n_modal].reshape(model.n, model.d)
+    R_sd = sd[model.residue_slice].reshape(model.n, model.d)
     if not 0 < z[i] < EXTRA_MAX_DAMPING:
         return f"damping ratio {z[i]:.3g} outside (0, {EXTRA_MAX_DAMPING:g})"
     if sd[i] > EXTRA_FREQUENCY_STD or sd[model.n + i] > EXTRA_DAMPING_STD * z[i]:
@@ -160,7 +181,7 @@ def _first_storey_modes(runs, d: int, poles, peaks, masses, f_top: float):
     poles and the ``d`` most prominent peaks (those no pole explains, at :data:`START_DAMPING`): the
     :func:`storey_modes` of a least-squares fit at all of them up to ``f_top`` (Hz)."""
     f = [p.frequency for p in poles]
-    z = [p.damping_ratio for p in poles]
+    z = [p.start_damping for p in poles]
     for peak in peaks[:d]:
         if all(abs(peak / x - 1) > STABLE_FREQUENCY for x in f):
             f.append(float(peak))
@@ -195,7 +216,7 @@ def _independent(freq: np.ndarray, subspace) -> np.ndarray:
     found = [[] for _ in freq]
     for poles in subspace:
         for i, k in enumerate(_match(freq, poles, STABLE_FREQUENCY)):
-            if k is not None:
+            if k is not None and poles[k].damping_stable:
                 found[i].append(poles[k].damping_ratio)
     return np.array([np.median(z) if z else np.nan for z in found])
 
@@ -240,28 +261,40 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
     notes = []
     tried: set = set()
     while model.n - d < MAX_EXTRA:
-        candidates = _candidates(model, fit, longest, f_max, tried)
+        candidates = _candidates(model, fit, spectra_list, longest, f_max, tried)
         best = None
-        for f_c, z_c in candidates:
+        for f_c, z_c, source in candidates:
             tried.add(round(f_c, 4))
+            if source == "neighbour":
+                local = _local_share(model, fit, spectra_list, f_c, z_c, rates, f_max)
+                if local < NEIGHBOUR_MIN_SHARE:
+                    notes.append(f"a mode near {f_c:.4g} Hz was tried and rejected: it removes {local:.0%} of the "
+                                 f"misfit above the noise level around it (a residual beside a mode that one more "
+                                 f"linear mode barely lowers is the rig's nonlinearity)")
+                    continue
             trial = _with_mode(model, fit, spectra_list, f_c, z_c, rates, f_max)
             if trial is None:
                 continue
             big, big_fit, new = trial
             F, p = f_test(fit.cost, big_fit.cost, 2 + d + 2 * len(runs), big_fit.dof)
             why = _is_mode(big, big_fit, new) if p < SIGNIFICANCE else f"not significant (F = {F:.3g}, p = {p:.2g})"
+            if not why and np.any((model.zeta(fit.theta) > 0) & (np.delete(big.zeta(big_fit.theta), new) <= 0)):
+                why = "a mode fitted before turns unstable beside it"
+            share = (fit.cost - big_fit.cost) / max(fit.cost - fit.dof, 1e-300)
+            if not why and source == "neighbour" and share < NEIGHBOUR_MIN_SHARE:
+                why = (f"it removes {share:.0%} of the misfit above the noise level (a residual beside a mode that "
+                       f"one more linear mode barely lowers is the rig's nonlinearity)")
             f_new = float(big.omega(big_fit.theta)[new] / (2 * np.pi))
             if why:
-                notes.append(f"a mode at {f_new:.4g} Hz (a subspace pole stable over model orders) was tried and "
-                             f"rejected: {why}")
+                notes.append(f"a mode at {f_new:.4g} Hz was tried and rejected: {why}")
             elif best is None or big_fit.cost < best[1].cost:
                 best = (big, big_fit, f_new, F)
         if best is None:
             break
         model, fit = best[0], best[1]
-        notes.append(f"the data hold one more resonance than the storeys explain: a mode at {best[2]:.4g} Hz (a "
-                     f"subspace pole stable over model orders) lowers the cost significantly (F = {best[3]:.3g}) "
-                     f"and is fitted too")
+        notes.append(f"the data hold one more resonance than the storeys explain: a mode at {best[2]:.4g} Hz "
+                     f"lowers the cost significantly (F = {best[3]:.3g}) and is fitted too")
+    model, fit = _complex_pairs(model, fit, spectra_list, rates, f_max, notes)
     freq = model.omega(fit.theta) / (2 * np.pi)
     storey = storey_modes(model.residues(fit.theta), freq, d, masses)
     extra = tuple(sorted((i for i in range(model.n) if i not in storey), key=lambda i: freq[i]))
@@ -269,8 +302,38 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
                          independent=_independent(freq, subspace), notes=tuple(notes))
 
 
-def _candidates(model: ModalModel, fit: ModalFit, poles, f_max: float, tried: set) -> list:
-    """(frequency Hz, start damping) of the stable subspace poles in the band that no fitted mode claims.
+def _complex_pairs(model: ModalModel, fit: ModalFit, spectra_list, rates, f_max: float, notes: list):
+    """The fit with quadrature residues on every pair of modes closer than :data:`CLOSE_PAIR` half-power
+    half-widths, where the F-test (:data:`SIGNIFICANCE`) asks for them and every mode stays a mode."""
+    f = model.omega(fit.theta) / (2 * np.pi)
+    z = np.abs(model.zeta(fit.theta))
+    pairs = sorted({tuple(sorted((i, k))) for i in range(model.n) for k in range(model.n)
+                    if i != k and abs(f[i] - f[k]) < CLOSE_PAIR * max(z[i] * f[i], z[k] * f[k])})
+    for pair in pairs:
+        quad = tuple(sorted(set(model.quadrature) | set(pair)))
+        if quad == model.quadrature:
+            continue
+        big = ModalModel(model.d, model.n_runs, extra=model.n - model.d, quadrature=quad)
+        start = big.pack(model.omega(fit.theta), model.zeta(fit.theta), model.residues(fit.theta),
+                         quadrature=model.quadrature_residues(fit.theta))
+        start[big.n_modal:] = fit.theta[model.n_modal:]
+        try:
+            trial = refine(big, spectra_list, [("classical fit", start)], sample_rates=rates, f_max=f_max)
+        except IdentificationError:
+            continue
+        F, p = f_test(fit.cost, trial.cost, len(pair) * model.d, trial.dof)
+        valid = all(not _is_mode(big, trial, i) for i in pair)
+        if p < SIGNIFICANCE and valid:
+            notes.append(f"the modes at {f[pair[0]]:.4g} and {f[pair[1]]:.4g} Hz, closer than their half-power "
+                         f"bands, are fitted as complex (non-classical) modes: quadrature residues lower the cost "
+                         f"significantly (F = {F:.3g}); their shapes, K and C use the in-phase residues")
+            model, fit = big, trial
+    return model, fit
+
+
+def _candidates(model: ModalModel, fit: ModalFit, spectra_list, poles, f_max: float, tried: set) -> list:
+    """(frequency Hz, start damping) of the resonances in the band that no fitted mode explains: the
+    stable subspace poles no fitted mode claims, and the residual's peak beside each fitted mode.
 
     Each fitted mode claims the nearest unclaimed pole within :data:`CLAIM_DISTANCE` (nearest pairs first),
     so that two poles 1 % apart that one fitted mode straddles leave one of them a candidate.
@@ -283,8 +346,82 @@ def _candidates(model: ModalModel, fit: ModalFit, poles, f_max: float, tried: se
         if gap < CLAIM_DISTANCE and i not in done and k not in claimed:
             claimed.add(k)
             done.add(i)
-    return [(p.frequency, p.damping_ratio) for k, p in enumerate(poles)
-            if k not in claimed and p.frequency < f_max and round(p.frequency, 4) not in tried]
+    out = [(p.frequency, p.start_damping, "subspace") for k, p in enumerate(poles)
+           if k not in claimed and p.frequency < f_max and round(p.frequency, 4) not in tried]
+    if fit.scale > NEIGHBOUR_SEARCH_SCALE:    # the residual holds the rig's nonlinearity, not only noise
+        return out
+    for f_peak in _neighbour_peaks(model, fit, spectra_list):
+        if round(f_peak, 4) not in tried and all(abs(f_peak / c[0] - 1) > STABLE_FREQUENCY for c in out):
+            out.append((f_peak, NEIGHBOUR_START_DAMPING, "neighbour"))
+    return out
+
+
+def _neighbour_peaks(model: ModalModel, fit: ModalFit, spectra_list) -> list:
+    """Per fitted mode, the peak (Hz) of the whitened residual power near it (within
+    :data:`NEIGHBOURHOOD` of its frequency, or 10 half-power half-widths if wider), first run's bins.
+
+    A second mode close to a fitted one, too weakly excited for the subspace estimate to hold it
+    stable over orders, leaves its trace there: the one mode fitted to both misses it on its flank."""
+    from momentid.estimation.modal_model import Likelihood
+
+    sp = spectra_list[0]
+    lik = Likelihood(model, spectra_list[:1], free=np.zeros(model.p, bool), base=fit.theta)
+    r = lik.residual(np.zeros(0))
+    m, d = sp.Y.shape
+    power = np.sum(r[:m * d].reshape(m, d) ** 2 + r[m * d:].reshape(m, d) ** 2, axis=1)
+    smooth = np.convolve(power, np.ones(NEIGHBOUR_SMOOTHING) / NEIGHBOUR_SMOOTHING, mode="same")
+    freq = model.omega(fit.theta) / (2 * np.pi)
+    zeta = np.abs(model.zeta(fit.theta))
+    out = []
+    for f, z in zip(freq, zeta):
+        near = np.flatnonzero((np.abs(sp.freq - f) < max(NEIGHBOURHOOD * f, 10 * z * f))
+                              & (np.abs(sp.freq - f) > 2 * z * f))
+        if near.size:
+            out.append(float(sp.freq[near[np.argmax(smooth[near])]]))
+    return out
+
+
+def _window(sp, low: float, high: float):
+    """The bins of ``sp`` between ``low`` and ``high`` (Hz)."""
+    k = (sp.freq >= low) & (sp.freq <= high)
+    return replace(sp, z=sp.z[k], U=sp.U[k], Y=sp.Y[k], freq=sp.freq[k])
+
+
+def _local_share(model: ModalModel, fit: ModalFit, spectra_list, f_c: float, z_c: float, rates, f_max: float) -> float:
+    """Share of the misfit above the noise level that one more mode at ``f_c`` removes from the bins
+    within :data:`NEIGHBOURHOOD` of it, the modes there (and the sensor gains) refitted with and without
+    it, the others held: a screen that costs a few hundred bins instead of the whole band."""
+    low, high = f_c * (1 - NEIGHBOURHOOD), min(f_c * (1 + NEIGHBOURHOOD), f_max)
+    local = [_window(sp, low, high) for sp in spectra_list]
+    if min(sp.freq.size for sp in local) < 4 * model.d:
+        return 0.0
+    f = model.omega(fit.theta) / (2 * np.pi)
+    near = [i for i in range(model.n) if low <= f[i] <= high]
+    big = ModalModel(model.d, model.n_runs, extra=model.n - model.d + 1)
+
+    def free_mask(m: ModalModel, modes) -> np.ndarray:
+        free = np.zeros(m.p, bool)
+        for i in modes:
+            free[[i, m.n + i]] = True
+            free[m.residue_slice.start + i * m.d:m.residue_slice.start + (i + 1) * m.d] = True
+        for r in range(m.n_runs):
+            free[m.sensor_slice(r).start:m.sensor_slice(r).start + m.d] = True
+        return free
+
+    start = big.pack(np.append(model.omega(fit.theta), 2 * np.pi * f_c), np.append(model.zeta(fit.theta), z_c),
+                     np.vstack([model.residues(fit.theta), np.zeros(model.d)]))
+    start[big.n_modal:] = fit.theta[model.n_modal:]
+    fresh = linear_start(big, local, big.omega(start), big.zeta(start))
+    start[big.residue_slice.start + model.n * model.d:big.residue_slice.stop] = big.residues(fresh)[-1]
+    try:
+        before = refine(model, local, [("fit", fit.theta)], sample_rates=rates, f_max=high,
+                        free=free_mask(model, near), fix_nuisance=False)
+        after = refine(big, local, [("fit", start)], sample_rates=rates, f_max=high,
+                       free=free_mask(big, near + [model.n]), fix_nuisance=False,
+                       frequency_bounds={model.n: (low, high)})
+    except IdentificationError:
+        return 0.0
+    return float((before.cost - after.cost) / max(before.cost - before.dof, 1e-300))
 
 
 def _with_mode(model: ModalModel, fit: ModalFit, spectra_list, f_c: float, z_c: float, rates, f_max: float):
@@ -301,7 +438,8 @@ def _with_mode(model: ModalModel, fit: ModalFit, spectra_list, f_c: float, z_c: 
     kept[big.n_modal:] = fit.theta[model.n_modal:]
     try:
         out = refine(big, spectra_list, [("linear fit at every pole", fresh), ("previous fit", kept)],
-                     sample_rates=rates, f_max=f_max)
+                     sample_rates=rates, f_max=f_max,
+                     frequency_bounds={model.n: (f_c * (1 - 2 * NEIGHBOURHOOD), f_c * (1 + 2 * NEIGHBOURHOOD))})
     except IdentificationError:
         return None
     f_new, f_old = big.omega(out.theta), model.omega(fit.theta)

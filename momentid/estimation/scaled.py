@@ -326,7 +326,7 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     gain_std = np.array([gain[r] * sd_all[s.start:s.start + d] for r, s in enumerate(slices)])
     offset_std = np.array([sd_all[s.start + d:s.stop] for s in slices])
     amplitude = np.array([response_amplitude(r, d, quiet_lead_in(r)) for r in selected])
-    warnings, check_notes, answer = check(selection, values, std, selected, gain, gain_std, offset, masses)
+    warnings, check_notes, answer = check(selection, values, std, selected, gain, offset, masses)
     notes += _notes(fit, selected, offset, values, len(selected)) + list(selection.notes) + list(fit.notes)
     notes += check_notes
     if selection.extra:
@@ -412,9 +412,12 @@ class AmplitudeTrend:
 
 
 def identify_per_run(experiment: Experiment, runs=None) -> tuple:
-    """:func:`identify_modal` on every run on its own; tuple of results in run order."""
+    """:func:`identify_modal` on every run on its own, on the machine's cores (forked workers, see
+    :func:`momentid.diagnosis.workers.run_forked`); tuple of results in run order."""
+    from momentid.diagnosis.workers import run_forked
+
     names = [r.name for r in experiment.runs] if runs is None else list(runs)
-    return tuple(identify_modal(experiment, runs=[n]) for n in names)
+    return tuple(run_forked(lambda name: identify_modal(experiment, runs=[name]), names))
 
 
 def weighted_line(x, y, s):

@@ -11,9 +11,10 @@ the time domain:
    as a Cholesky factor of one ``8 i x 8 i``-sized product: milliseconds for a two-minute record);
 3. the SVD of the block of ``L`` relating future outputs to past data, with the future inputs
    projected out, gives the extended observability matrix; its shift invariance gives ``A``;
-4. the eigenvalues of ``A`` at every model order are the poles; a pole counts as a mode when it is
-   found, with the same frequency (:data:`STABLE_FREQUENCY`) and a similar damping ratio
-   (:data:`STABLE_DAMPING`), at :data:`MIN_ORDERS` or more model orders (a stabilisation diagram).
+4. the eigenvalues of ``A`` at every model order are the poles; a pole is a resonance when it is
+   found with the same frequency (:data:`STABLE_FREQUENCY`) at :data:`MIN_ORDERS` or more model orders
+   (a stabilisation diagram), and its damping ratio is an estimate when it also stays within
+   :data:`STABLE_DAMPING` of its median over those orders (:attr:`StablePole.damping_stable`).
 
 Output noise does not bias it (the past outputs are instruments); table noise slightly does, which is
 why it only starts and checks the errors-in-variables fit.
@@ -28,14 +29,17 @@ import scipy.linalg
 
 __all__ = ["StablePole", "poles_by_order", "stable_poles", "STABLE_FREQUENCY", "STABLE_DAMPING", "MIN_ORDERS"]
 
-#: A pole is the same mode at two model orders when its frequency agrees within this fraction ...
+#: A pole is the same resonance at two model orders when its frequency agrees within this fraction, ...
 STABLE_FREQUENCY = 0.01
-#: ... and its damping ratio within this fraction (of the larger) ...
-STABLE_DAMPING = 0.3
-#: ... and it is a mode when so found at this many model orders.
+#: ... a resonance when so found at this many model orders, ...
 MIN_ORDERS = 3
-#: Poles with a damping ratio outside this range are noise or drift, not structural modes.
-DAMPING_RANGE = (1e-5, 0.2)
+#: ... and its damping ratio an estimate when it stays within this fraction of its median.
+STABLE_DAMPING = 0.3
+#: Poles with a damping ratio outside this range are noise or drift, not structural modes (slightly
+#: negative ones count: a lightly damped, weakly excited mode scatters about zero at some orders).
+DAMPING_RANGE = (-0.01, 0.2)
+#: A fit starts from a pole's damping ratio clipped to this range.
+START_DAMPING_RANGE = (5e-4, 0.1)
 #: Extra state dimensions (beyond two per expected mode) of the highest order tried: noise and
 #: unmodelled dynamics take some, and a mode missed at low orders appears there.
 EXTRA_ORDERS = 10
@@ -57,13 +61,24 @@ class StablePole:
     orders : int
         Model orders at which it was found.
     damping_spread : float
-        Relative spread (max - min over median) of its damping ratio over those orders.
+        Relative spread of its damping ratio over those orders: interquartile range over median (the
+        lowest orders, where noise takes a mode's place, do not count).
     """
 
     frequency: float
     damping_ratio: float
     orders: int
     damping_spread: float
+
+    @property
+    def start_damping(self) -> float:
+        """The damping ratio a fit may start from (clipped to :data:`START_DAMPING_RANGE`)."""
+        return float(np.clip(self.damping_ratio, *START_DAMPING_RANGE))
+
+    @property
+    def damping_stable(self) -> bool:
+        """The damping ratio is positive and its spread over the orders within :data:`STABLE_DAMPING`."""
+        return self.damping_ratio > 0 and self.damping_spread <= STABLE_DAMPING
 
 
 def _hankel(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray:
@@ -158,11 +173,8 @@ def stable_poles(u: np.ndarray, y: np.ndarray, dt: float, n_modes: int, f_max: f
         for f, z in poles:
             best, gap = None, STABLE_FREQUENCY
             for c, cluster in enumerate(clusters):
-                if c in used:
-                    continue
-                f0, z0 = np.median([p[0] for p in cluster]), np.median([p[1] for p in cluster])
-                g = abs(f / f0 - 1)
-                if g < gap and abs(z - z0) <= STABLE_DAMPING * max(z, z0):
+                g = abs(f / np.median([p[0] for p in cluster]) - 1)
+                if c not in used and g < gap:
                     best, gap = c, g
             if best is None:
                 clusters.append([(f, z)])
@@ -176,5 +188,6 @@ def stable_poles(u: np.ndarray, y: np.ndarray, dt: float, n_modes: int, f_max: f
             continue
         c = np.array(cluster)
         zm = float(np.median(c[:, 1]))
-        out.append(StablePole(float(np.median(c[:, 0])), zm, len(cluster), float(np.ptp(c[:, 1]) / zm)))
+        q25, q75 = np.percentile(c[:, 1], [25, 75])
+        out.append(StablePole(float(np.median(c[:, 0])), zm, len(cluster), float((q75 - q25) / max(abs(zm), 1e-12))))
     return sorted(out, key=lambda p: p.frequency)

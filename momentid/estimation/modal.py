@@ -34,7 +34,7 @@ factor when the model explains the data less well than the noise allows.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.linalg
@@ -58,6 +58,9 @@ NYQUIST_FRACTION = 0.42
 START_DAMPING = 0.02
 #: Evaluations one fit may use; reaching it is a capped fit (restarted from the other starts).
 MAX_NFEV = 200
+#: Convergence tolerances of the trust-region fit: a relative cost change of 1e-7 on a cost of ~1e4-1e5
+#: whitened residuals is ~1e-3, far below the change of 1 that a one-standard-error step makes.
+FTOL, XTOL, GTOL = 1e-7, 1e-8, 1e-8
 #: A gain whose standard error exceeds this is not measured by the data: it is fixed at 1.
 GAIN_STD_LIMIT = 0.05
 #: A clock offset whose standard error exceeds this many samples is fixed at 0.
@@ -194,7 +197,7 @@ def _solve(lik: Likelihood, theta0, lo, hi, max_nfev: int) -> _Outcome:
     try:
         result = scipy.optimize.least_squares(
             lik.residual, x0, jac=lik.jacobian, bounds=(lo[free], hi[free]), method="trf", x_scale="jac",
-            ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev)
+            ftol=FTOL, xtol=XTOL, gtol=GTOL, max_nfev=max_nfev)
     except (np.linalg.LinAlgError, ValueError, FloatingPointError):
         return _Outcome(theta0, np.inf, max_nfev, True)
     return _Outcome(lik.full(result.x), float(2 * result.cost), int(result.nfev), result.status == 0)
@@ -249,7 +252,7 @@ def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: floa
             break
     fit = _finish(model, lik, best, spectra_list, f_max, nfev, tuple(notes) + (f"started from the {best_name}",))
     if fix_nuisance:
-        fixed, why = _unidentified(model, fit, sample_rates)
+        fixed, why = _unidentified(model, fit, sample_rates, [sp.run for sp in spectra_list])
         if fixed.any():
             theta = fit.theta.copy()
             for r in range(model.n_runs):
@@ -259,8 +262,7 @@ def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: floa
             again = refine(model, spectra_list, [("previous fit", theta)], sample_rates=sample_rates,
                            f_max=f_max, free=free & ~fixed, fix_nuisance=False, hold=hold,
                            frequency_bounds=frequency_bounds)
-            return ModalFit(**{**again.__dict__, "nfev": again.nfev + fit.nfev,
-                               "notes": fit.notes + tuple(why)})
+            return replace(again, nfev=again.nfev + fit.nfev, notes=fit.notes + tuple(why))
     return fit
 
 
@@ -294,21 +296,19 @@ def _finish(model, lik: Likelihood, out: _Outcome, spectra_list, f_max, nfev, no
     return fit
 
 
-def _unidentified(model: ModalModel, fit: ModalFit, sample_rates):
-    """Sensor parameters the data do not determine (standard error above the limits, or at a bound
-    with a wide standard error): mask over theta, and a note per run."""
+def _unidentified(model: ModalModel, fit: ModalFit, sample_rates, names):
+    """Sensor parameters the data do not determine (standard error above :data:`GAIN_STD_LIMIT` or
+    :data:`OFFSET_STD_LIMIT` samples): mask over theta, and a note per run."""
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
-    lo, hi = model.bounds(sample_rates)
     fixed = np.zeros(model.p, bool)
     notes = []
-    for r, fs in enumerate(sample_rates):
+    for r, (fs, run) in enumerate(zip(sample_rates, names)):
         s = model.sensor_slice(r)
         g, t = np.arange(s.start, s.start + model.d), np.arange(s.start + model.d, s.stop)
         weak_g = fit.free[g] & (sd[g] > GAIN_STD_LIMIT)
         weak_t = fit.free[t] & (sd[t] * fs > OFFSET_STD_LIMIT)
         fixed[g[weak_g]] = True
         fixed[t[weak_t]] = True
-        run = fit.noise_sources[r].split(":")[0] if r < len(fit.noise_sources) else str(r)
         if weak_g.any():
             notes.append(f"run {run!r}: the gain of floor sensor(s) {', '.join(f'a{j + 1}' for j in np.flatnonzero(weak_g))} "
                          f"is not determined by the data (standard error above {GAIN_STD_LIMIT:.0%}): fixed at 1")
@@ -316,7 +316,6 @@ def _unidentified(model: ModalModel, fit: ModalFit, sample_rates):
             notes.append(f"run {run!r}: the clock offset of floor sensor(s) "
                          f"{', '.join(f'a{j + 1}' for j in np.flatnonzero(weak_t))} is not determined by the data "
                          f"(standard error above {OFFSET_STD_LIMIT:g} sample): fixed at 0")
-    del lo, hi
     return fixed, notes
 
 

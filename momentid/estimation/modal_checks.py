@@ -127,10 +127,15 @@ def _sensor_refusal(runs, gain, offset, storey_f1: float) -> None:
             ratio = low_frequency_ratio(run, len(gain[r]), storey_f1)
             said = ", ".join(f"a{j + 1} ({gain[r][j]:.2f} at the bound; below {LOW_FREQUENCY_FRACTION:g} x mode 1 "
                              f"it reads {ratio[j]:.2f} x the table)" for j in at)
+            reads_fine = np.all((ratio[at] > GAIN_BOUNDS[0]) & (ratio[at] < GAIN_BOUNDS[1]))
+            cause = ("its reading at low frequency is no gain fault, so the modal model does not fit this sensor: a "
+                     "sensor on another floor than stated (swapped files), or runs of different structures fitted "
+                     "together (try --per-run)" if reads_fine else
+                     "a sensor turned off the shaking axis, a wrong unit, or the wrong channel")
             raise IdentificationError(
                 f"run {run.name!r}: refused: floor sensor(s) {said}: expected a gain within {GAIN_BOUNDS[0]:g}-"
-                f"{GAIN_BOUNDS[1]:g} of the table sensor's: a sensor turned off the shaking axis, a wrong unit, "
-                f"or the wrong channel; check the import (axis, sign, unit, which file is which floor)")
+                f"{GAIN_BOUNDS[1]:g} of the table sensor's: {cause}; check the import (axis, sign, unit, which "
+                f"file is which floor)")
         limit = OFFSET_BOUND_SAMPLES / run.sample_rate
         late = np.flatnonzero(np.abs(np.abs(offset[r]) - limit) < BOUND_TOLERANCE * limit)
         if late.size:

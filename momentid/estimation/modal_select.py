@@ -8,21 +8,23 @@ too large (one mode fitted to two 1 % apart).  :func:`select_modes`:
 1. **Candidates.**  The spectral peaks of the floors' response relative to the table
    (:func:`~momentid.estimation.peaks.peak_candidates`) and the poles of a subspace estimate that are
    stable over model orders (:func:`~momentid.estimation.subspace.stable_poles`).
-2. **Storey-mode fit.**  ``d`` modes from the ``d`` most prominent peaks (started from the matching
-   subspace poles), band up to :data:`~momentid.estimation.modal.FIT_BAND_FACTOR` x the top one.
-3. **Extra modes.**  Every stable subspace pole in the band that no fitted mode claims, and the peak
-   of the residual beside each fitted mode (within :data:`NEIGHBOURHOOD`: a close mode too weakly
-   excited for the subspace estimate; only when the fit explains the data to the noise level, since a
-   rig that is not linear leaves residual beside every mode), is tried as one more mode (a residual peak elsewhere is not
-   enough: a rig that is not linear leaves peaks at the harmonics of its modes, which no linear
-   input-output model holds stable over orders); the one that lowers
-   the cost most is kept when the decrease is significant (:func:`f_test`: an F-test of nested models
-   against the larger model's residual variance, at :data:`SIGNIFICANCE`) *and* the new mode is a
-   mode: damping ratio in (0, :data:`EXTRA_MAX_DAMPING`), frequency and damping determined (standard
-   errors below 1 % and 50 %), a residue beyond :data:`SEEN_SIGMAS` standard errors on at least one
-   sensor, and separated from every other mode by more than the larger half-power half-width (closer
-   than that, two poles describe one resonance's shape, not two modes).  Repeat, up to
-   :data:`MAX_EXTRA` extra modes.
+2. **Storey-mode fit.**  The ``d`` likeliest storey modes among the candidates (a least-squares fit at
+   all of them, then step 5's choice) start a ``d``-mode fit (so do the ``d`` most prominent peaks);
+   the band runs up to :data:`~momentid.estimation.modal.FIT_BAND_FACTOR` x the top one.
+3. **Extra modes.**  Every stable subspace pole in the band that no fitted mode claims is tried as
+   one more mode, and so is the peak of the residual beside each fitted mode (within
+   :data:`NEIGHBOURHOOD`: a close mode too weakly excited for the subspace estimate).  A residual
+   peak elsewhere is not enough: a rig that is not linear leaves peaks at the harmonics of its modes,
+   which no linear input-output model holds stable over orders.  The candidate that lowers the cost
+   most is kept when the decrease is significant (:func:`f_test`: an F-test of nested models against
+   the larger model's residual variance, at :data:`SIGNIFICANCE`) *and* the new mode is a mode:
+   damping ratio in (0, :data:`EXTRA_MAX_DAMPING`), frequency and damping determined (standard errors
+   below 1 % and 50 %), a residue beyond :data:`SEEN_SIGMAS` standard errors on at least one sensor,
+   separated from every other mode by more than the larger half-power half-width (closer than that,
+   two poles describe one resonance's shape, not two modes), no mode fitted before turned unstable;
+   a residual-peak candidate must also remove :data:`NEIGHBOUR_MIN_SHARE` of the misfit above the
+   noise level (a rig that is not linear leaves residual beside every mode, which one more linear mode
+   lowers significantly but by a sliver).  Repeat, up to :data:`MAX_EXTRA` extra modes.
 4. **Complex pairs.**  Two modes closer than :data:`CLOSE_PAIR` half-power half-widths, an
    appendage's and a storey's, share their damping in proportions the classical model cannot hold
    (their floors move out of phase): each such pair is tried with quadrature residues (complex modes),
@@ -83,6 +85,10 @@ NEIGHBOUR_START_DAMPING = 0.003
 #: mode lowers significantly (the F-test) but by a sliver; a missed linear mode takes most of it away.
 NEIGHBOUR_SEARCH_SCALE = 5.0
 NEIGHBOUR_MIN_SHARE = 0.3
+#: The misfit above the noise level counts as at least this share of the degrees of freedom (a fit at
+#: the noise level has almost none: a mode that removes what noise alone would, ~its parameter count,
+#: must not look like one removing all of it).
+NOISE_FLOOR_SHARE = 0.01
 #: Subsets of modes within this much of the most orthogonal are equally orthogonal (then the effective
 #: mass decides).
 ORTHOGONALITY_SLACK = 0.1
@@ -269,8 +275,8 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
                 local = _local_share(model, fit, spectra_list, f_c, z_c, rates, f_max)
                 if local < NEIGHBOUR_MIN_SHARE:
                     notes.append(f"a mode near {f_c:.4g} Hz was tried and rejected: it removes {local:.0%} of the "
-                                 f"misfit above the noise level around it (a residual beside a mode that one more "
-                                 f"linear mode barely lowers is the rig's nonlinearity)")
+                                 f"misfit above the noise level (a residual beside a mode that one more linear mode "
+                                 f"barely lowers is the rig's nonlinearity)")
                     continue
             trial = _with_mode(model, fit, spectra_list, f_c, z_c, rates, f_max)
             if trial is None:
@@ -280,7 +286,7 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
             why = _is_mode(big, big_fit, new) if p < SIGNIFICANCE else f"not significant (F = {F:.3g}, p = {p:.2g})"
             if not why and np.any((model.zeta(fit.theta) > 0) & (np.delete(big.zeta(big_fit.theta), new) <= 0)):
                 why = "a mode fitted before turns unstable beside it"
-            share = (fit.cost - big_fit.cost) / max(fit.cost - fit.dof, 1e-300)
+            share = (fit.cost - big_fit.cost) / max(fit.cost - fit.dof, NOISE_FLOOR_SHARE * fit.dof)
             if not why and source == "neighbour" and share < NEIGHBOUR_MIN_SHARE:
                 why = (f"it removes {share:.0%} of the misfit above the noise level (a residual beside a mode that "
                        f"one more linear mode barely lowers is the rig's nonlinearity)")
@@ -388,40 +394,35 @@ def _window(sp, low: float, high: float):
 
 
 def _local_share(model: ModalModel, fit: ModalFit, spectra_list, f_c: float, z_c: float, rates, f_max: float) -> float:
-    """Share of the misfit above the noise level that one more mode at ``f_c`` removes from the bins
-    within :data:`NEIGHBOURHOOD` of it, the modes there (and the sensor gains) refitted with and without
-    it, the others held: a screen that costs a few hundred bins instead of the whole band."""
+    """Share of the misfit above the noise level that one more mode at ``f_c`` removes: a screen that
+    fits it on the bins within :data:`NEIGHBOURHOOD` of ``f_c`` only (with the modes there; the others
+    and the sensors held), then evaluates the whole band once with it.  It underestimates what the full
+    fit would remove, never by much for a mode that is there."""
+    from momentid.estimation.modal_model import Likelihood
+
     low, high = f_c * (1 - NEIGHBOURHOOD), min(f_c * (1 + NEIGHBOURHOOD), f_max)
     local = [_window(sp, low, high) for sp in spectra_list]
     if min(sp.freq.size for sp in local) < 4 * model.d:
         return 0.0
     f = model.omega(fit.theta) / (2 * np.pi)
-    near = [i for i in range(model.n) if low <= f[i] <= high]
     big = ModalModel(model.d, model.n_runs, extra=model.n - model.d + 1)
-
-    def free_mask(m: ModalModel, modes) -> np.ndarray:
-        free = np.zeros(m.p, bool)
-        for i in modes:
-            free[[i, m.n + i]] = True
-            free[m.residue_slice.start + i * m.d:m.residue_slice.start + (i + 1) * m.d] = True
-        for r in range(m.n_runs):
-            free[m.sensor_slice(r).start:m.sensor_slice(r).start + m.d] = True
-        return free
-
+    free = np.zeros(big.p, bool)
+    for i in [i for i in range(model.n) if low <= f[i] <= high] + [model.n]:
+        free[[i, big.n + i]] = True
+        free[big.residue_slice.start + i * big.d:big.residue_slice.start + (i + 1) * big.d] = True
     start = big.pack(np.append(model.omega(fit.theta), 2 * np.pi * f_c), np.append(model.zeta(fit.theta), z_c),
                      np.vstack([model.residues(fit.theta), np.zeros(model.d)]))
     start[big.n_modal:] = fit.theta[model.n_modal:]
     fresh = linear_start(big, local, big.omega(start), big.zeta(start))
     start[big.residue_slice.start + model.n * model.d:big.residue_slice.stop] = big.residues(fresh)[-1]
     try:
-        before = refine(model, local, [("fit", fit.theta)], sample_rates=rates, f_max=high,
-                        free=free_mask(model, near), fix_nuisance=False)
-        after = refine(big, local, [("fit", start)], sample_rates=rates, f_max=high,
-                       free=free_mask(big, near + [model.n]), fix_nuisance=False,
-                       frequency_bounds={model.n: (low, high)})
-    except IdentificationError:
+        after = refine(big, local, [("fit", start)], sample_rates=rates, f_max=high, free=free,
+                       fix_nuisance=False, frequency_bounds={model.n: (low, high)})
+        r = Likelihood(big, spectra_list, free=np.zeros(big.p, bool), base=after.theta).residual(np.zeros(0))
+    except (IdentificationError, np.linalg.LinAlgError, ValueError):
         return 0.0
-    return float((before.cost - after.cost) / max(before.cost - before.dof, 1e-300))
+    excess = max(fit.cost - fit.dof, NOISE_FLOOR_SHARE * fit.dof)
+    return float((fit.cost - float(r @ r)) / excess)
 
 
 def _with_mode(model: ModalModel, fit: ModalFit, spectra_list, f_c: float, z_c: float, rates, f_max: float):

@@ -65,6 +65,8 @@ FTOL, XTOL, GTOL = 1e-7, 1e-8, 1e-8
 GAIN_STD_LIMIT = 0.05
 #: A clock offset whose standard error exceeds this many samples is fixed at 0.
 OFFSET_STD_LIMIT = 0.5
+#: Clock offsets tried by :func:`linear_start` over the fit's bounds (a quarter of a sample apart).
+START_OFFSETS = 13
 #: A start's gain outside this range (the linear fit at fixed poles) is replaced by 1.
 START_GAIN_RANGE = (0.7, 1.4)
 
@@ -142,25 +144,40 @@ def _basis(w_bins, zinv, omega, zeta, h, hold: Hold):
 
 
 def linear_start(model: ModalModel, spectra_list, omega, zeta, hold: Hold = Hold.BAND_LIMITED) -> np.ndarray:
-    """theta with the given poles and the residues and gains that fit best at them.
+    """theta with the given poles and the residues, gains and clock offsets that fit best at them.
 
-    At fixed poles (and clock offsets 0) the response ``g_j (1 - sum_i R_ij H_i)`` is linear in
+    At fixed poles and clock offsets the response ``g_j (1 - sum_i R_ij H_i)`` is linear in
     ``c_j = g_j`` and ``b_ij = g_j R_ij``, and so is the transient: one least-squares problem per floor
-    and run.  Residues are averaged over runs; a gain outside :data:`START_GAIN_RANGE` starts at 1.
+    and run, solved for each clock offset of a grid over the bounds (:data:`START_OFFSETS` points; a
+    third of a sample is a radian at 40 % of the sample rate, which no residue can absorb) and kept at
+    the best.  Residues are averaged over runs; a gain outside :data:`START_GAIN_RANGE` starts at 1.
     """
+    from momentid.estimation.modal_model import OFFSET_BOUND
+
     omega, zeta = np.asarray(omega, float), np.asarray(zeta, float)
     n, d = model.n, model.d
-    residues, gains = [], np.ones((model.n_runs, d))
+    residues, gains, offsets = [], np.ones((model.n_runs, d)), np.zeros((model.n_runs, d))
     for r, sp in enumerate(spectra_list):
-        H, basis = _basis(2 * np.pi * sp.freq, np.conj(sp.z), omega, zeta, sp.h, hold)
+        w_bins = 2 * np.pi * sp.freq
+        H, basis = _basis(w_bins, np.conj(sp.z), omega, zeta, sp.h, hold)
         X = np.hstack([sp.U[:, None], -H * sp.U[:, None], basis.reshape(basis.shape[0], 2 * n)])
         A = np.vstack([X.real, X.imag])
-        coef = np.linalg.lstsq(A, np.vstack([sp.Y.real, sp.Y.imag]), rcond=None)[0]      # (1 + 3n, d)
+        pinv = np.linalg.pinv(A)
+        grid = np.linspace(-OFFSET_BOUND, OFFSET_BOUND, START_OFFSETS) * sp.h
+        best = np.full(d, np.inf)
+        coef = np.zeros((A.shape[1], d))
+        for tau in grid:
+            Y = sp.Y * np.exp(1j * w_bins * tau)[:, None]                  # the delay undone
+            b = np.vstack([Y.real, Y.imag])
+            c_tau = pinv @ b
+            sse = np.sum((b - A @ c_tau) ** 2, axis=0)
+            better = sse < best
+            best[better], offsets[r, better], coef[:, better] = sse[better], tau, c_tau[:, better]
         c = coef[0]
         good = (c > START_GAIN_RANGE[0]) & (c < START_GAIN_RANGE[1])
         gains[r] = np.where(good, c, 1.0)
         residues.append(coef[1:1 + n] / np.where(good, c, 1.0)[None, :])
-    return model.pack(omega, zeta, np.mean(residues, axis=0), gains=gains)
+    return model.pack(omega, zeta, np.mean(residues, axis=0), gains=gains, offsets=offsets)
 
 
 def shear_start(model: ModalModel, frequency_hz, masses=None) -> np.ndarray:

@@ -65,6 +65,9 @@ class ExtraMode:
         Floor sensors whose residue exceeds 3 standard errors.
     damping_independent : float
         The subspace estimate's damping ratio near this frequency (NaN: none stable over orders).
+    residues_quadrature : ndarray, shape (d,)
+        Quadrature residues ``Q_j`` of a complex mode (zeros for a classical one): its floor j term is
+        ``s^2 (R_j + Q_j s / w) / (s^2 + 2 zeta w s + w^2)``.
     """
 
     frequency: float
@@ -75,12 +78,15 @@ class ExtraMode:
     residues_std: np.ndarray
     seen_by: tuple
     damping_independent: float = float("nan")
+    residues_quadrature: np.ndarray | None = None
 
     def to_dict(self) -> dict:
         return {"frequency_hz": self.frequency, "frequency_std": self.frequency_std,
                 "damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
                 "residues": np.asarray(self.residues).tolist(), "residues_std": np.asarray(self.residues_std).tolist(),
                 "seen_by": list(self.seen_by),
+                "residues_quadrature": None if self.residues_quadrature is None else
+                np.asarray(self.residues_quadrature).tolist(),
                 "damping_ratio_subspace": None if np.isnan(self.damping_independent) else self.damping_independent}
 
 
@@ -99,7 +105,8 @@ def extra_modes(selection) -> tuple:
         out.append(ExtraMode(frequency=f, frequency_std=f * float(sd[i]), damping_ratio=float(z[i]),
                              damping_ratio_std=float(sd[model.n + i]), residues=R[i].copy(),
                              residues_std=R_sd[i].copy(), seen_by=seen,
-                             damping_independent=float(selection.independent[i])))
+                             damping_independent=float(selection.independent[i]),
+                             residues_quadrature=model.quadrature_residues(fit.theta)[i].copy()))
     return tuple(out)
 
 

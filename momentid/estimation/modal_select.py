@@ -300,12 +300,36 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
         model, fit = best[0], best[1]
         notes.append(f"the data hold one more resonance than the storeys explain: a mode at {best[2]:.4g} Hz "
                      f"lowers the cost significantly (F = {best[3]:.3g}) and is fitted too")
+    model, fit = _drop_non_modes(model, fit, spectra_list, rates, f_max, masses, notes)
     model, fit = _complex_pairs(model, fit, spectra_list, rates, f_max, notes)
     freq = model.omega(fit.theta) / (2 * np.pi)
     storey = storey_modes(model.residues(fit.theta), freq, d, masses)
     extra = tuple(sorted((i for i in range(model.n) if i not in storey), key=lambda i: freq[i]))
     return ModeSelection(model=model, fit=fit, storey=storey, extra=extra, subspace=subspace,
                          independent=_independent(freq, subspace), notes=tuple(notes))
+
+
+def _drop_non_modes(model: ModalModel, fit: ModalFit, spectra_list, rates, f_max: float, masses, notes: list):
+    """The fit without the modes beyond the storeys' that are no modes (:func:`_is_mode`) after the
+    extra modes joined (one that a later mode took the place of), refitted after each one dropped."""
+    while model.n > model.d:
+        freq = model.omega(fit.theta) / (2 * np.pi)
+        storey = storey_modes(model.residues(fit.theta), freq, model.d, masses)
+        why = {i: _is_mode(model, fit, i) for i in range(model.n) if i not in storey}
+        bad = [i for i, w in why.items() if w]
+        if not bad:
+            break
+        i = bad[0]
+        keep = [k for k in range(model.n) if k != i]
+        small = ModalModel(model.d, model.n_runs, extra=model.n - model.d - 1)
+        try:
+            fit = refine(small, spectra_list, [("the fit without it", fit.theta[model.select_indices(keep)])],
+                         sample_rates=rates, f_max=f_max)
+        except IdentificationError:
+            break
+        notes.append(f"the mode at {freq[i]:.4g} Hz is dropped: {why[i]}")
+        model = small
+    return model, fit
 
 
 def _complex_pairs(model: ModalModel, fit: ModalFit, spectra_list, rates, f_max: float, notes: list):

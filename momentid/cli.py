@@ -175,7 +175,7 @@ def _report(experiment, args) -> int:
     _refuse_implausible(experiment, result)
 
     if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
-        payload, text = result.to_dict(), result.table()
+        payload, text = result.to_dict(), result.table(warnings=False)   # warnings: on stderr, once
     elif experiment.structure is not None:
         comparison = compare(result, experiment.structure)
         payload = comparison.to_dict()
@@ -235,7 +235,7 @@ def _cmd_identify(args) -> int:
             payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
             print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
         else:
-            print("\n\n".join(r.table() for r in results))
+            print("\n\n".join(r.table(warnings=False) for r in results))   # warnings: on stderr, once
             if trend is not None:
                 print("\n" + trend.table())
         for r in results:

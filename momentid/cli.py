@@ -12,11 +12,14 @@ import io
 import json
 import math
 import os
+import signal
 import sys
 import warnings
 from pathlib import Path
 
+from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_interrupt
 from momentid.core.series import json_safe
+from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
 
 __all__ = ["main", "only_json_on_stdout"]
@@ -30,6 +33,7 @@ _EPILOG = """examples:
   momentid plan scenarios/lab_noisy.toml              # runs and masses for a target accuracy (CRLB)
   momentid import lab_data/ -o lab.mcap               # a real rig's exports (CSV, Xsens DOT) -> recording
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
+  momentid twin lab.mcap -o twin/                     # the calibrated MuJoCo twin of the rig
 """
 
 
@@ -61,6 +65,20 @@ def _positive_int(text: str) -> int:
     if value < 1:
         raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
     return value
+
+
+def _run_names(text: str | None) -> list[str] | None:
+    """``--runs a,b``: the names, each once (a run named twice would count its data twice)."""
+    if text is None:
+        return None
+    names = [n.strip() for n in text.split(",")]
+    if not all(names):
+        raise MomentidError(f"--runs {text!r}: expected comma-separated run names, got an empty one")
+    twice = [n for i, n in enumerate(names) if n in names[:i]]
+    if twice:
+        raise MomentidError(f"--runs {text}: run {twice[0]!r} is named twice; expected each run once (the same "
+                            f"data counted twice would shrink every standard error by sqrt(2))")
+    return names
 
 
 def _output_path(out: str | None, name: str) -> Path:
@@ -148,7 +166,7 @@ def _report(experiment, args) -> int:
     from momentid.estimation.scaled import ModalIdentification
 
     times = args.time if args.time else None
-    runs = args.runs.split(",") if args.runs else None
+    runs = _run_names(args.runs)
     try:
         result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
     except IdentificationError as exc:
@@ -159,7 +177,7 @@ def _report(experiment, args) -> int:
     _refuse_implausible(experiment, result)
 
     if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
-        payload, text = result.to_dict(), result.table()
+        payload, text = result.to_dict(), result.table(warnings=False)   # warnings: on stderr, once
     elif experiment.structure is not None:
         comparison = compare(result, experiment.structure)
         payload = comparison.to_dict()
@@ -184,6 +202,10 @@ def _cmd_run(args) -> int:
 
     path = Path(args.scenario) if args.scenario else default_scenario_path()
     scenario = load_scenario(path)
+    unknown = [n for n in _run_names(args.runs) or () if n not in {r.name for r in scenario.runs}]
+    if unknown:   # before minutes of simulation, not after
+        raise MomentidError(f"--runs {args.runs}: {path} has no run named {unknown[0]!r}; its runs are "
+                            f"{', '.join(r.name for r in scenario.runs)}")
     out = _output_path(args.output, scenario.name)
     progress = not args.quiet and sys.stderr.isatty()
     experiment = run_experiment(scenario, out, progress=progress, workers=args.workers)
@@ -195,7 +217,7 @@ def _cmd_run(args) -> int:
         from momentid.report.viewer import view
 
         view(experiment, identify_options={"estimator": args.estimator, "times": args.time or None,
-                                           "runs": args.runs.split(",") if args.runs else None})
+                                           "runs": _run_names(args.runs)})
     return status
 
 
@@ -205,7 +227,7 @@ def _cmd_identify(args) -> int:
     if args.stream:
         return _identify_stream(args)
     experiment = read_recording(args.recording)
-    runs = args.runs.split(",") if args.runs else None
+    runs = _run_names(args.runs)
     if args.per_run:
         from momentid.estimation.scaled import amplitude_trend, identify_per_run
 
@@ -215,7 +237,7 @@ def _cmd_identify(args) -> int:
             payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
             print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
         else:
-            print("\n\n".join(r.table() for r in results))
+            print("\n\n".join(r.table(warnings=False) for r in results))   # warnings: on stderr, once
             if trend is not None:
                 print("\n" + trend.table())
         for r in results:
@@ -263,7 +285,7 @@ def _warn(warnings, run: str | None = None) -> None:
 def _cmd_import(args) -> int:
     from momentid.io.importer import import_folder, report, summary, write_import
 
-    experiment = import_folder(args.folder)
+    experiment = import_folder(args.folder, relabel=not args.refuse_mislabelled)
     out = write_import(experiment, _output_path(args.output, Path(args.folder).resolve().name))
     for line in report(experiment):
         print(line)
@@ -275,28 +297,30 @@ def _cmd_view(args) -> int:
     from momentid.report.viewer import view
 
     out = view(args.recording, save=args.save, result=args.result, exaggeration=args.exaggeration,
-               run=args.run)
+               run=args.run, twin=args.twin)
     if out is not None:
         print(f"{args.recording} -> {out} (open it with: rerun {out})")
     return 0
 
 
 def _cmd_sweep(args) -> int:
-    from momentid.sweep import load_sweep, run_sweep, write_table
+    from momentid.io.exclusive import reserve
+    from momentid.sweep import load_sweep, run_sweep, table_path, table_text
 
     sweep = load_sweep(args.spec)
-    out = Path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
+    out = table_path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
     where = f"Dask scheduler {args.address}" if args.address else "local cores"
-    print(f"sweep {args.spec}: {len(sweep.cases)} cases of {sweep.base} over "
-          f"{', '.join(sweep.keys)} on {where}", file=sys.stderr)
     show = not args.quiet and sys.stderr.isatty()
 
     def done(row):
         if show:
             print(f"  case {row['case']}: {row['status']}", file=sys.stderr)
 
-    rows = run_sweep(sweep, workers=args.workers, address=args.address, on_case=done)
-    write_table(rows, out)
+    with reserve(out) as slot:   # one writer per table, refused before the sweep starts
+        print(f"sweep {args.spec}: {len(sweep.cases)} cases of {sweep.base} over "
+              f"{', '.join(sweep.keys)} on {where}", file=sys.stderr)
+        rows = run_sweep(sweep, workers=args.workers, address=args.address, on_case=done)
+        slot.commit(table_text(rows, out).encode("utf-8"))
     widths = [max(len(k), 8) for k in sweep.keys]
     print(f"{'case':>5}  " + "  ".join(f"{k:>{w}}" for k, w in zip(sweep.keys, widths))
           + f"  {'max rel err':>11}  status")
@@ -312,12 +336,14 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_diagnose(args) -> int:
     from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
-    diag = diagnose(experiment, hold_out=args.hold_out)
-    written = write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
+    with exclusive(out):   # one writer per report folder, refused before minutes of work
+        diag = diagnose(experiment, hold_out=args.hold_out)
+        written = write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
@@ -326,12 +352,33 @@ def _cmd_diagnose(args) -> int:
     return 0
 
 
+def _cmd_twin(args) -> int:
+    from momentid.io.recording import read_recording
+    from momentid.twin import build_twin, write_twin
+
+    out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
+    experiment = read_recording(args.recording)
+    twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
+    names = write_twin(twin, experiment, out, plots=not args.no_plots)
+    if args.json:
+        print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
+    else:
+        print(twin.summary())
+        print(f"\ntwin written to {out}/ ({', '.join(names)})")
+    _warn(twin.warnings)
+    return 0
+
+
 def _cmd_plan(args) -> int:
-    from momentid.estimation.design import cramer_rao, plan
+    from momentid.estimation.design import cramer_rao, plan, plan_progress_bar
     from momentid.lab.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
-    designs, best = plan(scenario, target=args.target, max_runs=args.max_runs)
+    if args.max_runs < 2:
+        raise MomentidError(f"--max-runs {args.max_runs}: expected at least 2 (a reference run and one with added mass)")
+    with plan_progress_bar(not args.quiet and sys.stderr.isatty()) as progress:
+        designs, best = plan(scenario, target=args.target, max_runs=args.max_runs, time_limit=args.time_limit,
+                             progress=progress)
     as_designed = cramer_rao(scenario)
     if args.json:
         payload = {
@@ -444,6 +491,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "offset found per sensor and reported.  Files may be gzip-compressed.  "
                                    "See docs/recording-format.md and docs/real-data.md.")
     p.add_argument("folder", metavar="DIR", help="folder with experiment.toml and the runs' data files")
+    p.add_argument("--refuse-mislabelled", action="store_true",
+                   help="refuse the import when physics places a sensor on another floor than listed (or "
+                        "finds it mounted reversed), instead of relabelling it with a note (the default)")
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<folder name>.mcap) or a .mcap file "
                         "(default: out/)")
@@ -464,6 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--run", metavar="NAME", help="the run whose tab opens first (default: the first run)")
     p.add_argument("--result", metavar="JSON",
                    help="show this result of `momentid identify --json` instead of identifying again")
+    p.add_argument("--twin", metavar="DIR",
+                   help="a folder of `momentid twin`: beside each run, the twin moving and every floor sensor "
+                        "recorded and as the twin reads it (the recording is not identified again)")
     p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("diagnose", help="locate a model/recording mismatch and name the missing physics",
@@ -483,6 +536,24 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default: the last run)")
     p.set_defaults(func=_cmd_diagnose)
 
+    p = sub.add_parser("twin", help="the calibrated MuJoCo twin of a rig: MJCF, parameters, replay of every trial",
+                       description="Identify the recording (accelerometers only: the modal fit with sensor gains and "
+                                   "clock offsets; K and C from the stated floor masses, mass-normalised without), "
+                                   "build its MJCF twin on momentid's rig (identified K and C as tendons, each "
+                                   "sensor's gain, bias and clock offset as a sensor model), replay every trial "
+                                   "through MuJoCo under its recorded table acceleration and write DIR/twin.xml, "
+                                   "DIR/twin.json (parameters, per-trial NRMSE) and plots.  Refuses (exit 2) one "
+                                   "trial, a trial without table sensor, or an identification the data contradict. "
+                                   "See docs/twin.md.")
+    p.add_argument("recording", help="MCAP recording (momentid import, or momentid run)")
+    p.add_argument("-o", "--output", metavar="DIR", help="the twin's folder (default: out/<recording>_twin); "
+                                                         "written whole or not at all")
+    p.add_argument("--runs", metavar="NAMES", help="comma-separated trials to calibrate on (default: all); every "
+                                                   "trial is replayed, the others with the calibrated runs' mean sensors")
+    p.add_argument("--json", action="store_true", help="print twin.json to stdout")
+    p.add_argument("--no-plots", action="store_true", help="write twin.xml and twin.json only")
+    p.set_defaults(func=_cmd_twin)
+
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",
                        description="Evaluate the Cramér-Rao lower bound of the scenario's experiment and of "
                                    "candidate designs (added-mass patterns, 2..N runs, the scenario's excitation "
@@ -493,6 +564,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--target", type=_positive_float, default=0.01,
                    help="target relative standard deviation of every parameter (default 0.01)")
     p.add_argument("--max-runs", type=_positive_int, default=4, help="largest number of runs to consider")
+    p.add_argument("--time-limit", type=_positive_float, default=PLAN_TIME_LIMIT_S, metavar="SECONDS",
+                   help=f"refuse, before it starts, a plan estimated to take longer on this machine (default "
+                        f"{PLAN_TIME_LIMIT_S:g} s; the estimate times its first candidate run)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(func=_cmd_plan)
 
@@ -517,27 +592,42 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
-        return 2
     try:
-        with only_json_on_stdout(args.json), warnings.catch_warnings():
+        parser = build_parser()
+        args = parser.parse_args(argv)   # --help and usage errors print too
+        if args.command is None:
+            parser.print_help()
+            return 2
+        with sigterm_as_interrupt():
+            return _run_command(args)
+    except BrokenPipeError:
+        return quiet_broken_pipe()
+
+
+def _run_command(args) -> int:
+    """Run the chosen command; every expected failure is one ``error:`` line and an exit code."""
+    try:
+        from momentid.lab.rig import mujoco_warnings_counted_not_printed
+
+        with (only_json_on_stdout(args.json), warnings.catch_warnings(),
+              mujoco_warnings_counted_not_printed()):
             warnings.showwarning = _one_line_warning
             warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
             return args.func(args)
+    except BrokenPipeError:
+        raise   # an OSError, but no error of the command: main() keeps it quiet
     except MomentidError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:  # disk full, an output folder that cannot exist (/proc/x), permissions
         print(f"error: {_os_error(exc)}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("error: terminated (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:
-        return 0
 
 
 if __name__ == "__main__":  # pragma: no cover

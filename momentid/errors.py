@@ -18,6 +18,8 @@ __all__ = [
     "SensorDataError",
     "ViewerError",
     "ResourceError",
+    "TimeLimitError",
+    "OutputBusyError",
     "RecoveryWarning",
 ]
 
@@ -77,12 +79,33 @@ class ResourceError(MomentidError):
                          f"refused before starting; {hint}")
 
 
+class TimeLimitError(ResourceError):
+    """A job would run longer than its time limit; estimated (from a measured part of it) before
+    the rest starts.  ``needed`` and ``available`` are seconds here."""
+
+    def __init__(self, what: str, needed: float, available: float, hint: str):
+        self.what, self.needed, self.available, self.hint = what, needed, available, hint
+        MomentidError.__init__(self, f"{what} would take about {_duration(needed)} on this machine, the limit is "
+                                     f"{_duration(available)}: refused before starting; {hint}")
+
+
+def _duration(seconds: float) -> str:
+    for unit, size in (("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            return f"{seconds / size:.3g} {unit}"
+    return f"{seconds:.3g} s"
+
+
 def _size(nbytes: float) -> str:
     for unit in ("B", "KB", "MB", "GB", "TB", "PB"):
         if abs(nbytes) < 1000 or unit == "PB":
             return f"{nbytes:.3g} {unit}"
         nbytes /= 1000
     return f"{nbytes:.3g} PB"
+
+
+class OutputBusyError(MomentidError):
+    """Another process is writing the same output (file or folder) now: one writer per output."""
 
 
 class RecoveryWarning(UserWarning):

@@ -28,6 +28,7 @@ ones and their relative errors, or the error that stopped it.
 from __future__ import annotations
 
 import csv
+import io
 import itertools
 import json
 import math
@@ -38,12 +39,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
+from momentid.io.exclusive import write_whole
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import MomentidError, ScenarioError
 from momentid.lab.scenario import Scenario, default_scenario_path, parse_scenario, set_key
 
 __all__ = ["Case", "Sweep", "load_sweep", "parse_sweep", "run_case", "run_sweep", "write_table",
-           "table_columns"]
+           "table_columns", "table_path", "table_text"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,10 @@ def _grid_items(node: Any, prefix: str, source: Path) -> list[tuple[str, list]]:
         if not node:
             raise ScenarioError(f"{source}: key 'grid.{prefix}' = []: expected a non-empty array of "
                                 "values to sweep")
+        twice = [v for i, v in enumerate(node) if v in node[:i]]
+        if twice:   # the same case twice would count twice in any statistic over the table
+            raise ScenarioError(f"{source}: key 'grid.{prefix}' = {node!r}: {twice[0]!r} is listed twice; "
+                                "expected each value once")
         return [(prefix, node)]
     if not isinstance(node, dict) or not node:
         raise ScenarioError(f"{source}: key 'grid.{prefix}' = {node!r}: expected an array of values "
@@ -188,9 +194,11 @@ def run_case(index: int, values: dict, scenario: Scenario, estimator: str) -> di
 
 
 def _local(payloads: list[tuple], workers: int, done: Callable[[dict], None]) -> list[dict]:
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    from momentid.core.processes import forked_pool
+
+    with forked_pool(workers) as pool:   # workers that die with the sweep
         futures = [pool.submit(run_case, *p) for p in payloads]
         for future in as_completed(futures):
             done(future.result())
@@ -293,18 +301,27 @@ def _flat(row: dict) -> dict:
     return out
 
 
-def write_table(rows: list[dict], path) -> Path:
-    """Write the rows as CSV (``.csv``, one flat row per case) or JSON (``.json``)."""
+def table_path(path) -> Path:
+    """``path`` as a result table's name (``.csv`` or ``.json``), checked before a sweep starts."""
     path = Path(path)
     if path.suffix not in (".csv", ".json"):
         raise MomentidError(f"output {path}: expected a .csv or .json file name")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".json":
-        path.write_text(json.dumps(rows, indent=2, allow_nan=False) + "\n", encoding="utf-8")
-        return path
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=table_columns(rows))
-        writer.writeheader()
-        for row in rows:
-            writer.writerow(_flat(row))
     return path
+
+
+def table_text(rows: list[dict], path) -> str:
+    """The rows as CSV (``.csv``, one flat row per case) or JSON (``.json``), by ``path``'s suffix."""
+    if table_path(path).suffix == ".json":
+        return json.dumps(rows, indent=2, allow_nan=False) + "\n"
+    out = io.StringIO(newline="")
+    writer = csv.DictWriter(out, fieldnames=table_columns(rows))
+    writer.writeheader()
+    for row in rows:
+        writer.writerow(_flat(row))
+    return out.getvalue()
+
+
+def write_table(rows: list[dict], path) -> Path:
+    """Write the rows as CSV (``.csv``, one flat row per case) or JSON (``.json``), whole or not at
+    all and locked against a second writer (:func:`momentid.io.exclusive.write_whole`)."""
+    return write_whole(table_path(path), table_text(rows, path).encode("utf-8"))

@@ -57,20 +57,20 @@ def test_view_save_on_a_full_disk_is_an_error_and_leaves_no_truncated_file(tmp_p
     (rerun's own file sink drops write errors); now the file is written whole or not at all."""
     import errno
 
-    import momentid.report.viewer as viewer
+    import momentid.io.exclusive as exclusive
     from momentid.io.recording import write_experiment
     from bad_input.recording import tiny_experiment
 
     rec = tmp_path / "rec.mcap"
     write_experiment(rec, tiny_experiment())
+    locked = exclusive.open_locked
 
-    def full(path, mode="r", *args, **kwargs):
-        f = open(path, mode, *args, **kwargs)
-        if "w" in mode:
-            f.write = lambda data: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device"))
+    def full(path):   # the .rrd's temporary file, on a disk that takes no more bytes
+        f = locked(path)
+        f.write = lambda data: (_ for _ in ()).throw(OSError(errno.ENOSPC, "No space left on device"))
         return f
 
-    monkeypatch.setattr(viewer, "open", full, raising=False)
+    monkeypatch.setattr(exclusive, "open_locked", full)
     out = tmp_path / "v.rrd"
     assert cli.main(["view", str(rec), "--save", str(out)]) == 2
     captured = capsys.readouterr()

@@ -141,7 +141,13 @@ def test_jittered_time_stamps_nan_cells_and_scalar_masses(tmp_path, sim):
     run = exp.run("reference")
     # The grid k * (2 s / 2000) is k / 1000 s to a few ulps of 2 s.
     assert np.allclose(run.time, np.arange(2001) / 1000.0, rtol=0, atol=1e-15)
-    assert np.isnan(run["a2"][10]) and np.isfinite(np.delete(run.values, 10, axis=0)).all()
+    # The nan cell is interpolated at import and noted with its row (issue 22: it was refused later as
+    # "units in g?"); the simulated a2 is smooth at 1 kHz, so the straight line between its neighbours
+    # is the sample to 1 % of the signal's RMS.
+    assert np.isfinite(run.values).all() and run.meta["notes"] == [
+        "1 missing sample (row 12) of a2 interpolated linearly between their neighbours on the uniform clock"]
+    truth = sim.run("reference")["a2"][10]
+    assert abs(run["a2"][10] - truth) < 0.01 * np.std(sim.run("reference")["a2"])
     assert exp.structure.storey_stiffness == (2100.0,) * 3 and run.added_mass.tolist() == [0.0] * 3
 
 

@@ -171,24 +171,112 @@ def test_the_cli_reports_every_sensor(tmp_path, capsys):
 
 # ----------------------------------------------------------------------------- doctored copies
 
-def test_a_nan_gap_is_kept_and_noted(tmp_path, original):
+def _empty_cells(first: int, count: int):
+    """Sensor a2's accelerations blank on ``count`` data rows from data row ``first``."""
     def edit(k, lines):
         if k == 2:
-            for row in range(HEADER_LINES + 1000, HEADER_LINES + 1010):
+            for row in range(HEADER_LINES + first, HEADER_LINES + first + count):
                 set_cells(lines, row, (ACC_X, ACC_Y, ACC_Z), ("", "", ""))
-    run = import_folder(write_trial(tmp_path / "lab", edit)).run("trial")
-    assert sensor(run, "a2")["missing"] == 10
-    assert "10 samples missing (nan)" in " ".join(sensor(run, "a2")["notes"])
-    assert np.isnan(run["a2"]).sum() == 10 and np.all(np.isfinite(run.values[:, [0, 1, 3]]))
+    return edit
 
 
-def test_lost_rows_become_nan_samples(tmp_path, original):
+def test_a_short_nan_gap_is_interpolated_and_noted(tmp_path, original):
+    run = import_folder(write_trial(tmp_path / "lab", _empty_cells(1000, 3))).run("trial")
+    notes = " ".join(sensor(run, "a2")["notes"])
+    # Line numbers: data row 1000 is line HEADER_LINES + 1000 + 1 = 1009.
+    assert "rows 1009-1011" in notes and "interpolated linearly" in notes, notes
+    assert sensor(run, "a2")["missing"] == 0 and np.all(np.isfinite(run.values))
+    assert run.n_samples == original.n_samples
+    # Only the three samples change, and with them the mean removed over the record (a constant):
+    # 1e-9 m/s^2 is far above float64 round-off (1e-15) and far below the change of a sample (1e-3).
+    diff = run["a2"] - original["a2"]
+    assert np.flatnonzero(np.abs(diff - np.median(diff)) > 1e-9).tolist() == [999, 1000, 1001]
+
+
+def test_a_long_nan_gap_is_one_line_naming_the_rows(tmp_path):
+    with pytest.raises(SensorDataError, match=r"sensor2\.csv: rows 1009-1018, column 'Acc_X': 10 consecutive "
+                                              r"samples missing; expected at most 5"):
+        import_folder(write_trial(tmp_path / "lab", _empty_cells(1000, 10)))
+
+
+def test_a_few_lost_rows_are_interpolated(tmp_path, original):
     def edit(k, lines):
         if k == 1:
             del lines[HEADER_LINES + 2000:HEADER_LINES + 2005]
     run = import_folder(write_trial(tmp_path / "lab", edit)).run("trial")
-    assert run.n_samples == original.n_samples and sensor(run, "a1")["missing"] == 5
-    assert np.isnan(run["a1"]).sum() == 5
+    assert run.n_samples == original.n_samples and sensor(run, "a1")["missing"] == 0
+    assert "the 5 samples lost between rows 2008 and 2009" in " ".join(sensor(run, "a1")["notes"])
+
+
+def test_more_lost_rows_than_can_be_interpolated_are_refused(tmp_path):
+    def edit(k, lines):
+        if k == 1:
+            del lines[HEADER_LINES + 2000:HEADER_LINES + 2006]
+    with pytest.raises(SensorDataError, match=r"sensor1\.csv: the 6 samples lost between rows 2008 and 2009"):
+        import_folder(write_trial(tmp_path / "lab", edit))
+
+
+def _lost_packet(lines, row):
+    """The Xsens app's mark of a lost packet at data line ``row``: the stamp of the row before jumps two
+    intervals, this row repeats it with nan/inf in every channel, PacketCounter runs on."""
+    before = lines[row - 1].split(",")
+    stamp = str(int(before[CLOCK]) + 8333)
+    set_cells(lines, row - 1, (CLOCK,), (stamp,))
+    cells = lines[row].split(",")
+    lines[row] = ",".join([cells[0], stamp] + ["nan" if i % 2 else "inf" for i in range(len(cells) - 2)])
+
+
+def test_a_lost_packet_row_is_named_and_repaired(tmp_path, original):
+    """Issue 18 point 6: the pattern of a real Xsens DOT export, which was refused as 'the clock went back'."""
+    def edit(k, lines):
+        if k == 3:
+            _lost_packet(lines, HEADER_LINES + 3000)
+    run = import_folder(write_trial(tmp_path / "lab", edit)).run("trial")
+    notes = " ".join(sensor(run, "a3")["notes"])
+    assert "row 3009: no acceleration (every cell empty, nan or inf: 1 lost packet)" in notes, notes
+    assert "row 3009 repeats the stamp of the row before" in notes and "interpolated linearly" in notes
+    assert run.n_samples == original.n_samples
+    # The row before the lost one moved one sample later (by its stamp); the lost sample in between
+    # is interpolated. Every other sample is the original's, up to the change of the removed mean
+    # (a constant; 1e-9 m/s^2 separates float64 round-off from a changed sample).
+    diff = run["a3"] - original["a3"]
+    assert np.count_nonzero(np.abs(diff - np.median(diff)) > 1e-9) <= 2
+
+
+def test_a_repeated_stamp_without_a_lost_packet_is_named_as_such(tmp_path):
+    def edit(k, lines):
+        if k == 2:
+            stamp = lines[HEADER_LINES + 500].split(",")[CLOCK]
+            set_cells(lines, HEADER_LINES + 501, (CLOCK,), (stamp,))
+    with pytest.raises(SensorDataError, match=r"sensor2\.csv: row 510, column 'SampleTimeFine': \d+ us repeats "
+                                              r"the stamp of row 509"):
+        import_folder(write_trial(tmp_path / "lab", edit))
+
+
+def test_an_export_in_g_is_converted_with_a_note(tmp_path, original):
+    """Issue 22 point 2: an export in g (gravity ~1) was taken as m/s^2; it is converted, noted."""
+    def edit(k, lines):
+        if k == 1:
+            for row in rows(lines)[1:]:
+                cells = lines[row].split(",")
+                set_cells(lines, row, (ACC_X, ACC_Y, ACC_Z),
+                          [repr(float(cells[c]) / 9.80665) for c in (ACC_X, ACC_Y, ACC_Z)])
+    run = import_folder(write_trial(tmp_path / "lab", edit)).run("trial")
+    report = sensor(run, "a1")
+    assert "accelerations in g (gravity reads 0.99" in " ".join(report["notes"])
+    assert report["gravity"] == pytest.approx(sensor(original, "a1")["gravity"], rel=1e-12)
+    # Dividing and multiplying by 9.80665 in float64 (17 printed digits) is exact to round-off.
+    assert np.allclose(run["a1"], original["a1"], rtol=0, atol=1e-12)
+
+
+def test_a_packet_counter_places_a_row_without_a_stamp(tmp_path, original):
+    def edit(k, lines):
+        if k == 2:
+            set_cells(lines, HEADER_LINES + 700, (CLOCK,), ("",))
+    run = import_folder(write_trial(tmp_path / "lab", edit)).run("trial")
+    assert "row 709: no SampleTimeFine stamp; placed by PacketCounter (8333 us per packet)" in " ".join(
+        sensor(run, "a2")["notes"])
+    assert np.array_equal(run.values, original.values)
 
 
 def test_a_duplicated_sensor_file_is_refused(tmp_path):

@@ -155,3 +155,19 @@ class Experiment:
         raise SensorDataError(
             f"{self.source}: no run named {name!r}; runs are {', '.join(r.name for r in self.runs)}"
         )
+
+    def select(self, names=None) -> tuple[RunData, ...]:
+        """The runs named ``names``, in that order (every run when None).
+
+        A run named twice is refused: its samples would count twice, and every standard error
+        would shrink by sqrt(2) with no new information.
+        """
+        if names is None:
+            return self.runs
+        names = list(names)
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice or not names:
+            raise SensorDataError(f"{self.source}: runs = {names}: expected each run at most once and at least one "
+                                  + (f"(run {twice[0]!r} is named {names.count(twice[0])} times: the same data would "
+                                     f"count as new evidence)" if twice else "run"))
+        return tuple(self.run(n) for n in names)

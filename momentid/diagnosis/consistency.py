@@ -34,7 +34,7 @@ from momentid.core.series import RunData
 from momentid.estimation.noise import band_level, windowed_dft
 from momentid.diagnosis.thresholds import EXCESS
 
-__all__ = ["SensorFit", "KinematicCheck", "kinematic_check", "noise_sigma"]
+__all__ = ["SensorFit", "KinematicCheck", "kinematic_check", "noise_sigma", "inter_sample", "ROUND_OFF"]
 
 #: Delays searched (s): at most this, and at most 0.45 of the band's top period (no phase wrap).
 MAX_DELAY = 0.05
@@ -82,6 +82,26 @@ def noise_sigma(run: RunData) -> dict[str, float]:
     return dict(zip(run.channels, band_level(windowed_dft(run.values), band)))
 
 
+#: float64 round-off of one stored sample, relative to its channel's RMS: the least noise a record
+#: can carry.  A level measured on noise-free data may lie below it (the top of a smooth spectrum).
+ROUND_OFF = float(np.finfo(float).eps)
+
+
+def inter_sample(omega_h):
+    """Relative size of what a sampled signal leaves open between its samples, at ``omega h``.
+
+    A band-limited signal and one held to a straight line between samples (a first-order hold:
+    a simulator's table drive, a digital servo's command) share every sample, yet their second
+    derivatives differ by ``(omega h)^2 / 12`` of the signal at ``omega`` (the second-order term of
+    the trapezoid rule).  Nothing in the record tells them apart, so no relation between channels
+    that differentiates or integrates them (``a = zdd + q''``, a replay) holds closer than this
+    share of each one's own spectrum: a residual within it is no mismatch, whatever its ratio to
+    a noise level that may be zero.  It is 3e-6 at 1 Hz sampled at 1 kHz and 8e-3 at 5 Hz sampled
+    at 100 Hz, where a fault that small is below any sensor's calibration anyway.
+    """
+    return np.asarray(omega_h) ** 2 / 12
+
+
 def _spectra(run: RunData, d: int, band: tuple[float, float]):
     """Windowed DFT bins of a_j, zdd and corrected q_j'' in ``band``, and their noise variances."""
     fs = run.sample_rate
@@ -103,11 +123,14 @@ def _spectra(run: RunData, d: int, band: tuple[float, float]):
     # the second difference is -(2 - 2 cos wh) / h^2 where q'' is -w^2: undo the ratio exactly
     exact = np.where(omega > 0, (omega * h) ** 2 / np.maximum(2 - 2 * np.cos(omega * h), 1e-300), 1.0)
     A, Z, Y = dft(a), dft(z), dft(qdd) * exact[:, None]
-    sig = noise_sigma(run)
+    # white noise, at least each sample's round-off (q's amplified by the second difference's omega^4) ...
+    sig = {c: max(s, ROUND_OFF * float(np.sqrt(np.mean(run[c] ** 2)))) for c, s in noise_sigma(run).items()}
     power = float(np.sum(w ** 2))
     s_z = sig.get("zdd", 0.0) ** 2
     var = np.column_stack([(sig[f"a{j + 1}"] ** 2 + s_z + omega ** 4 * sig[f"q{j + 1}"] ** 2) * power
                            for j in range(d)])
+    # ... and what the three channels leave open between their samples
+    var += inter_sample(omega * h)[:, None] ** 2 * (np.abs(A) ** 2 + np.abs(Z[:, None]) ** 2 + np.abs(Y) ** 2)
     return omega, A, Z, Y, np.maximum(var, 1e-300)
 
 

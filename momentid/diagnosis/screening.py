@@ -21,6 +21,7 @@ import numpy as np
 import scipy.optimize
 
 from momentid import mechanisms
+from momentid.diagnosis.consistency import ROUND_OFF
 from momentid.diagnosis.residuals import (ResidualRow, blocks, replay_noise, replay_outputs)
 from momentid.estimation.reconstruct import band_filter
 from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
@@ -34,8 +35,6 @@ __all__ = ["Domain", "Candidate", "ReplayResiduals", "DampingPattern", "screen_e
            "screen_attachment", "damping_pattern", "signature_columns", "remaining_excess", "pattern_fit",
            "screening_order"]
 
-#: Replay residual floor for noise-free data: this fraction of the replayed channels' RMS.
-REPLAY_ROUND_OFF = 1e-6
 #: Attachment frequencies tried by replay: from just above the top mode ...
 ATTACHMENT_LOW_OVER_TOP_MODE = 1.1
 #: ... to the lower of 0.4 x the sample rate (the band's ceiling) and 20 x the top mode (an
@@ -276,7 +275,10 @@ def screen_replay(result, runs, d: int, band) -> ReplayResiduals:
     target = np.concatenate(target)
     scale = np.sqrt(np.mean(np.concatenate(sims) ** 2, axis=0))
     rms = np.sqrt(np.mean(target ** 2, axis=0))
-    floor = np.maximum(np.mean(noise, axis=0), REPLAY_ROUND_OFF * scale)
+    # Noise-free data: the floor is what the replay's straight-line table drive between samples leaves
+    # open (consistency.inter_sample: h^2/12 of the replay's second derivative, by Parseval), and round-off.
+    between = np.sqrt(np.mean(np.concatenate([np.diff(s, 2, axis=0) for s in sims]) ** 2, axis=0)) / 12
+    floor = np.maximum.reduce([np.mean(noise, axis=0), between, ROUND_OFF * scale])
     excess = {f"a{j + 1}": float(rms[j] / floor[j]) for j in range(d)}
     train = np.concatenate([blocks(r.n_samples, fs)[0] for r in runs])
     test = ~train

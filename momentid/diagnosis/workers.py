@@ -12,11 +12,11 @@ other (each job is deterministic and single-threaded).
 
 from __future__ import annotations
 
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Sequence
 
 from threadpoolctl import threadpool_limits
+
+from momentid.core.processes import forked_pool
 
 __all__ = ["WORKERS", "run_forked"]
 
@@ -53,8 +53,7 @@ def run_forked(job: Callable, tasks: Sequence) -> list:
     global _JOB
     _JOB = (job, tasks)
     try:
-        with ProcessPoolExecutor(max_workers=min(WORKERS, len(tasks)),
-                                 mp_context=multiprocessing.get_context("fork")) as pool:
+        with forked_pool(min(WORKERS, len(tasks))) as pool:   # workers that die with the diagnosis
             return list(pool.map(_call, range(len(tasks))))
     finally:
         _JOB = None

@@ -5,6 +5,11 @@
 - :mod:`~momentid.estimation.reconstruct`: velocities and displacements from what was measured.
 - :mod:`~momentid.estimation.linear`: exact discretisation and simulation of the linear model.
 - :mod:`~momentid.estimation.eiv`: frequency-domain errors-in-variables maximum likelihood.
+- Runs without added mass (accelerometers only): :mod:`~momentid.estimation.scaled` (``identify``'s
+  result), :mod:`~momentid.estimation.modal_select` (how many modes, which are the storeys'),
+  :mod:`~momentid.estimation.modal` and :mod:`~momentid.estimation.modal_model` (the fit),
+  :mod:`~momentid.estimation.subspace` (starts and the damping's second opinion),
+  :mod:`~momentid.estimation.modal_checks` (what is refused or flagged).
 - :mod:`~momentid.estimation.design`: Cramér-Rao bounds and experiment planning.
 - :mod:`~momentid.estimation.comparison`: identified against analytic parameters.
 """

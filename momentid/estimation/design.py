@@ -15,20 +15,23 @@ deviation.
 
 from __future__ import annotations
 
+import contextlib
+import time
 from dataclasses import dataclass, replace
+from typing import Callable, Iterator
 
 import numpy as np
 
 from momentid.core.series import RunData
 from momentid.estimation.eiv import fisher_information
-from momentid.errors import IdentificationError, ScenarioError
+from momentid.errors import IdentificationError, ScenarioError, TimeLimitError
 from momentid.estimation.identification import Layout
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.lab.scenario import BandLimitedNoise, Run, Scenario
 from momentid.lab.sensors import noise_std
 from momentid.lab.simulation import ground_motion_of
 
-__all__ = ["Bound", "cramer_rao", "plan", "Design"]
+__all__ = ["Bound", "cramer_rao", "plan", "plan_progress_bar", "Design", "PLAN_TIME_LIMIT_S"]
 
 #: The Fisher information sums frequency bins up to this multiple of the top
 #: natural frequency: above it the structure's response is below the noise.
@@ -49,6 +52,13 @@ NOISE_BAND_HIGH_MAX_FRACTION = 0.4
 #: overloading the rig), and the single fraction of the other two patterns.
 EVERY_FLOOR_FRACTIONS = (0.05, 0.1, 0.2)
 PATTERN_FRACTION = 0.1
+
+#: The planner's default time limit (s): its work is one noise-free simulation and Fisher information
+#: per candidate run (timed on the first before the others start), and a plan that would take
+#: longer than a coffee break is refused with the ``max_runs`` that fits.
+PLAN_TIME_LIMIT_S = 600.0
+#: The planner's band-limited noise ramps in and out over this long (s), at most a quarter of the record.
+NOISE_TAPER_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -133,6 +143,19 @@ def _run_information(scenario: Scenario, run: Run, layout: Layout, theta: np.nda
     return info
 
 
+def _information_setup(scenario: Scenario, mass: str = "diagonal") -> tuple[Layout, np.ndarray, float]:
+    """The unknowns' layout, their true values and the top of the information band (Hz)."""
+    if scenario.sensors.ideal:
+        raise ScenarioError(f"{scenario.source}: [sensors] are ideal (noise-free): the Cramér-Rao bound is 0; "
+                            f"give the instruments' noise to plan an experiment")
+    from momentid.core.analytic import modal_properties
+    s = scenario.structure
+    layout = Layout(s.storeys, mass)
+    theta = layout.pack(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix(), s.rayleigh_mu)
+    f_top = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
+    return layout, theta, INFORMATION_BAND_FACTOR * f_top
+
+
 def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache: dict | None = None) -> Bound:
     """The CRLB of ``scenario``'s experiment (or of ``runs`` under its excitation).
 
@@ -164,15 +187,8 @@ def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache:
         The runs do not identify every unknown (singular information).
     """
     runs = tuple(runs) if runs is not None else scenario.runs
-    if scenario.sensors.ideal:
-        raise ScenarioError(f"{scenario.source}: [sensors] are ideal (noise-free): the Cramér-Rao bound is 0; "
-                            f"give the instruments' noise to plan an experiment")
     s = scenario.structure
-    layout = Layout(s.storeys, mass)
-    theta = layout.pack(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix(), s.rayleigh_mu)
-    from momentid.core.analytic import modal_properties
-    f_top = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
-    f_max = INFORMATION_BAND_FACTOR * f_top
+    layout, theta, f_max = _information_setup(scenario, mass)
     info = sum(_run_information(scenario, run, layout, theta, f_max, _cache) for run in runs)
     try:
         cov = np.linalg.inv(info)
@@ -222,7 +238,8 @@ def _patterns(masses: np.ndarray) -> dict[str, np.ndarray]:
     return out
 
 
-def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tuple[list[Design], Design | None]:
+def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4, time_limit: float | None = PLAN_TIME_LIMIT_S,
+         progress: Callable[[int, int], None] | None = None) -> tuple[list[Design], Design | None]:
     """Evaluate candidate designs; return all and the recommended one.
 
     Candidates: the scenario's excitation and a band-limited noise of the
@@ -240,6 +257,11 @@ def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tupl
         Largest acceptable relative standard deviation of every parameter.
     max_runs : int
         Most runs a candidate design may have, the reference run included.
+    time_limit : float or None
+        Seconds the plan may take on this machine, estimated from its first candidate run before
+        the others start (None: no limit).
+    progress : callable, optional
+        ``progress(done, total)`` after each design: designs evaluated so far, and in all.
 
     Returns
     -------
@@ -247,8 +269,17 @@ def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tupl
         Every candidate with its :class:`Bound`.
     recommended : Design or None
         The cheapest design meeting ``target``; None when none does.
+
+    Raises
+    ------
+    TimeLimitError
+        The plan would take longer than ``time_limit`` (the message says which ``max_runs`` fits).
+    ResourceError
+        Its designs would not fit in memory.
     """
     from momentid.core.analytic import modal_properties
+    if not (isinstance(max_runs, int) and max_runs >= 2):
+        raise ScenarioError(f"max_runs = {max_runs!r}: expected an integer >= 2 (a reference run and one more)")
     s = scenario.structure
     masses = np.asarray(s.masses)
     f = modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency
@@ -257,18 +288,66 @@ def plan(scenario: Scenario, *, target: float = 0.01, max_runs: int = 4) -> tupl
     rms = float(np.sqrt(np.mean(ground_motion_of(scenario).acceleration(t) ** 2)))
     band = (max(NOISE_BAND_LOW_FACTOR * f.min(), NOISE_BAND_LOW_MIN),
             min(NOISE_BAND_HIGH_FACTOR * f.max(), NOISE_BAND_HIGH_MAX_FRACTION * fs))
-    noise = BandLimitedNoise(rms=rms, band=band, seed=scenario.seed)
+    noise = BandLimitedNoise(rms=rms, band=band, seed=scenario.seed, taper=min(NOISE_TAPER_S, scenario.duration / 4))
     excitations = {"scenario": scenario,
                    f"noise {noise.band[0]:.2g}-{noise.band[1]:.2g} Hz": replace(scenario, excitation=noise)}
-    designs = []
-    cache: dict = {}
+    patterns = _patterns(masses)
     reference = Run("reference", tuple(np.zeros(s.storeys)))
+    cache: dict = {}
+    total = len(excitations) * (1 + len(patterns) * (max_runs - 1))   # candidate runs (at most: some repeat)
+    _affordable(scenario, reference, cache, total, len(excitations), len(patterns), max_runs, time_limit)
+    designs = []
     for ex_label, sc in excitations.items():
-        for label, pattern in _patterns(masses).items():
+        for label, pattern in patterns.items():
             for extra in range(1, max_runs):
                 runs = (reference,) + tuple(Run(f"added{k + 1}", tuple((k + 1) * pattern)) for k in range(extra))
                 bound = cramer_rao(sc, runs, _cache=cache)
                 designs.append(Design(f"{extra + 1} runs, {label}", ex_label, runs, bound))
+                if progress is not None:
+                    progress(len(designs), len(excitations) * len(patterns) * (max_runs - 1))
     meeting = [d for d in designs if d.bound.worst[1] <= target]
     best = min(meeting, key=lambda d: (len(d.runs), d.added_mass_total)) if meeting else None
     return designs, best
+
+
+def _affordable(scenario: Scenario, reference: Run, cache: dict, total: int, n_excitations: int, n_patterns: int,
+                max_runs: int, time_limit: float | None) -> None:
+    """Refuse a plan that would not fit in memory or in ``time_limit``, before its work starts.
+
+    The time of one candidate run is measured on the first one the plan needs (the reference run
+    under the scenario's excitation, kept in ``cache``), so the estimate is this machine's today.
+    """
+    from momentid.core.resources import require_memory
+
+    layout, theta, f_max = _information_setup(scenario)
+    p = layout.p
+    designs = n_excitations * n_patterns * (max_runs - 1)
+    require_memory(8.0 * (designs * (p * p + 3 * p) + total * p * p),
+                   f"{scenario.source}: plan of {designs} designs ({p} parameters each)",
+                   "lower max_runs (momentid plan --max-runs)")
+    start = time.perf_counter()
+    _run_information(scenario, reference, layout, theta, f_max, cache)   # the reference run's, kept
+    each = time.perf_counter() - start
+    estimate = each * total
+    if time_limit is not None and estimate > time_limit:
+        fit = int((time_limit / each / n_excitations - 1) // n_patterns) + 1
+        fits = (f"at most {fit} runs (--max-runs {fit}) fit in that time" if fit >= 2 else
+                "not even two runs fit in that time")
+        raise TimeLimitError(f"{scenario.source}: plan of up to {max_runs} runs ({total} candidate runs, "
+                             f"{each:.2g} s each)", estimate, time_limit,
+                             f"{fits}; raise the limit to go past it (momentid plan --time-limit SECONDS)")
+
+
+@contextlib.contextmanager
+def plan_progress_bar(enabled: bool) -> Iterator[Callable[[int, int], None] | None]:
+    """A ``progress(done, total)`` for :func:`plan` that draws a bar on stderr (None when not ``enabled``)."""
+    if not enabled:
+        yield None
+        return
+    from tqdm import tqdm
+
+    with tqdm(unit="design", desc="plan", leave=False, dynamic_ncols=True) as bar:
+        def progress(done: int, total: int) -> None:
+            bar.total = total
+            bar.update(done - bar.n)
+        yield progress

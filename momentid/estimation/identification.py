@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import json
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -514,7 +514,9 @@ def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "di
         ``damping_ratio`` lists, mode 1 first), ``notes`` and ``warnings``.
         ``warnings`` lists what the data contradict or cannot support
         (unstable modes, non-positive masses, a fit stopped at its iteration
-        cap, poorly excited modes); the CLI prints each as ``WARNING:``.
+        cap, poorly excited modes, sensors that physics places on other floors
+        than listed: :func:`momentid.io.placement.placement_warnings`); the CLI
+        prints each as ``WARNING:``.
 
     Raises
     ------
@@ -533,13 +535,16 @@ def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "di
     # synchronisation (300x slower for 8x8 expm on a busy 2-core machine).
     with threadpool_limits(limits=1, user_api="blas"):
         if estimator == "modal" or (estimator == "auto" and not _adds_mass(experiment, None)):
-            return _identify_modal(experiment, runs, times)
-        return _identify(experiment, estimator=estimator, mass=mass, runs=runs, times=times,
-                         prefilter=prefilter)
+            result = _identify_modal(experiment, runs, times)
+        else:
+            result = _identify(experiment, estimator=estimator, mass=mass, runs=runs, times=times,
+                               prefilter=prefilter)
+    from momentid.io.placement import placement_warnings  # sensors on other floors than listed (issue 18)
+    return replace(result, warnings=(*placement_warnings(experiment), *result.warnings))
 
 
 def _adds_mass(experiment: Experiment, runs) -> bool:
-    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    selected = experiment.select(runs)
     return any(np.any(r.added_mass) for r in selected)
 
 
@@ -562,7 +567,7 @@ def _identify(experiment: Experiment, *, estimator: str, mass: str, runs, times,
     if estimator not in ESTIMATORS:
         raise IdentificationError(f"estimator = {estimator!r}: expected one of {', '.join(ESTIMATORS)}")
     ideal = _ideal(experiment)
-    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    selected = experiment.select(runs)
     names = tuple(r.name for r in selected)
     if len(selected) < 2:
         raise IdentificationError(

@@ -21,7 +21,7 @@ import scipy.signal
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 
-__all__ = ["pick_resonances", "response_amplitude"]
+__all__ = ["pick_resonances", "peak_candidates", "require_resonances", "response_amplitude"]
 
 #: Welch segment length (s): 0.1 Hz resolution, enough to separate the modes of
 #: a shear building (their spacing is a large fraction of the first frequency).
@@ -36,6 +36,9 @@ HIGHEST_FRACTION = 0.42
 #: Half-width (Hz multiples of the Welch resolution) searched on the full-record
 #: spectrum to refine a picked peak.
 REFINE_BINS = 1.5
+#: Peaks returned by :func:`peak_candidates`: this many per storey plus :data:`MAX_EXTRA_CANDIDATES`.
+MAX_CANDIDATES_PER_STOREY = 2
+MAX_EXTRA_CANDIDATES = 4
 
 
 def _score(run: RunData, d: int, sigma_u: float):
@@ -47,6 +50,40 @@ def _score(run: RunData, d: int, sigma_u: float):
     _, Prel = scipy.signal.welch(rel, fs, nperseg=nper, axis=0)
     floor = NOISE_FLOOR_FACTOR * 2.0 * sigma_u ** 2 / fs     # one-sided PSD of white noise
     return f, np.sum(Prel, axis=1) / (Puu + floor)
+
+
+def peak_candidates(runs, d: int, sigma_u: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every peak of the score, most prominent first: frequencies (Hz, refined on the full record) and
+    prominences (of the score's logarithm averaged over runs).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        With ``zdd`` and ``a1..ad``.
+    d : int
+        Storeys (floor accelerometers).
+    sigma_u : float
+        Noise standard deviation of the table accelerometer (m/s^2).
+    """
+    total, f = None, None
+    for run in runs:
+        f_run, s = _score(run, d, sigma_u)
+        if total is None:
+            f, total = f_run, np.log(s)
+        else:
+            total = total + np.interp(f, f_run, np.log(s))
+    total = total / len(runs)
+    df = f[1] - f[0]
+    fs = runs[0].sample_rate
+    keep = (f > LOWEST_CYCLES * df) & (f < HIGHEST_FRACTION * fs)
+    peaks, props = scipy.signal.find_peaks(np.where(keep, total, -np.inf), prominence=0.0)
+    order = np.argsort(props["prominences"])[::-1][:MAX_CANDIDATES_PER_STOREY * d + MAX_EXTRA_CANDIDATES]
+    run = max(runs, key=lambda r: r.n_samples)
+    rel = run.group("a", d) - run["zdd"][:, None]
+    power = np.sum(np.abs(np.fft.rfft(rel * np.hanning(run.n_samples)[:, None], axis=0)) ** 2, axis=1)
+    freq = np.fft.rfftfreq(run.n_samples, 1.0 / run.sample_rate)
+    freqs = np.array([_refine(freq, power, f[k], REFINE_BINS * df) for k in peaks[order]])
+    return freqs, props["prominences"][order]
 
 
 def pick_resonances(runs, d: int, sigma_u: float) -> np.ndarray:
@@ -66,38 +103,26 @@ def pick_resonances(runs, d: int, sigma_u: float) -> np.ndarray:
     IdentificationError
         Fewer than ``d`` resonances stand out of the spectrum.
     """
-    total, f = None, None
-    for run in runs:
-        f_run, s = _score(run, d, sigma_u)
-        if total is None:
-            f, total = f_run, np.log(s)
-        else:
-            total = total + np.interp(f, f_run, np.log(s))
-    total = total / len(runs)
-    df = f[1] - f[0]
-    fs = runs[0].sample_rate
-    keep = (f > LOWEST_CYCLES * df) & (f < HIGHEST_FRACTION * fs)
-    peaks, props = scipy.signal.find_peaks(np.where(keep, total, -np.inf), prominence=0.0)
-    if peaks.size < d:
+    freqs, _ = peak_candidates(runs, d, sigma_u)
+    require_resonances(runs, d, freqs.size)
+    return np.sort(freqs[:d])
+
+
+def require_resonances(runs, d: int, found: int) -> None:
+    """:class:`IdentificationError` unless ``found`` resonances are at least the ``d`` storeys'."""
+    if found < d:
         raise IdentificationError(
-            f"runs {[r.name for r in runs]}: {peaks.size} resonances stand out of the floors' response "
+            f"runs {[r.name for r in runs]}: {found} resonances stand out of the floors' response "
             f"relative to the table, expected {d} (one per storey): the table motion does not excite "
             f"the structure's modes")
-    best = peaks[np.argsort(props["prominences"])[::-1][:d]]
-    return np.sort([_refine(runs, d, f[k], REFINE_BINS * df) for k in best])
 
 
-def _refine(runs, d: int, f0: float, half_width: float) -> float:
-    """Peak frequency on the full-record spectrum (finer than Welch's) near ``f0``."""
-    run = max(runs, key=lambda r: r.n_samples)
-    rel = run.group("a", d) - run["zdd"][:, None]
-    X = np.fft.rfft(rel * np.hanning(run.n_samples)[:, None], axis=0)
-    freq = np.fft.rfftfreq(run.n_samples, 1.0 / run.sample_rate)
+def _refine(freq: np.ndarray, power: np.ndarray, f0: float, half_width: float) -> float:
+    """Peak frequency on the full-record spectrum ``power`` at ``freq`` (finer than Welch's) near ``f0``."""
     near = np.flatnonzero(np.abs(freq - f0) <= half_width)
     if near.size == 0:
         return f0
-    power = np.sum(np.abs(X[near]) ** 2, axis=1)
-    return float(freq[near[np.argmax(power)]])
+    return float(freq[near[np.argmax(power[near])]])
 
 
 def response_amplitude(run: RunData, d: int, start: int = 0) -> float:

@@ -25,29 +25,22 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from momentid.core.analytic import Modes
 from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
-from momentid.estimation.modal import ModalModel, fit_modal
-from momentid.estimation.noise import estimate_noise, quiet_lead_in
-from momentid.estimation.peaks import pick_resonances, response_amplitude
+from momentid.estimation.modal import ModalModel
+from momentid.estimation.modal_checks import ExtraMode, check, extra_modes
+from momentid.estimation.modal_select import select_modes
+from momentid.estimation.noise import quiet_lead_in
+from momentid.estimation.peaks import response_amplitude
 
-__all__ = ["ModalIdentification", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend", "weighted_line"]
+__all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend", "weighted_line"]
 
-#: A mode whose frequency is uncertain by more than this fraction, or whose
-#: damping ratio by more than half of itself, is reported as poorly determined.
-POOR_FREQUENCY = 0.01
-POOR_DAMPING = 0.5
-#: A floor sensor whose fitted gain differs from the table sensor's by more than
-#: this fraction is suspect (a real accelerometer is calibrated to ~1-2 %).
-SUSPECT_GAIN = 0.05
 #: A residual variance factor above this says the linear model does not explain
 #: the data to the noise level (standard errors are inflated by its square root).
 MISFIT_NOTE = 2.0
-#: Shapes further than this from M-orthogonal (largest off-diagonal of the
-#: normalised modal mass matrix) contradict the stated masses.
-ORTHOGONALITY_WARNING = 0.2
 #: Relative step of the delta method's central differences.
 DELTA_STEP = 1e-6
 
@@ -93,6 +86,16 @@ class ModalIdentification:
         always shown by the CLI.
     estimator : str
         ``"modal-eiv"``.
+    extra_modes : tuple of ExtraMode
+        Resonances in the fitted band beyond the storey modes (see
+        :mod:`momentid.estimation.modal_select`): frequency, damping ratio, per-sensor residues and the
+        sensors that see them.  Fitted with the storey modes so that they do not distort them.
+    damping_ratio_subspace : ndarray, shape (d,)
+        The storey modes' damping ratios by the subspace estimate of the same data (NaN: no pole
+        stable over model orders there); the fit's are checked against them.
+    damping_is_answer : ndarray of bool, shape (d,)
+        False where a damping ratio is not an answer (unstable, or more than 2x off the subspace
+        estimate); the cause is in ``warnings``.
     """
 
     frequency: np.ndarray
@@ -124,6 +127,9 @@ class ModalIdentification:
     notes: tuple = ()
     warnings: tuple = ()
     estimator: str = "modal-eiv"
+    extra_modes: tuple = ()
+    damping_ratio_subspace: np.ndarray | None = None
+    damping_is_answer: np.ndarray | None = None
 
     @property
     def storeys(self) -> int:
@@ -154,16 +160,35 @@ class ModalIdentification:
             "amplitude_m_s2": lst(self.amplitude), "residual_rms": self.residual_rms,
             "noise": list(self.noise), "f_max_hz": self.f_max, "nfev": self.nfev,
             "notes": list(self.notes), "warnings": list(self.warnings),
+            "extra_modes": [m.to_dict() for m in self.extra_modes],
+            "damping_ratio_subspace": None if self.damping_ratio_subspace is None else
+            [None if np.isnan(z) else float(z) for z in self.damping_ratio_subspace],
+            "damping_is_answer": None if self.damping_is_answer is None else [bool(a) for a in self.damping_is_answer],
         }
 
-    def table(self) -> str:
-        """Plain-text report: modes with standard errors, matrices, sensors, warnings."""
+    def table(self, warnings: bool = True) -> str:
+        """Plain-text report: modes with standard errors and the subspace estimate's damping, extra
+        modes, matrices, sensors, notes and (``warnings=True``) warnings.  The CLI prints the warnings
+        on stderr instead, once."""
         lines = [f"runs: {', '.join(self.runs)} (no added mass: modal fit, {self.estimator})",
-                 "mode  frequency (Hz)        damping ratio (%)     shape (floor 1..top)"]
+                 "mode  frequency (Hz)        damping ratio (%)     subspace (%)  shape (floor 1..top)"]
+        independent = (np.full(self.storeys, np.nan) if self.damping_ratio_subspace is None
+                       else self.damping_ratio_subspace)
+        answer = np.ones(self.storeys, bool) if self.damping_is_answer is None else self.damping_is_answer
         for i in range(self.storeys):
             shape = " ".join(f"{x:+.3f}" for x in self.shapes[:, i])
+            check = "      -     " if np.isnan(independent[i]) else f"{100 * independent[i]:9.3f}   "
+            flag = "" if answer[i] else "  (damping NOT AN ANSWER: see warnings)"
             lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  "
-                         f"{100 * self.damping_ratio[i]:7.3f} +- {100 * self.damping_ratio_std[i]:.3f}    {shape}")
+                         f"{100 * self.damping_ratio[i]:7.3f} +- {100 * self.damping_ratio_std[i]:.3f}  {check} "
+                         f"{shape}{flag}")
+        if self.extra_modes:
+            lines.append(f"extra modes (beyond the {self.storeys} storey modes; fitted so that they do not distort them):")
+            for m in self.extra_modes:
+                seen = ", ".join(m.seen_by) or "no sensor beyond 3 standard errors"
+                lines.append(f"   +  {m.frequency:8.4f} +- {m.frequency_std:.4f}  {100 * m.damping_ratio:7.3f} +- "
+                             f"{100 * m.damping_ratio_std:.3f}  residues {' '.join(f'{x:+.3g}' for x in m.residues)}; "
+                             f"seen by {seen}")
         if self.K is not None:
             lines.append(f"masses (stated, kg): {list(self.masses)}")
             lines.append("K (N/m):\n" + _matrix(self.K, self.K_std))
@@ -179,7 +204,8 @@ class ModalIdentification:
                          f"table: gain {gains}, clock offset (ms) {offsets}")
         lines.append(f"residual RMS {self.residual_rms:.3g} x noise; fitted 0-{self.f_max:.3g} Hz")
         lines += [f"note: {n}" for n in self.notes]
-        lines += [f"WARNING: {w}" for w in self.warnings]
+        if warnings:
+            lines += [f"WARNING: {w}" for w in self.warnings]
         return "\n".join(lines)
 
 
@@ -258,11 +284,12 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     Raises
     ------
     IdentificationError
-        No noise source, fewer resonances than storeys, or a singular fit.
+        No noise source, fewer resonances than storeys, a singular fit, or a floor sensor whose gain
+        the data put outside 0.5-2 of the table's.
     """
     from momentid.estimation.checks import check_run
 
-    selected = experiment.runs if runs is None else tuple(experiment.run(n) for n in runs)
+    selected = experiment.select(runs)
     if not selected:
         raise IdentificationError(f"{experiment.source}: no runs to identify from")
     d = experiment.storeys
@@ -283,22 +310,28 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         masses = tuple(float(m) for m in np.asarray(masses) + added)
         notes.append(f"masses include the run's added mass: {list(masses)} kg")
     stated = dict(experiment.statement.noise) if experiment.statement is not None else None
-    noise0 = estimate_noise(selected[0], stated=stated)       # the table's level, for the peak score
-    picked = pick_resonances(selected, d, noise0.sigma["zdd"])
-    model = ModalModel(d, len(selected))
-    fit = fit_modal(model, selected, picked, masses=masses, stated=stated)
-    values = _derived(model, fit.theta, None if masses is None else np.asarray(masses, float))
-    std = _delta(model, fit.theta, fit.covariance, None if masses is None else np.asarray(masses, float))
-    sd_all = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
-    gain = np.array([model.sensors(fit.theta, r)[0] for r in range(len(selected))])
-    offset = np.array([model.sensors(fit.theta, r)[1] for r in range(len(selected))])
-    gain_std = np.array([gain[r] * sd_all[model.n_modal + 2 * d * r:model.n_modal + 2 * d * r + d]
-                         for r in range(len(selected))])
-    offset_std = np.array([sd_all[model.n_modal + 2 * d * r + d:model.n_modal + 2 * d * (r + 1)]
-                           for r in range(len(selected))])
+    with threadpool_limits(limits=1, user_api="blas"):     # small dense products: threads only add waiting
+        selection = select_modes(selected, d, masses=masses, stated=stated)
+    model, fit = selection.model, selection.fit
+    keep = model.select_indices(selection.storey)
+    storey_model = ModalModel(d, len(selected))
+    theta, cov = fit.theta[keep], fit.covariance[np.ix_(keep, keep)]
+    m_arr = None if masses is None else np.asarray(masses, float)
+    values = _derived(storey_model, theta, m_arr)
+    std = _delta(storey_model, theta, cov, m_arr)
+    sd_all = np.sqrt(np.clip(np.diag(cov), 0, None))
+    gain = np.array([storey_model.sensors(theta, r)[0] for r in range(len(selected))])
+    offset = np.array([storey_model.sensors(theta, r)[1] for r in range(len(selected))])
+    slices = [storey_model.sensor_slice(r) for r in range(len(selected))]
+    gain_std = np.array([gain[r] * sd_all[s.start:s.start + d] for r, s in enumerate(slices)])
+    offset_std = np.array([sd_all[s.start + d:s.stop] for s in slices])
     amplitude = np.array([response_amplitude(r, d, quiet_lead_in(r)) for r in selected])
-    warnings = _warnings(values, std, fit, selected, gain, masses)
-    notes += _notes(fit, selected, offset, values, len(selected))
+    warnings, check_notes, answer = check(selection, values, std, selected, gain, offset, masses)
+    notes += _notes(fit, selected, offset, values, len(selected)) + list(selection.notes) + list(fit.notes)
+    notes += check_notes
+    if selection.extra:
+        notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more than the "
+                     f"{d} storeys: the extra ones are fitted with the storey modes and reported apart")
     has_k = masses is not None
     return ModalIdentification(
         frequency=values["frequency"], frequency_std=std["frequency"],
@@ -311,35 +344,9 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         sensor_gain=gain, sensor_gain_std=gain_std, sensor_offset=offset, sensor_offset_std=offset_std,
         amplitude=amplitude, residual_rms=float(np.sqrt(fit.scale)), runs=tuple(r.name for r in selected),
         noise=fit.noise_sources, f_max=fit.f_max, nfev=fit.nfev, notes=tuple(notes), warnings=tuple(warnings),
+        extra_modes=extra_modes(selection),
+        damping_ratio_subspace=selection.independent[list(selection.storey)], damping_is_answer=answer,
     )
-
-
-def _warnings(values, std, fit, runs, gain, masses) -> list[str]:
-    out = []
-    f, z = values["frequency"], values["damping_ratio"]
-    for i in range(f.size):
-        if z[i] <= 0:
-            out.append(f"mode {i + 1} at {f[i]:.4g} Hz is UNSTABLE (damping ratio {z[i]:.3g} <= 0): the data "
-                       f"contradict a passive linear structure there (sensor fault, or the table barely "
-                       f"excites this mode); do not use its damping")
-        elif std["frequency"][i] > POOR_FREQUENCY * f[i] or std["damping_ratio"][i] > POOR_DAMPING * z[i]:
-            out.append(f"mode {i + 1} at {f[i]:.4g} Hz is poorly determined (frequency +- "
-                       f"{std['frequency'][i]:.2g} Hz, damping ratio {z[i]:.3g} +- {std['damping_ratio'][i]:.2g}): "
-                       f"the runs excite it too little")
-    if fit.capped:
-        out.append(f"the fit stopped at its evaluation cap ({fit.nfev}) before converging: the results are "
-                   f"not a minimum of the likelihood")
-    for r, run in enumerate(runs):
-        bad = np.flatnonzero(np.abs(gain[r] - 1) > SUSPECT_GAIN)
-        if bad.size:
-            out.append(f"run {run.name!r}: floor sensor(s) {', '.join(f'a{j + 1}' for j in bad)} read "
-                       f"{', '.join(f'{gain[r][j]:.3f}' for j in bad)} x the table sensor at low frequency: "
-                       f"expected within {SUSPECT_GAIN:.0%} (gain, mounting angle or a loose sensor?)")
-    if masses is not None and values["orthogonality"] > ORTHOGONALITY_WARNING:
-        out.append(f"the mode shapes are far from orthogonal with the stated masses {list(masses)} (largest "
-                   f"off-diagonal modal mass {values['orthogonality']:.2f}, expected below "
-                   f"{ORTHOGONALITY_WARNING}): K and C are the nearest consistent matrices, check the masses")
-    return out
 
 
 def _notes(fit, runs, offset, values, n_runs) -> list[str]:
@@ -347,7 +354,7 @@ def _notes(fit, runs, offset, values, n_runs) -> list[str]:
            "damping model: classical modal damping (one ratio per mode); C from the modes"]
     if fit.scale > MISFIT_NOTE:
         out.append(f"the linear model explains the data to {np.sqrt(fit.scale):.3g} x the noise level only "
-                   f"(a rig that is not quite linear, or more than {values['frequency'].size} modes): standard "
+                   f"(a rig that is not quite linear, or more modes than it fits): standard "
                    f"errors are inflated by that factor" + ("; try --per-run" if n_runs > 1 else ""))
     for r, run in enumerate(runs):
         h = 1.0 / run.sample_rate
@@ -405,9 +412,12 @@ class AmplitudeTrend:
 
 
 def identify_per_run(experiment: Experiment, runs=None) -> tuple:
-    """:func:`identify_modal` on every run on its own; tuple of results in run order."""
-    names = [r.name for r in experiment.runs] if runs is None else list(runs)
-    return tuple(identify_modal(experiment, runs=[n]) for n in names)
+    """:func:`identify_modal` on every run on its own, on the machine's cores (forked workers, see
+    :func:`momentid.diagnosis.workers.run_forked`); tuple of results in run order."""
+    from momentid.diagnosis.workers import run_forked
+
+    names = [r.name for r in experiment.select(runs)]
+    return tuple(run_forked(lambda name: identify_modal(experiment, runs=[name]), names))
 
 
 def weighted_line(x, y, s):

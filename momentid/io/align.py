@@ -37,7 +37,7 @@ from momentid.errors import SensorDataError
 from momentid.io.formats import SensorRecord
 
 __all__ = ["Alignment", "SensorReport", "AlignedRun", "align_sensors", "ALIGN_BAND", "CLOCK_AGREEMENT",
-           "MIN_ALIGN_CORRELATION", "STILL_RMS", "STILL_FRACTION"]
+           "MIN_ALIGN_CORRELATION", "STILL_RMS", "STILL_FRACTION", "MIN_ALIGN_PERIODS", "min_align_samples"]
 
 #: Band (Hz) used to pick the shaking axis, estimate clock offsets and signs:
 #: above the slow drift of an IMU's offset, below the first mode of a
@@ -65,6 +65,11 @@ STILL_RMS = 0.01
 STILL_FRACTION = 0.2
 #: Largest relative difference between two sensors' sample intervals.
 STEP_TOLERANCE = 1e-3
+#: Fewest periods of the lowest frequency of :data:`ALIGN_BAND` a sensor's record must span: the
+#: shaking axis, sign and clock offset are read from the motion in that band, and fewer than two of
+#: its slowest cycles (6.7 s) cannot tell motion from drift; the zero-phase band-pass also needs its
+#: edge transients (a few periods of the band edges) to die out inside the record.
+MIN_ALIGN_PERIODS = 2.0
 
 
 class Alignment(enum.Enum):
@@ -206,6 +211,23 @@ def _lag(table: np.ndarray, floor: np.ndarray) -> tuple[float, float]:
     return lags[i] + frac, float(xc[i] / norm) if norm > 0 else 0.0
 
 
+def min_align_samples(step: float) -> int:
+    """Fewest samples (at interval ``step``, s) a sensor record needs to be aligned: :data:`MIN_ALIGN_PERIODS`
+    periods of the lowest frequency of :data:`ALIGN_BAND`."""
+    return int(np.ceil(MIN_ALIGN_PERIODS / ALIGN_BAND[0] / step))
+
+
+def _check_length(records: list[SensorRecord], step: float) -> None:
+    need = min_align_samples(step)
+    for rec in records:
+        if rec.acc.shape[0] < need:
+            raise SensorDataError(
+                f"{rec.path}: {rec.acc.shape[0]} samples ({rec.acc.shape[0] * step:.3g} s); expected at least "
+                f"{need} ({need * step:.3g} s, {MIN_ALIGN_PERIODS:g} periods of {ALIGN_BAND[0]:g} Hz): the "
+                f"shaking axis, sign and clock of each sensor are read from its motion at "
+                f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz, which a shorter record cannot tell from drift")
+
+
 def _check_distinct(records: list[SensorRecord]) -> None:
     for i, a in enumerate(records):
         for b in records[i + 1:]:
@@ -244,7 +266,8 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
     Raises
     ------
     SensorDataError
-        A one-line reason: different sample intervals, a duplicated file, a
+        A one-line reason: different sample intervals, a record too short to
+        read its axes (:func:`min_align_samples`), a duplicated file, a
         sensor that does not move, clocks that do not overlap and data that
         cannot align a sensor, no common span.
     """
@@ -254,6 +277,7 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
             raise SensorDataError(f"{rec.path}: sample interval {rec.step:.6g} s differs from "
                                   f"{step:.6g} s of {records[0].path}; expected sensors at one rate")
     _check_distinct(records)
+    _check_length(records, step)
     axes = [_axes(rec, step) for rec in records]
     table_rms = float(np.sqrt(np.mean(axes[0][2] ** 2)))
     if table_rms < STILL_RMS:
@@ -336,7 +360,7 @@ def _assemble(records: list[SensorRecord], channels: tuple[str, ...], axes: list
         offset = float(np.nanmean(series))
         values[:, k] = sign * (series - offset)
         missing = int(np.isnan(series).sum())
-        extra = list(link.notes)
+        extra = list(rec.notes) + list(link.notes)
         if sign < 0:
             extra.append("mounted reversed: sign flipped")
         if missing:

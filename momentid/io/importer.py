@@ -14,9 +14,12 @@ and ``docs/real-data.md``):
   CSV per run, format ``csv``) or ``table`` and ``floors`` (one file per
   sensor, e.g. ``xsens-dot``).  Files may be gzip-compressed (read by
   content); a named file that exists only as ``<name>.gz`` is read from there.
-* a one-file-per-run format is taken as it is; one file per sensor goes
-  through :func:`momentid.io.align.align_sensors` (clocks, shaking axis,
-  sign, gravity and offset), whose per-sensor reports go into ``run.meta``.
+* a one-file-per-run format is taken as it is (``nan`` cells interpolated, at
+  most 5 in a row, with a note); one file per sensor goes through
+  :func:`momentid.io.align.align_sensors` (clocks, shaking axis, sign, gravity
+  and offset), whose per-sensor reports go into ``run.meta``;
+* every run's sensors are checked against physics for their floors
+  (:mod:`momentid.io.placement`): relabelled with a note, or refused.
 
 Who is to blame decides the error class: a mistake in ``experiment.toml``
 (key, type, value, a run file that does not exist) is a
@@ -38,9 +41,11 @@ from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError, SensorDataError
 from momentid.io.align import SensorReport, align_sensors
 from momentid.io.formats import ExportFormat, Layout, get_format
+from momentid.io.formats.base import repair_missing
 from momentid.io.formats.csv_run import csv_error, read_csv_run
-from momentid.io.rate import check_model_rate, resonances_near_nyquist
-from momentid.io.structure_table import parse_structure
+from momentid.io.placement import check_placement, corrected
+from momentid.io.rate import check_model_rate, check_plausible_rate, resonances_near_nyquist
+from momentid.io.structure_table import MASS_RANGE, parse_structure
 from momentid.io.toml_reader import Table, load_toml
 
 __all__ = ["import_folder", "import_recording", "write_import", "summary", "report", "read_csv_run",
@@ -135,7 +140,9 @@ def _description(folder: Path) -> _Description:
     runs: list[_RunSpec] = []
     for tab in top.tables("runs"):
         files = _run_files(tab, fmt, folder, d)
-        added = tab.numbers("added_mass", (0.0,) * d, length=d, nonnegative=True, scalar_ok=True)
+        added = tab.numbers("added_mass", None, length=d, nonnegative=True, scalar_ok=True)
+        if added is not None and max(added) > MASS_RANGE[1]:
+            raise tab.error("added_mass", f"added masses (kg) of at most {MASS_RANGE[1]:g} kg per floor")
         name = tab.string("name", files[0].name.split(".")[0])
         if not name:
             raise tab.error("name", "a non-empty run name")
@@ -143,20 +150,46 @@ def _description(folder: Path) -> _Description:
         if name in (r.name for r in runs):
             raise tab.error("name" if tab.has("name") else "file",
                             f"a unique run name; {name!r} is already used (default name: the file's stem)")
-        runs.append(_RunSpec(name, files, added))
+        _check_not_listed(tab, files, runs)
+        runs.append(_RunSpec(name, files, added or (0.0,) * d))
     top.finish()
     return _Description(meta, model, statement, fmt, runs, text)
 
 
+def _check_not_listed(tab: Table, files: tuple[Path, ...], runs: list[_RunSpec]) -> None:
+    """A data file already read for another run (or another sensor of this one): the same trial listed
+    twice would validate an identification on its own training data."""
+    seen = {f.resolve(): (r.name, k) for r in runs for k, f in enumerate(r.files)}
+    for k, f in enumerate(files):
+        if f.resolve() in seen:
+            other, _ = seen[f.resolve()]
+            raise tab.error("file" if len(files) == 1 else "table" if k == 0 else "floors",
+                            f"files not used by another run; {f.name} is already run {other!r}'s (the same trial "
+                            f"listed twice?)")
+        seen[f.resolve()] = ("this run", k)
+
+
 # ----------------------------------------------------------------------------- the import
+
+def _read_run_file(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
+    """One run file as it is, ``nan`` cells interpolated (at most ``MAX_REPAIR_GAP`` in a row) with a note."""
+    path = spec.files[0]
+    time, channels, values = fmt.read_run(path, storeys)
+    check_plausible_rate((time.size - 1) / (time[-1] - time[0]), str(path))
+
+    def rows(a: int, b: int) -> str:  # the header is row 1
+        return f"row {a + 2}" if b - a == 1 else f"rows {a + 2}-{b + 1}"
+
+    values, keep, notes = repair_missing(values, rows, channels, str(path))
+    return RunData(name=spec.name, added_mass=np.array(spec.added_mass), time=time[keep],
+                   channels=channels, values=values, meta={"source_file": str(path), "notes": notes})
+
 
 def _read_run(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
     """One run: a run file as it is, or the sensor files aligned (:func:`align_sensors`)."""
     added = np.array(spec.added_mass)
     if fmt.layout is Layout.RUN_FILE:
-        time, channels, values = fmt.read_run(spec.files[0], storeys)
-        return RunData(name=spec.name, added_mass=added, time=time, channels=channels, values=values,
-                       meta={"source_file": str(spec.files[0])})
+        return _read_run_file(spec, fmt, storeys)
     channels = ("zdd", *(f"a{i + 1}" for i in range(storeys)))
     records = [fmt.read_sensor(f) for f in spec.files]
     aligned = align_sensors(records, channels)
@@ -173,13 +206,17 @@ def _read_run(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
                    values=aligned.values, meta=meta)
 
 
-def import_folder(path) -> Experiment:
+def import_folder(path, *, relabel: bool = True) -> Experiment:
     """Read a lab folder (``experiment.toml`` + the runs' data files) into an experiment.
 
     Parameters
     ----------
     path : str or Path
         The folder; see the module docstring for the contract.
+    relabel : bool
+        What to do with sensors that physics places on other floors than listed, or finds mounted
+        reversed (:mod:`momentid.io.placement`): True (default) relabels or flips them and notes
+        it in the run's ``meta["notes"]``; False refuses the import with that note as the error.
 
     Returns
     -------
@@ -204,7 +241,8 @@ def import_folder(path) -> Experiment:
         ``experiment.toml`` is missing or invalid (file, key, value).
     SensorDataError
         A data file is malformed or unusable (a one-line reason naming the
-        file), or the runs disagree on their channels or sample rate.
+        file), the runs disagree on their channels or sample rate, or (with
+        ``relabel=False``) a sensor sits on another floor than listed.
     """
     folder = Path(path)
     desc = _description(folder)
@@ -215,9 +253,11 @@ def import_folder(path) -> Experiment:
         run = _read_run(spec, desc.fmt, d)
         if runs:
             _agree(runs[0], run, desc.runs[0].files[0], spec.files[0])
+            _not_repeated(runs, run, spec.files[0])
         elif structure is not None:
             check_model_rate(structure, run.sample_rate, str(spec.files[0]))
         runs.append(run)
+    runs = _placement(runs, desc, folder / EXPERIMENT_FILE, relabel)
     groups = [g for g in ("zdd", "z", "zd", "a", "q", "v")
               if any(c.rstrip("0123456789") == g for c in runs[0].channels)]
     scenario = {
@@ -231,6 +271,32 @@ def import_folder(path) -> Experiment:
     }
     return Experiment(runs=tuple(runs), structure=structure, scenario=scenario, scenario_text=desc.text,
                       source=str(folder), statement=desc.statement)
+
+
+def _placement(runs: list[RunData], desc: _Description, toml: Path, relabel: bool) -> list[RunData]:
+    """The runs with the sensor-placement check's fixes applied and its findings noted (or refused)."""
+    files = {r.name: tuple(r.meta["source_files"]) for r in runs if "source_files" in r.meta}
+    out = {r.name: r for r in runs}
+    for finding in check_placement(runs, desc.statement.masses, files):
+        run = out[finding.run]
+        if not finding.fixable:
+            out[finding.run] = dataclasses.replace(run, meta=dict(run.meta, notes=[*run.meta.get("notes", ()),
+                                                                                   finding.message]))
+        elif relabel:
+            out[finding.run] = corrected(run, finding)
+        else:
+            raise SensorDataError(f"{toml}: {finding.message}; refused (without --refuse-mislabelled the import "
+                                  f"relabels the sensors and notes it)")
+    return [out[r.name] for r in runs]
+
+
+def _not_repeated(runs: list[RunData], run: RunData, file: Path) -> None:
+    """Two runs with identical data are the same trial listed twice (copied files): refused, as the
+    copy would count as independent evidence and as held-out data for its own fit."""
+    for other in runs:
+        if other.values.shape == run.values.shape and np.array_equal(other.values, run.values, equal_nan=True):
+            raise SensorDataError(f"{file}: run {run.name!r} holds the same data as run {other.name!r}; expected "
+                                  f"each trial once (the same trial listed twice?)")
 
 
 def _agree(first: RunData, run: RunData, first_file: Path, file: Path) -> None:
@@ -257,7 +323,7 @@ def write_import(experiment: Experiment, out_path) -> Path:
     return write_experiment(out, experiment)
 
 
-def import_recording(folder, out_path) -> Path:
+def import_recording(folder, out_path, *, relabel: bool = True) -> Path:
     """Import a lab folder (see :func:`import_folder`) and write it to ``out_path``.
 
     Parameters
@@ -266,6 +332,9 @@ def import_recording(folder, out_path) -> Path:
         The lab's folder: ``experiment.toml`` and the files it names.
     out_path : str or Path
         The MCAP recording to write.
+    relabel : bool
+        As in :func:`import_folder`: relabel sensors physics places on other floors (default), or
+        refuse.
 
     Returns
     -------
@@ -273,19 +342,21 @@ def import_recording(folder, out_path) -> Path:
         ``out_path``, an MCAP recording that :func:`momentid.read_recording`
         reads and :func:`momentid.identify` identifies.
     """
-    return write_import(import_folder(folder), out_path)
+    return write_import(import_folder(folder, relabel=relabel), out_path)
 
 
 def report(experiment: Experiment) -> list[str]:
-    """Per run, what the import did with each sensor and any note (empty for run-file formats)."""
+    """Per run, what the import did with each sensor and any note (runs of a run-file format: their
+    notes only)."""
     lines = []
     for run in experiment.runs:
-        sensors = run.meta.get("sensors")
-        if not sensors:
+        sensors = run.meta.get("sensors") or ()
+        notes = run.meta.get("notes", ())
+        if not sensors and not notes:
             continue
-        lines.append(f"run {run.name!r}: {run.n_samples} samples, {run.time[-1]:.2f} s")
+        lines.append(f"run {run.name!r}: {run.n_samples} samples, {run.time[-1] - run.time[0]:.2f} s")
         lines += [f"  {SensorReport.from_dict(s).line()}" for s in sensors]
-        lines += [f"  note: {n}" for n in run.meta.get("notes", ())]
+        lines += [f"  note: {n}" for n in notes]
     return lines
 
 

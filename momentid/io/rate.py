@@ -21,7 +21,8 @@ from momentid.core import analytic
 from momentid.core.structure import Structure
 from momentid.errors import SensorDataError
 
-__all__ = ["check_model_rate", "resonances_near_nyquist", "MODE_NYQUIST_FRACTION", "PEAK_PROMINENCE"]
+__all__ = ["check_model_rate", "check_plausible_rate", "resonances_near_nyquist", "MODE_NYQUIST_FRACTION",
+           "PEAK_PROMINENCE", "PLAUSIBLE_RATE"]
 
 #: A mode above this fraction of the Nyquist frequency is too close to it to
 #: be resolved (the anti-alias roll-off of an IMU starts around there).
@@ -33,6 +34,11 @@ MODE_NYQUIST_FRACTION = 0.8
 PEAK_PROMINENCE = 2.0
 #: Welch segment length (samples): ~4 s at 120 Hz, 0.23 Hz resolution.
 WELCH_SEGMENT = 512
+#: Sample rates (Hz) a shake-table record can have.  Below 5 Hz no structural mode above 2 Hz is
+#: resolved (bench-top models start at 1-4 Hz, IMUs log at 60-200 Hz, data loggers up to tens of kHz);
+#: a time column in ms makes a 1 kHz record look like 1 Hz, and one in us like 1 mHz.  Above 1 MHz
+#: a time column in a unit larger than seconds is likelier than such a logger.
+PLAUSIBLE_RATE = (5.0, 1e6)
 
 
 def check_model_rate(structure: Structure, sample_rate: float, where: str) -> None:
@@ -50,6 +56,25 @@ def check_model_rate(structure: Structure, sample_rate: float, where: str) -> No
         raise SensorDataError(f"{where}: sample rate {sample_rate:.6g} Hz is too low for the stated model's "
                               f"highest mode at {top:.4g} Hz; expected above "
                               f"{top / (0.5 * MODE_NYQUIST_FRACTION):.4g} Hz")
+
+
+def check_plausible_rate(sample_rate: float, where: str) -> None:
+    """Refuse a sample rate no shake-table record has (a time column in the wrong unit), before any
+    numerics run on it.
+
+    Raises
+    ------
+    SensorDataError
+        Naming ``where``, the rate and the likely cause.
+    """
+    low, high = PLAUSIBLE_RATE
+    if low <= sample_rate <= high:
+        return
+    guess = ("is the time column in ms?" if sample_rate < low and sample_rate * 1e3 >= low
+             else "is the time column in us?" if sample_rate < low
+             else "is the time column in a unit larger than seconds?")
+    raise SensorDataError(f"{where}: sample rate {sample_rate:.4g} Hz (time step {1 / sample_rate:.4g} s): "
+                          f"expected {low:g} Hz to {high:g} Hz for a shake-table record, with times in s: {guess}")
 
 
 def resonances_near_nyquist(values: np.ndarray, sample_rate: float) -> list[float]:

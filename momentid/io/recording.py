@@ -33,6 +33,8 @@ from mcap.writer import CompressionType, Writer
 from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
 from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
 from momentid.io.mcap_check import DAMAGE, MCAP_MAGIC, Bounded, summary_damage
+from momentid.io.exclusive import open_locked
+from momentid.io.structure_table import MASS_RANGE, implausible_mass
 from momentid.core.structure import LabStatement, Structure
 
 __all__ = [
@@ -208,8 +210,8 @@ class RecordingWriter:
                     f"{self.path}: extra_metadata key {key!r} = {value!r}: expected a str key other "
                     f"than {', '.join(meta)} and a str value")
             meta[key] = value
-        try:
-            self._file = open(self.path, "wb")
+        try:   # locked before it is truncated: a second writer of the same file is refused, not mixed in
+            self._file = open_locked(self.path)
         except OSError as e:
             raise RecordingError(f"{self.path}: cannot create the recording ({e.strerror}); "
                                  "expected a writable file path") from None
@@ -237,7 +239,8 @@ class RecordingWriter:
             return False
         try:
             if not self._closed:
-                self._writer.add_metadata(ABORTED_RECORD, {"error": f"{exc_type.__name__}: {exc}",
+                error = f"{exc_type.__name__}: {exc}" if str(exc) else exc_type.__name__
+                self._writer.add_metadata(ABORTED_RECORD, {"error": error,
                                                            "runs_written": str(self._completed)})
             self.close()
         except (OSError, RecordingError):
@@ -486,7 +489,7 @@ def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
     scan = _scan(path, on_block=hook)
     if scan.experiment is None:
         raise RecordingError(f"{path}: no {EXPERIMENT_RECORD!r} metadata record; expected a momentid recording")
-    complete, notes = [], []
+    complete, lost = [], []
     for name, run in scan.runs.items():
         rec = run.record
         spans = sorted((b[0], b[4]) for b in run.blocks)
@@ -496,11 +499,8 @@ def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
             ok = ok and first == expected
             expected = first + n
         ok = ok and rec is not None and str(expected) == rec.get("n_samples")
-        (complete if ok else notes).append(name if ok else f"{path}: run {name!r} is incomplete; left out")
-    if scan.failure or not scan.data_end:
-        notes.append(f"{path}: the recording ends early ({scan.failure or 'no end-of-data record'}); "
-                     f"only completed runs were used; {_lost_runs(scan.experiment, complete)}")
-    return scan.experiment, complete, notes
+        (complete if ok else lost).append(name if ok else f"run {name!r} is incomplete; left out")
+    return scan.experiment, complete, _damage_notes(path, scan, complete, lost)
 
 
 def _scan(path: Path, on_block=None) -> _Scan:
@@ -760,6 +760,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
         raise RecordingError(f"{where}: storeys = {storeys}; expected {structure.storeys} as in the structure")
     storeys = structure.storeys if structure is not None else storeys
     statement = _statement(_loads(exp.get("statement", "null"), where, "statement"), where, exp)
+    _plausible_masses(where, structure, statement)
     if statement is not None and storeys not in (None, statement.storeys):
         raise RecordingError(f"{where}: storeys = {storeys}; expected {statement.storeys} as in the statement")
     scenario = _loads(exp.get("scenario", "{}"), where, "scenario")
@@ -779,24 +780,7 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     runs = tuple(done[i] for i in sorted(done))
     complete = scan.data_end and not scan.data_crc_bad and not lost and scan.aborted is None
 
-    notes = []
-    recovered = f"recovered {len(runs)} of {len(scan.runs)} runs found"
-    if lost:
-        recovered += f" ({'; '.join(lost)})"
-    if not scan.data_end:
-        what = "truncated" if scan.at_end else "corrupted"
-        after = f"after run {runs[-1].name!r}" if runs else "before any run completed"
-        notes.append(f"{path}: {what} {after}; {recovered}, {_lost_runs(exp, runs)}; "
-                     f"reading stopped {scan.failure}")
-    elif scan.data_crc_bad:
-        notes.append(f"{path}: data section CRC mismatch ({scan.failure}): a record outside the "
-                     f"CRC-checked sensor chunks is corrupted; {recovered}")
-    elif scan.aborted is not None:
-        notes.append(f"{path}: the writer was aborted ({scan.aborted.get('error', '?')}); {recovered}")
-    elif lost:
-        notes.append(f"{path}: {recovered}")
-    elif scan.failure:
-        notes.append(f"{path}: summary or footer damaged {scan.failure}; all data was read")
+    notes = _damage_notes(path, scan, [r.name for r in runs], lost)
     if not complete and not runs:  # notes say why
         raise TruncatedRecordingError(f"{notes[0]}; no completed run to recover")
     for note in notes:
@@ -804,6 +788,30 @@ def _assemble(path: Path, scan: _Scan) -> Experiment:
     return Experiment(runs=runs, structure=structure, scenario=scenario,
                       scenario_text=exp.get("scenario_text", ""), source=str(path),
                       complete=complete, notes=tuple(notes), statement=statement)
+
+
+def _damage_notes(path: Path, scan: _Scan, kept: list[str], lost: list[str]) -> list[str]:
+    """What a damaged or aborted file kept and lost, in the same words for :func:`read_recording` and
+    :func:`stream_recording`: ``kept`` names the runs read whole (in file order), ``lost`` says why
+    each other run found was left out."""
+    recovered = f"recovered {len(kept)} of {len(scan.runs)} runs found"
+    if lost:
+        recovered += f" ({'; '.join(lost)})"
+    planned = _lost_runs(scan.experiment, kept)
+    if not scan.data_end:
+        what = "truncated" if scan.at_end else "corrupted"
+        after = f"after run {kept[-1]!r}" if kept else "before any run completed"
+        return [f"{path}: {what} {after}; {recovered}, {planned}; reading stopped {scan.failure}"]
+    if scan.data_crc_bad:
+        return [f"{path}: data section CRC mismatch ({scan.failure}): a record outside the "
+                f"CRC-checked sensor chunks is corrupted; {recovered}"]
+    if scan.aborted is not None:
+        return [f"{path}: the writer was aborted ({scan.aborted.get('error', '?')}); {recovered}, {planned}"]
+    if lost:
+        return [f"{path}: {recovered}"]
+    if scan.failure:
+        return [f"{path}: summary or footer damaged {scan.failure}; all data was read"]
+    return []
 
 
 def _lost_runs(experiment: dict, kept) -> str:
@@ -819,6 +827,17 @@ def _lost_runs(experiment: dict, kept) -> str:
         return "later runs are lost"
     lost = [n for n in planned if n not in kept]
     return f"lost {len(lost)} of the {len(planned)} planned runs ({', '.join(lost) or 'none'})"
+
+
+def _plausible_masses(where: str, structure: Structure | None, statement: LabStatement | None) -> None:
+    """Floor masses outside :data:`~momentid.io.structure_table.MASS_RANGE` (written before imports
+    checked them) are refused here, before identification overflows on them or prints K as 0 +- 0."""
+    for key, masses in (("structure.masses", structure.masses if structure is not None else None),
+                        ("statement.masses", statement.masses if statement is not None else None)):
+        bad = None if masses is None else implausible_mass(masses)
+        if bad is not None:
+            raise RecordingError(f"{where}: {key}[{bad}] = {masses[bad]!r}: expected a floor mass between "
+                                 f"{MASS_RANGE[0]:g} and {MASS_RANGE[1]:g} kg (re-import with the masses in kg)")
 
 
 def _statement_dict(statement: LabStatement | None) -> dict | None:

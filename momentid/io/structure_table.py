@@ -14,11 +14,14 @@ from __future__ import annotations
 import numpy as np
 
 from momentid.core import analytic
+from momentid.core.resources import require_memory
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError
 from momentid.io.toml_reader import Table
+from momentid.lab.plausible import MASS_RANGE  # one range for scenarios, imports and recordings
 
-__all__ = ["parse_structure", "DEFAULT_STOREY_HEIGHT", "DEFAULT_BASE_MASS"]
+__all__ = ["parse_structure", "implausible_mass", "DEFAULT_STOREY_HEIGHT", "DEFAULT_BASE_MASS", "MASS_RANGE",
+           "MODEL_BYTES_PER_STOREY2"]
 
 #: Storey height (m) of a nominal model that states none (it only scales drawings).
 DEFAULT_STOREY_HEIGHT = 0.3
@@ -26,6 +29,18 @@ DEFAULT_STOREY_HEIGHT = 0.3
 DEFAULT_BASE_MASS = 100.0
 #: Keys that only a full nominal model has.
 MODEL_KEYS = ("storey_stiffness", "rayleigh_mu", "rayleigh_kappa", "damping", "base_mass")
+#: Memory (bytes) a model needs per storey squared: its d x d mass, damping and stiffness matrices
+#: and their copies in identification (8 of them at 8 bytes); checked before anything of size d is
+#: allocated, so ``storeys = 1000000000`` is refused in one line.
+MODEL_BYTES_PER_STOREY2 = 64.0
+
+
+def implausible_mass(masses) -> int | None:
+    """Index of the first mass (kg) outside :data:`MASS_RANGE` (or not finite), None when all are plausible."""
+    for i, m in enumerate(masses):
+        if not MASS_RANGE[0] <= m <= MASS_RANGE[1]:  # nan fails too
+            return i
+    return None
 
 
 def _storeys(tab: Table) -> tuple[int, tuple[float, ...] | None]:
@@ -33,9 +48,16 @@ def _storeys(tab: Table) -> tuple[int, tuple[float, ...] | None]:
     if masses is None and not tab.has("storeys"):
         raise ScenarioError(f"{tab.file}: missing key '{tab.key('masses')}' (or '{tab.key('storeys')}'); "
                             f"expected the floor masses in kg, floor 1 first, or the number of storeys")
+    if masses is not None:
+        bad = implausible_mass(masses)
+        if bad is not None:
+            raise ScenarioError(f"{tab.file}: key '{tab.key('masses')}[{bad}]' = {masses[bad]!r}: expected a floor "
+                                f"mass between {MASS_RANGE[0]:g} and {MASS_RANGE[1]:g} kg")
     d = len(masses) if masses is not None else tab.integer("storeys", minimum=1)
     if tab.has("storeys") and tab.integer("storeys", minimum=1) != d:
         raise tab.error("storeys", f"the number of entries in 'masses' ({d})")
+    require_memory(MODEL_BYTES_PER_STOREY2 * float(d) ** 2, f"{tab.file}: a model of {tab.key('storeys')} = {d}",
+                   "state the number of storeys of the rig (one per floor sensor)")
     return d, masses
 
 

@@ -23,6 +23,8 @@ TABLE_INERTIA_RATIO`` (a stiff servo table).
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import mujoco
 
@@ -35,7 +37,7 @@ from momentid.mechanisms.place import Place, Target
 
 __all__ = ["build_spec", "compile_model", "sensor_layout", "callback_forces", "storey_to_floor", "drifts",
            "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS", "stateful",
-           "state_actuator"]
+           "state_actuator", "mujoco_warnings_counted_not_printed", "add_storey_elements", "empty_spec"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -119,12 +121,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     for mech in mechanisms:
         registry.validate(mech, d)
 
-    spec = mujoco.MjSpec()
-    spec.modelname = name
-    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
-    spec.option.timestep = timestep
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_RK4
-    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    spec = empty_spec(name, timestep, mujoco.mjtIntegrator.mjINT_RK4)
     mu, kappa = structure.rayleigh_mu, structure.rayleigh_kappa
 
     base = spec.worldbody.add_body(name="base", pos=[0, 0, _PLATEN[2]])
@@ -138,6 +135,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     base.add_site(name="base_imu", pos=[0, 0, 0])
 
     height = _PLATEN[2]
+    floors = []
     for i in range(d):
         height += structure.storey_heights[i]
         m_i = structure.masses[i]
@@ -149,6 +147,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         floor.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(_SLAB),
                        rgba=[0.8, 0.6, 0.3, 1], contype=0, conaffinity=0)
         floor.add_site(name=f"floor{i + 1}_imu", pos=[0, 0, 0])
+        floors.append(floor)
         if dm[i] > 0:
             extra = floor.add_body(name=f"added{i + 1}", pos=[0, 0, _SLAB[2] + 0.02])
             extra.mass = dm[i]
@@ -175,6 +174,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
         tendon.stiffness = [k_i, 0.0, 0.0]
         tendon.damping = [c_i, 0.0, 0.0]
         tendon.springlength = [0.0, 0.0]
+    add_storey_elements(spec, mechanisms, [base] + floors, timestep)
 
     # act = commanded table acceleration (m/s^2), ctrl = its rate (m/s^3); force = inertia x act
     spec.add_actuator(name="table", target="base_x", trntype=mujoco.mjtTrn.mjTRN_JOINT,
@@ -194,6 +194,7 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     def sensor(kind, name, target, objtype):
         spec.add_sensor(name=name, type=kind, objname=target, objtype=objtype)
 
+
     site, joint = mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_JOINT
     acc, pos, vel = (mujoco.mjtSensor.mjSENS_ACCELEROMETER, mujoco.mjtSensor.mjSENS_JOINTPOS,
                      mujoco.mjtSensor.mjSENS_JOINTVEL)
@@ -207,6 +208,43 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
     for i in range(d):
         sensor(vel, f"v{i + 1}", f"q{i + 1}", joint)
     return spec
+
+
+def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
+    """A spec with no bodies yet: stated inertias, ``timestep`` (s), ``integrator``, no contacts."""
+    spec = mujoco.MjSpec()
+    spec.modelname = name
+    spec.compiler.inertiafromgeom = mujoco.mjtInertiaFromGeom.mjINERTIAFROMGEOM_FALSE
+    spec.option.timestep = timestep
+    spec.option.integrator = integrator
+    spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    return spec
+
+
+def add_storey_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:
+    """Add the MJCF elements of the ``mjcf_elements`` storey kinds among ``mechanisms`` (e.g.
+    ``joint_friction``'s sliders) to ``spec``.
+
+    ``bodies`` are the base and the floors, in order (``bodies[i]`` is below storey ``i + 1``); the floor
+    joints are ``q<i>``.  The mass the elements put on a floor is taken off that floor's own, so that
+    the floor masses stay as stated.  The constraint solver becomes PGS (see the comment below).
+    """
+    for mech in mechanisms:
+        kind = registry.get(mech.type)
+        place = kind.place(mech.location)
+        if not (kind.mjcf_elements and place.target is Target.STOREY):
+            continue
+        # PGS: the table's huge armature (TABLE_INERTIA_RATIO) swamps the Newton solver's convergence test,
+        # which then stops before the sliders' friction constraints hold; PGS solves them one by one.
+        spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
+        below, above = place.nodes
+        lower = bodies[below]
+        added = kind.storey_elements(spec, mech, lower, f"q{above}", f"q{below}" if below > 0 else None, timestep)
+        if below > 0:
+            if not lower.mass > added:
+                raise ModelError(f"{mech.type} at {place.words}: its elements weigh {added:.3g} kg, more than "
+                                 f"floor {below} ({lower.mass:.3g} kg): expected a smaller timestep")
+            lower.mass = lower.mass - added
 
 
 def callback_forces(mechanisms, q: np.ndarray, v: np.ndarray, time: float = 0.0,
@@ -267,7 +305,8 @@ def compile_model(spec: mujoco.MjSpec) -> mujoco.MjModel:
     try:
         return spec.compile()
     except Exception as exc:  # mujoco raises ValueError with the compiler's text
-        raise ModelError(f"MuJoCo could not compile model '{spec.modelname}': {exc}") from None
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())   # one line
+        raise ModelError(f"MuJoCo could not compile model '{spec.modelname}': {text}") from None
 
 
 def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
@@ -276,3 +315,18 @@ def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
     for s in range(model.nsensor):
         out[model.sensor(s).name] = int(model.sensor_adr[s])
     return out
+
+
+@contextlib.contextmanager
+def mujoco_warnings_counted_not_printed():
+    """MuJoCo prints each warning (``Nan, Inf or huge value in QPOS ...``) and appends it to
+    ``MUJOCO_LOG.TXT`` in the working folder.  momentid reads the warning counters of ``MjData``
+    instead and refuses the run in one line (or, replaying a trial model that goes unstable, takes
+    that as an answer), so the text is dropped meanwhile (a process-wide MuJoCo setting: forked
+    workers inherit it; the command line sets it for the whole command)."""
+    old = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(old)

@@ -21,6 +21,7 @@ import numpy as np
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.io.structure_table import parse_structure
+from momentid.lab.plausible import check_added_mass, check_excitation, check_structure
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import ScenarioError
 
@@ -403,6 +404,7 @@ def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario
     runs = []
     for i, tab in enumerate(top.tables("runs")):
         added = tab.numbers("added_mass", length=d, nonnegative=True, scalar_ok=True)
+        check_added_mass(tab, added)
         runs.append(Run(name=_file_safe(tab, "name", f"run{i + 1}"), added_mass=added))
         tab.finish()
     names = [r.name for r in runs]
@@ -528,8 +530,11 @@ def _parse_sensors(sens: Table, storeys: int, sample_rate: float) -> Sensors:
 
 
 def _parse_structure(tab: Table) -> Structure:
-    """The scenario's ``[structure]``: a full nominal model (:func:`momentid.io.structure_table.parse_structure`)."""
-    return parse_structure(tab, require_model=True)
+    """The scenario's ``[structure]``: a full nominal model (:func:`momentid.io.structure_table.parse_structure`)
+    within the plausible ranges of :mod:`momentid.lab.plausible`."""
+    structure = parse_structure(tab, require_model=True)
+    check_structure(tab, structure)
+    return structure
 
 
 def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, Tracking | None]:
@@ -552,8 +557,7 @@ def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, 
         exc = Harmonics(amp, omega, phase)
     elif kind == "record":
         raw = tab.string("file")
-        fmt = tab.string("format", "at2", choices=("at2",))
-        del fmt
+        tab.string("format", "at2", choices=("at2",))   # the one format: checked, nothing to keep
         path = Path(raw).expanduser()
         if not path.is_absolute():
             path = (source.parent / path) if source.suffix else path
@@ -578,6 +582,7 @@ def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, 
             seed=tab.integer("seed", seed, minimum=0),
             taper=tab.number("taper", 1.0, nonnegative=True),
         )
+    check_excitation(tab, exc, tracking)
     tab.finish()
     return exc, tracking
 

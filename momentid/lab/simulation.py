@@ -26,6 +26,7 @@ from mujoco import rollout as _rollout
 
 from momentid import mechanisms as mechanisms_registry
 from momentid.lab import rig
+from momentid.lab.plausible import implausible
 from momentid.mechanisms.place import Target
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
@@ -52,18 +53,6 @@ def _control_callback(callback, act_dyn=None) -> Iterator[None]:
         mujoco.set_mjcb_control(previous)
         if act_dyn is not None:
             mujoco.set_mjcb_act_dyn(previous_dyn)
-
-
-@contextlib.contextmanager
-def _quiet_warnings() -> Iterator[None]:
-    """Keep MuJoCo from printing warnings (they are still counted in ``MjData.warning``, which
-    the caller checks): a replay of a trial model may go unstable, and that is an answer."""
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(lambda message: None)
-    try:
-        yield
-    finally:
-        mujoco.set_mju_user_warning(previous)
 
 
 def ground_motion_of(scenario: Scenario) -> GroundMotion:
@@ -294,7 +283,7 @@ def _check_run(warnings, out, scenario: Scenario, run: Run) -> None:
     if warnings:
         raise SimulationError(
             f"{scenario.source}: run {run.name!r}: MuJoCo warnings {warnings}: expected none "
-            f"(check masses, stiffnesses and the sample rate)"
+            f"(check masses, stiffnesses, the excitation's amplitude and frequencies, and the sample rate)"
         )
     if not np.all(np.isfinite(out)):
         bad = int(np.argmax(~np.all(np.isfinite(out), axis=1)))
@@ -309,6 +298,9 @@ def _stability_check(scenario: Scenario) -> None:
     """Refuse steps that RK4 cannot integrate stably for this structure."""
     from momentid.core.analytic import modal_properties
     s = scenario.structure
+    wrong = implausible(s)   # a Scenario built in code, past the reader's ranges: its matrices would overflow
+    if wrong is not None:
+        raise SimulationError(f"{scenario.source}: structure.{wrong} (momentid.lab.plausible)")
     f_max = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
     w_h = 2 * math.pi * f_max * scenario.timestep
     if w_h > 1.0:   # RK4 is stable to w h ~ 2.8; past 1 it is not accurate either
@@ -368,26 +360,25 @@ def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int,
     motion (not pickled).  Either way each run is exactly
     :func:`simulate_run`, so the numbers equal the serial path's bit for bit.
     """
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+    from concurrent.futures import ThreadPoolExecutor
+
+    from momentid.core.processes import forked_pool
 
     forked = rig.needs_callback(scenario.truth)
-    if forked:
-        pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
-                                   initializer=_set_forked_job, initargs=(scenario, motion))
-        futures = [pool.submit(_simulate_forked, i) for i in range(len(scenario.runs))]
-    else:   # threads report their progress as they go
-        pool = ThreadPoolExecutor(max_workers=workers)
-        futures = [pool.submit(simulate_run, scenario, run, motion, progress=progress)
-                   for run in scenario.runs]
-    try:
+    with contextlib.ExitStack() as stack:
+        if forked:   # workers that die with this process, killed when it is interrupted
+            pool = stack.enter_context(forked_pool(workers, _set_forked_job, (scenario, motion)))
+            futures = [pool.submit(_simulate_forked, i) for i in range(len(scenario.runs))]
+        else:   # threads report their progress as they go
+            pool = ThreadPoolExecutor(max_workers=workers)
+            stack.callback(pool.shutdown, wait=True, cancel_futures=True)
+            futures = [pool.submit(simulate_run, scenario, run, motion, progress=progress)
+                       for run in scenario.runs]
         for future in futures:
             result = future.result()
             if forked:
                 progress(scenario.n_samples)
             yield result
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
 
 
 #: Float arrays of a run's length held per channel at the peak of a simulation: the recorded
@@ -535,7 +526,7 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     names = [f"{g}{i + 1}" for g in ("a", "q", "v") for i in range(d)]
     index = np.array([layout[c] for c in names])
     nodes = np.append(zdd, zdd[-1])            # the table holds its last acceleration
-    with _quiet_warnings():
+    with rig.mujoco_warnings_counted_not_printed():   # a trial model may go unstable: an answer
         out, warnings = _roll(model, initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h), 1, index,
                               mechanisms=mechanisms, structure=structure)
     if warnings or not np.all(np.isfinite(out)):

@@ -8,7 +8,7 @@ It declares, in one place, everything the rest of the project needs to know abou
   or a sensor channel; :mod:`momentid.mechanisms.place`), **parameters** with their SI units and
   physical bounds (a scenario's ``[truth]`` record is validated against them);
 - how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
-  :meth:`MechanismKind.added_mass_body`), or the **storey force** or **link force** (a floor
+  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.storey_elements`), or the **storey force** or **link force** (a floor
   against the table, or two floors) the simulator applies in its control callback
   (:meth:`MechanismKind.storey_force`, :meth:`MechanismKind.floor_force`), with an internal
   state the simulator integrates when the force has memory (:meth:`MechanismKind.has_state`,
@@ -247,6 +247,9 @@ class MechanismKind:
     #: A force that opposes its place's stretch rate: a linear identification takes it into C as an
     #: equivalent viscous damping, so where C's pattern shows a damper, this kind there is its rival.
     dissipative: ClassVar[bool] = False
+    #: A storey kind that adds bodies, joints and tendons of its own to the MJCF
+    #: (:meth:`storey_elements`), e.g. ``joint_friction``'s sliders.
+    mjcf_elements: ClassVar[bool] = False
     #: One line for the docs and ``describe``.
     summary: ClassVar[str] = ""
 
@@ -296,6 +299,14 @@ class MechanismKind:
         ``height`` the storey's height (m).
         """
         return stiffness, damping
+
+    def storey_elements(self, spec, mech: Mechanism, lower_body, upper_joint: str, lower_joint: str | None,
+                        timestep: float) -> float:
+        """For ``mjcf_elements`` kinds: add the storey's own bodies, joints and tendons to ``spec``
+        (``mujoco.MjSpec``), riding on ``lower_body`` (the body below the storey); ``upper_joint`` and
+        ``lower_joint`` name the slide joints of the floors above and below (None: the table).  Returns
+        the mass (kg) added onto ``lower_body``."""
+        return 0.0
 
     def added_mass_body(self, mech: Mechanism, body, mass: float) -> None:
         """Change the MJCF body (``mujoco.MjsBody``) of the added mass ``mass`` (kg) on ``mech``'s floor."""

@@ -39,7 +39,6 @@ Entity paths::
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
 import os
@@ -54,9 +53,10 @@ import scipy.signal
 
 from momentid.core.series import Experiment, RunData, channel_unit
 from momentid.errors import IdentificationError, SensorDataError, ViewerError
+from momentid.io.exclusive import write_whole
 
 __all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
-           "log_scene", "write_rrd", "show", "view", "rig_samples", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
+           "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
 
 #: The timeline of every run: seconds of experiment time.
 TIMELINE = "time"
@@ -102,6 +102,10 @@ class Scene:
         Equation residual (N) per run, when the run has ``a``, ``q``, ``v``.
     notes : list of str
         What could not be shown, and why.
+    overlay : object, optional
+        A layer shown beside each run and in the side column (the twin: :class:`momentid.twin.overlay.TwinOverlay`):
+        ``spatial_views(scene, run)``, ``series_views(scene, run)``, ``side_views()`` give its blueprint views,
+        ``log(rec, scene, run)`` and ``log_static(rec)`` its data.
     """
 
     experiment: Experiment
@@ -112,6 +116,7 @@ class Scene:
     residuals: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     reconstructed: dict = field(default_factory=dict)
+    overlay: object = None
 
     @property
     def heights(self) -> np.ndarray:
@@ -189,6 +194,12 @@ def _nice(x: float) -> float:
     """Largest 1-2-5 number not above ``x``."""
     decade = 10.0 ** math.floor(math.log10(x))
     return next(m * decade for m in (5, 2, 1) if m * decade <= x)
+
+
+#: Largest exaggeration / the default one (which draws the largest displacement at about a fifth of
+#: the building height): 1e4 draws it 2000 building heights away, where nothing is left to see (and
+#: beyond, the viewer's float32 positions overflow).
+MAX_EXAGGERATION = 1e4
 
 
 def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict | None = None) -> float:
@@ -295,7 +306,7 @@ def check_result(result, experiment: Experiment, source: str = "result") -> None
 
 
 def prepare(experiment: Experiment, *, result=None, exaggeration: float | None = None,
-            run: str | None = None, identify_options: dict | None = None) -> Scene:
+            run: str | None = None, identify_options: dict | None = None, identify: bool = True) -> Scene:
     """Identify (unless ``result`` is given), compare and collect what to show.
 
     Parameters
@@ -309,6 +320,8 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         The run whose tab opens first (default: the first run).
     identify_options : dict, optional
         Keyword arguments of :func:`momentid.estimation.identification` (estimator, runs, times).
+    identify : bool
+        Identify when no ``result`` is given (False: show none, e.g. beside a twin that carries its own).
 
     Returns
     -------
@@ -320,7 +333,8 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         Bad exaggeration, unknown run name, or a result of another recording.
     """
     from momentid.estimation.comparison import compare
-    from momentid.estimation.identification import equation_residual, identify
+    from momentid.estimation.identification import equation_residual
+    from momentid.estimation.identification import identify as identify_experiment
 
     names = [r.name for r in experiment.runs]
     if run is not None and run not in names:
@@ -332,13 +346,19 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         got = _reconstruct(r, experiment.storeys)
         if got is not None:
             scene.reconstructed[r.name] = got
-    scene.exaggeration = (exaggeration if exaggeration is not None
-                          else auto_exaggeration(experiment, scene.heights, scene.reconstructed))
+    default = auto_exaggeration(experiment, scene.heights, scene.reconstructed)
+    if exaggeration is not None and exaggeration > MAX_EXAGGERATION * default:
+        raise ViewerError(f"exaggeration = {exaggeration!r}: would draw the largest displacement at about "
+                          f"{exaggeration / default / 5:.3g} building heights; expected at most "
+                          f"{MAX_EXAGGERATION * default:g} (the default here is {default:g})")
+    scene.exaggeration = exaggeration if exaggeration is not None else default
     if result is not None:
         check_result(result, experiment)
+    elif not identify:
+        scene.notes.append("not identified: the twin's parameters are shown instead")
     else:
         try:
-            result = identify(experiment, **(identify_options or {}))
+            result = identify_experiment(experiment, **(identify_options or {}))
         except (IdentificationError, SensorDataError) as exc:
             scene.notes.append(f"not identified: {exc}")
     scene.result = result
@@ -412,10 +432,13 @@ def blueprint(scene: Scene):
         if run.name in scene.residuals:
             views.append(rrb.TimeSeriesView(name=f"{run.name}: equation residual of the identified model (N)",
                                             origin=f"{root}/residual", plot_legend=legend(True)))
+        spatial = [rrb.Spatial3DView(origin=f"{root}/rig", eye_controls=eye,
+                                     name=f"{run.name}: building, displacements drawn x{scene.exaggeration:g}")]
+        if scene.overlay is not None:
+            spatial += scene.overlay.spatial_views(scene, run, eye)
+            views += scene.overlay.series_views(scene, run)
         tabs.append(rrb.Horizontal(
-            rrb.Spatial3DView(origin=f"{root}/rig", eye_controls=eye,
-                              name=f"{run.name}: building, displacements drawn x{scene.exaggeration:g}"),
-            rrb.Vertical(*views),
+            rrb.Vertical(*spatial) if len(spatial) > 1 else spatial[0], rrb.Vertical(*views),
             column_shares=[2, 3], name=f"run {run.name}",
         ))
     side = [rrb.Tabs(rrb.TextDocumentView(origin="/identification/parameters", name="identified vs. analytic"),
@@ -428,6 +451,9 @@ def blueprint(scene: Scene):
                                      name="relative error per parameter (bar k = row k)",
                                      plot_legend=rrb.PlotLegend(visible=False)))
     shares = [3.0, 1.3, 1.6][:len(side)]
+    if scene.overlay is not None:
+        extra = scene.overlay.side_views()
+        side, shares = side + extra, shares + [2.0] * len(extra)
     layout = rrb.Horizontal(rrb.Tabs(*tabs, active_tab=scene.active_run),
                             rrb.Vertical(*side, row_shares=shares), column_shares=[5, 2])
     return rrb.Blueprint(layout, rrb.BlueprintPanel(state="collapsed"), rrb.SelectionPanel(state="collapsed"),
@@ -441,19 +467,22 @@ def rig_samples(run: RunData) -> np.ndarray:
     return np.arange(0, run.n_samples, step)
 
 
-def _log_rig(rec, scene: Scene, run: RunData) -> None:
+def log_rig(rec, scene: Scene, run: RunData, root: str | None = None, motion=None) -> None:
+    """Draw the rig of ``run`` moving: table and floors, at ``root`` (default ``/runs/<run>/rig``),
+    with ``motion = (z, q)`` (table displacement (n,), floors relative to it (n, d), m; default: the
+    recording's, :meth:`Scene.drawn`)."""
     import rerun as rr
 
     d, X = scene.experiment.storeys, scene.exaggeration
     h = scene.heights
     level = np.concatenate([[0.0], np.cumsum(h)])
     w = float(h.max())
-    root = f"{_run_path(run.name)}/rig"
+    root = root or f"{_run_path(run.name)}/rig"
     idx = rig_samples(run)
     n = idx.size
     time = rr.TimeColumn(TIMELINE, duration=run.time[idx])
     zero = np.zeros(n)
-    z, q = scene.drawn(run)
+    z, q = scene.drawn(run) if motion is None else motion
     z = zero if z is None else z[idx]
     q = np.zeros((n, d)) if q is None else q[idx]
     rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
@@ -574,6 +603,8 @@ def log_scene(rec, scene: Scene) -> None:
     rec.log("/identification/parameters", rr.TextDocument(_parameters_markdown(scene), media_type=md), static=True)
     if scene.result is not None:
         rec.log("/identification/modes", rr.TextDocument(_modes_markdown(scene), media_type=md), static=True)
+    if scene.overlay is not None:
+        scene.overlay.log_static(rec)
     if scene.comparison is not None:
         errors = np.array([e.rel_error for e in scene.comparison.entries])
         rec.log("/identification/rel_error",
@@ -581,7 +612,9 @@ def log_scene(rec, scene: Scene) -> None:
                 static=True)
     for run in scene.experiment.runs:
         root = _run_path(run.name)
-        _log_rig(rec, scene, run)
+        log_rig(rec, scene, run)
+        if scene.overlay is not None:
+            scene.overlay.log(rec, scene, run)
         time = rr.TimeColumn(TIMELINE, duration=run.time)
         for channel in run.channels:
             name, color = _channel_label(channel)
@@ -638,17 +671,9 @@ def write_rrd(experiment, path, **options) -> Path:
 
 def _write_file(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` whole or not at all (a temporary file renamed into place)."""
-    partial = path.with_name(path.name + ".partial")
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(partial, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(partial, path)
+        write_whole(path, data)   # locked: a second writer of the same file is refused
     except OSError as exc:
-        with contextlib.suppress(OSError):
-            partial.unlink(missing_ok=True)
         raise ViewerError(f"{path}: cannot write the rerun recording ({exc.strerror or exc}); "
                           f"expected a writable path with {len(data) / 1e6:.3g} MB free; nothing was written"
                           ) from None
@@ -699,7 +724,7 @@ def show(scene: Scene, *, port: int = 9876) -> None:
 
 
 def view(recording, *, save=None, result=None, exaggeration: float | None = None, run: str | None = None,
-         identify_options: dict | None = None, port: int = 9876) -> Path | None:
+         identify_options: dict | None = None, port: int = 9876, twin=None) -> Path | None:
     """Read ``recording``, then show it in the viewer or, with ``save``, write a ``.rrd``.
 
     Parameters
@@ -715,6 +740,9 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
         See :func:`prepare`.
     port : int
         Port of the viewer to connect to or spawn.
+    twin : str or Path, optional
+        A folder of ``momentid twin``: each run's twin floor accelerations beside the recorded ones
+        and the twin moving (:mod:`momentid.twin.overlay`); the recording is then not identified again.
 
     Returns
     -------
@@ -728,13 +756,23 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
     ViewerError
         See :func:`load_result`, :func:`prepare`, :func:`write_rrd`, :func:`show`.
     """
+    from momentid.io.mcap_check import MCAP_MAGIC
     from momentid.io.recording import read_recording
 
+    if save is not None and Path(save).is_file():
+        with open(save, "rb") as f:
+            if f.read(len(MCAP_MAGIC)) == MCAP_MAGIC:   # `view rec.mcap --save rec.mcap` destroyed the recording
+                raise ViewerError(f"--save {save}: that file is an MCAP recording; expected a new path or an "
+                                  f"existing .rrd (a rerun file written over it would destroy it)")
     experiment = recording if isinstance(recording, Experiment) else read_recording(recording)
     if isinstance(result, (str, Path)):
         result = load_result(result, experiment)
     scene = prepare(experiment, result=result, exaggeration=exaggeration, run=run,
-                    identify_options=identify_options)
+                    identify_options=identify_options, identify=twin is None)
+    if twin is not None:
+        from momentid.twin.overlay import TwinOverlay
+
+        scene.overlay = TwinOverlay.from_folder(twin, experiment)
     if save is not None:
         return write_rrd(scene, save)
     show(scene, port=port)

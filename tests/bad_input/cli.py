@@ -11,6 +11,7 @@ import momentid as mi
 
 from ._core import Case, CliResult, Group, Outcome, cli
 from .csv_import import lab_folder
+from .faults import held
 from .scenario import BASE, write
 
 #: Three runs (two with added mass) of the tiny scenario: enough for every estimator.
@@ -77,6 +78,12 @@ def _scenario(folder: Path):
     write(folder)
 
 
+def _noisy_scenario(folder: Path) -> None:
+    """The three-run scenario with 1 % sensor noise (a plan needs noise), as ``noisy.toml``."""
+    (folder / "noisy.toml").write_text(THREE_RUNS + '[sensors]\nset = "accel+disp"\n[sensors.accelerometer]\n'
+                                       'relative_noise = 0.01\n[sensors.displacement]\nrelative_noise = 0.01\n')
+
+
 def _lab_with(r1: str):
     return lambda folder: lab_folder(folder, r1=r1)
 
@@ -91,6 +98,54 @@ def _json_notes(*argv, cut_after=None, flip_in=None):
         if not notes:
             return CliResult(result.code, result.stdout, "")  # no note anywhere a script reads
         return CliResult(result.code, result.stdout, "note: " + json.dumps(notes))
+    return act
+
+
+def _aborted_rec(folder: Path) -> Path:
+    """The simulated recording as a Ctrl-C'd `momentid run` leaves it: two of its three planned runs,
+    then the writer's abort record."""
+    import warnings
+
+    from momentid.io.recording import RecordingWriter, read_recording
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        experiment = read_recording(_rec(folder))
+    path = folder / "aborted.mcap"
+    try:
+        with RecordingWriter(path, structure=experiment.structure, scenario=experiment.scenario,
+                             scenario_text=THREE_RUNS) as writer:
+            for run in experiment.runs[:2]:
+                writer.write_run(run)
+            raise KeyboardInterrupt
+    except KeyboardInterrupt:
+        pass
+    return path
+
+
+def _aborted_notes(*argv):
+    """``momentid identify <aborted recording> <argv> --json``: the note of the lost run must be in the
+    JSON, worded as the whole-file read words it (one way to say it, streamed or not)."""
+    def act(folder: Path) -> CliResult:
+        path = _aborted_rec(folder)
+        whole = json.loads(cli("identify", path, "--json").stdout).get("notes")
+        result = cli("identify", path, *argv, "--json")
+        notes = json.loads(result.stdout).get("notes")
+        if not notes or notes != whole:
+            return CliResult(result.code, result.stdout, "")   # no note, or another one than the whole read's
+        return CliResult(result.code, result.stdout, "note: " + json.dumps(notes))
+    return act
+
+
+def _while_held(kind: str, output: str, *argv, setup=None, rec=False):
+    """``momentid <argv>`` while another process holds ``output`` (``file``, ``whole`` or ``folder``:
+    :func:`.faults.held`); ``REC`` in ``argv`` stands for the simulated recording."""
+    def act(folder: Path) -> CliResult:
+        if setup is not None:
+            setup(folder)
+        path = _rec(folder) if rec else None
+        with held(kind, folder / output):
+            return cli(*(path if a == "REC" else a for a in argv))
     return act
 
 
@@ -154,6 +209,14 @@ CASES = [
          _in("run", "s.toml", "-q", "-o", "/proc/momentid_x", setup=_scenario), ("/proc/momentid_x",)),
     Case(Group.CLI, "run-output-is-a-file", Outcome.ERROR,
          _in("run", "s.toml", "-o", "taken", setup=lambda f: (_scenario(f), _file("taken")(f))), ("taken",)),
+    Case(Group.CLI, "run-mass-1e308", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: write(f, "masses = [10.0, 12.0]",
+                                                                           "masses = [1e308, 12.0]")),
+         ("s.toml", "structure.masses[0]", "1e+308")),
+    Case(Group.CLI, "run-stiffness-1e308", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: write(f, "storey_stiffness = [2000.0, 1500.0]",
+                                                                           "storey_stiffness = [2000.0, 1e308]")),
+         ("s.toml", "storey_stiffness[1]", "1e+308")),
     Case(Group.CLI, "run-workers-zero", Outcome.ERROR, _in("run", "-j", "0"), ("-j", "'0'")),
     Case(Group.CLI, "run-workers-word", Outcome.ERROR, _in("run", "-j", "many"), ("'many'",)),
     Case(Group.CLI, "run-sample-rate-1e12", Outcome.REFUSAL,
@@ -181,6 +244,19 @@ CASES = [
          ("corrupted after run 'm1'", "(m2)")),
     Case(Group.CLI, "identify-stream-crc-damaged-json", Outcome.RECOVERY,
          _json_notes("identify", "REC", "--stream", "--json", flip_in=3), ("CRCValidationError", "m2")),
+    # issue 22: a run named twice counted twice (every standard error shrank by sqrt 2)
+    Case(Group.CLI, "identify-runs-twice", Outcome.ERROR, _with_rec("identify", "REC", "--runs", "ref,m1,ref"),
+         ("--runs", "'ref'", "twice")),
+    Case(Group.CLI, "identify-runs-empty-name", Outcome.ERROR, _with_rec("identify", "REC", "--runs", "ref,,m1"),
+         ("--runs", "empty")),
+    Case(Group.CLI, "identify-per-run-twice", Outcome.ERROR,
+         _with_rec("identify", "REC", "--per-run", "--runs", "ref,ref"), ("'ref'", "twice")),
+    Case(Group.CLI, "run-runs-unknown", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "--runs", "ref,nope", "-o", "o.mcap", setup=_scenario), ("'nope'", "s.toml")),
+    # issue 22: after a Ctrl-C'd run, --stream said nothing of the lost run (the whole read did)
+    Case(Group.CLI, "identify-aborted-json", Outcome.RECOVERY, _aborted_notes(), ("aborted", "(m2)")),
+    Case(Group.CLI, "identify-stream-aborted-json", Outcome.RECOVERY, _aborted_notes("--stream"),
+         ("aborted", "(m2)")),
     Case(Group.CLI, "identify-stream-estimator-eiv", Outcome.ERROR,
          _with_rec("identify", "REC", "--stream", "--estimator", "eiv"), ("--stream", "--estimator eiv")),
     Case(Group.CLI, "identify-stream-runs", Outcome.ERROR,
@@ -209,16 +285,49 @@ CASES = [
          ("r.json",)),
     Case(Group.CLI, "view-unknown-run", Outcome.ERROR, _with_rec("view", "REC", "--save", "v.rrd", "--run", "nope"),
          ("nope",)),
+    Case(Group.CLI, "view-save-onto-its-recording", Outcome.ERROR, _with_rec("view", "REC", "--save", "REC"),
+         ("rec.mcap", "MCAP recording")),
+    Case(Group.CLI, "view-exaggeration-1e308", Outcome.ERROR,
+         _with_rec("view", "REC", "--save", "v.rrd", "--exaggeration", "1e308"), ("exaggeration", "1e+308")),
     Case(Group.CLI, "view-exaggeration-word", Outcome.ERROR, _in("view", "x.mcap", "--exaggeration", "big"),
          ("'big'",)),
     Case(Group.CLI, "diagnose-missing-file", Outcome.ERROR, _in("diagnose", "none.mcap"), ("none.mcap",)),
     Case(Group.CLI, "diagnose-output-is-a-file", Outcome.ERROR,
          _with_rec("diagnose", "REC", "-o", "rec.mcap"), ("rec.mcap", "a file of that name exists")),
+    # issue 22: two writers of one output both exited 0 and left an unreadable file
+    Case(Group.CLI, "run-output-being-written", Outcome.ERROR,
+         _while_held("file", "o.mcap", "run", "s.toml", "-q", "-o", "o.mcap", setup=_scenario),
+         ("o.mcap", "another process is writing it")),
+    Case(Group.CLI, "import-output-being-written", Outcome.ERROR,
+         _while_held("file", "lab.mcap", "import", "lab", "-o", "lab.mcap", setup=lab_folder),
+         ("lab.mcap", "another process is writing it")),
+    Case(Group.CLI, "view-save-being-written", Outcome.ERROR,
+         _while_held("whole", "v.rrd", "view", "REC", "--save", "v.rrd", rec=True),
+         ("v.rrd", "another process is writing it")),
+    Case(Group.CLI, "diagnose-folder-being-written", Outcome.ERROR,
+         _while_held("folder", "report", "diagnose", "REC", "-o", "report", rec=True),
+         ("report", "another process is writing it")),
+    Case(Group.CLI, "sweep-table-being-written", Outcome.ERROR,
+         _while_held("whole", "t.csv", "sweep", "w.toml", "-q", "-o", "t.csv", setup=lambda f: (_scenario(f), _file(
+             "w.toml", '[sweep]\nbase = "s.toml"\n[grid]\n"scenario.seed" = [0]\n')(f))),
+         ("t.csv", "another process is writing it")),
     Case(Group.CLI, "plan-missing-scenario", Outcome.ERROR, _in("plan", "none.toml"), ("none.toml",)),
     Case(Group.CLI, "plan-target-zero", Outcome.ERROR, _in("plan", "s.toml", "--target", "0"), ("'0'",)),
     Case(Group.CLI, "plan-target-nan", Outcome.ERROR, _in("plan", "s.toml", "--target", "nan"), ("'nan'",)),
     Case(Group.CLI, "plan-max-runs-zero", Outcome.ERROR, _in("plan", "s.toml", "--max-runs", "0"), ("'0'",)),
+    # issue 22: plan --max-runs 1000000 ran for hours without a word
+    Case(Group.CLI, "plan-max-runs-1e6", Outcome.REFUSAL,
+         _in("plan", "noisy.toml", "--max-runs", "1000000", setup=_noisy_scenario), ("9999990 designs", "refused")),
+    Case(Group.CLI, "plan-beyond-time-limit", Outcome.REFUSAL,
+         _in("plan", "noisy.toml", "--max-runs", "5000", "--time-limit", "10", setup=_noisy_scenario),
+         ("5000 runs", "--max-runs", "--time-limit", "refused")),
+    Case(Group.CLI, "plan-max-runs-one", Outcome.ERROR,
+         _in("plan", "noisy.toml", "--max-runs", "1", setup=_noisy_scenario), ("--max-runs 1",)),
     Case(Group.CLI, "sweep-missing-spec", Outcome.ERROR, _in("sweep", "none.toml"), ("none.toml",)),
+    Case(Group.CLI, "sweep-grid-value-twice", Outcome.ERROR,
+         _in("sweep", "w.toml", setup=lambda f: (_scenario(f), _file(
+             "w.toml", '[sweep]\nbase = "s.toml"\n[grid]\n"scenario.seed" = [0, 1, 0]\n')(f))),
+         ("w.toml", "scenario.seed", "twice")),
     Case(Group.CLI, "sweep-bad-spec", Outcome.ERROR, _in("sweep", "w.toml", setup=_file("w.toml", "[sweep]\nbase = 3\n")),
          ("w.toml", "base")),
 ]

@@ -41,6 +41,15 @@ def _cell(row: int, column: str, value: str) -> str:
     return "\n".join(lines)
 
 
+def _both_missing(row: int) -> str:
+    """Line ``row`` without its stamp and its packet counter: nothing places it."""
+    lines = dot_text().split("\n")
+    cells = lines[row - 1].split(",")
+    cells[0] = cells[1] = ""
+    lines[row - 1] = ",".join(cells)
+    return "\n".join(lines)
+
+
 def _clock(tick):
     """The good file with the device clock of data row ``k`` (0-based) set to ``tick(k)``."""
     lines = dot_text().split("\n")
@@ -51,7 +60,7 @@ def _clock(tick):
     return "\n".join(lines)
 
 
-def _read(text: str | bytes):
+def reading(text: str | bytes):
     def act(folder: Path):
         path = folder / "dot.csv"
         path.write_bytes(text if isinstance(text, bytes) else text.encode("utf-8"))
@@ -63,7 +72,8 @@ _BAD_FILES = [
     ("acc-1e308", _cell(12, "Acc_X", "1e308"), ("dot.csv", "row 12", "'Acc_X'", "1e+308")),
     ("acc-inf", _cell(13, "Acc_Z", "-inf"), ("dot.csv", "row 13", "'Acc_Z'", "-inf")),
     ("acc-word", _cell(14, "Acc_Y", "g"), ("dot.csv", "row 14", "'Acc_Y'")),
-    ("clock-missing-cell", _cell(15, "SampleTimeFine", ""), ("dot.csv", "row 15", "'SampleTimeFine'")),
+    ("clock-missing-cell-and-counter", _both_missing(15),
+     ("dot.csv", "row 15", "'SampleTimeFine'")),
     ("clock-negative", _cell(15, "SampleTimeFine", "-5"), ("dot.csv", "row 15", "'SampleTimeFine'", "-5")),
     ("clock-beyond-uint32", _cell(15, "SampleTimeFine", "1e300"), ("dot.csv", "row 15", "'SampleTimeFine'")),
     ("clock-jitter", _cell(15, "SampleTimeFine", str(699806679 + 6 * STEP_US + 1000)),
@@ -123,7 +133,7 @@ def _same_file_twice(folder: Path):
     return _folder('"f2.csv"]', '"f2.csv"]')(folder)
 
 
-CASES = [Case(Group.IMU, id_, Outcome.ERROR, _read(text), names) for id_, text, names in _BAD_FILES] + [
+CASES = [Case(Group.IMU, id_, Outcome.ERROR, reading(text), names) for id_, text, names in _BAD_FILES] + [
     Case(Group.IMU, id_, Outcome.ERROR, _folder(old, new), ("experiment.toml", *names))
     for id_, old, new, *names in _BAD_TOML] + [
     Case(Group.IMU, "same-data-in-every-file", Outcome.ERROR, _same_file_twice, (".csv",)),

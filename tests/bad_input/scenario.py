@@ -111,6 +111,24 @@ _BAD_KEYS = [
     ("truth-storey-out-of-range", "[[runs]]\nname = \"ref\"",
      "[[truth.mechanisms]]\ntype = \"coulomb_friction\"\nstorey = 7\nforce = 0.3\n\n[[runs]]\nname = \"ref\"",
      "storey", "7"),
+    # issue 22: finite but absurd values overflowed inside the simulation (a traceback from an eigen-solver)
+    ("masses-1e308", "masses = [10.0, 12.0]", "masses = [1e308, 12.0]", "structure.masses[0]", "1e+308", "kg"),
+    ("masses-1e-308", "masses = [10.0, 12.0]", "masses = [10.0, 1e-308]", "structure.masses[1]", "1e-308"),
+    ("stiffness-1e308", "storey_stiffness = [2000.0, 1500.0]", "storey_stiffness = 1e308",
+     "storey_stiffness", "1e+308", "N/m"),
+    ("mu-1e308", "rayleigh_mu = 0.05", "rayleigh_mu = 1e308", "rayleigh_mu", "1e+308"),
+    ("kappa-1e308", "rayleigh_kappa = 0.001", "rayleigh_kappa = 1e308", "rayleigh_kappa", "1e+308"),
+    ("base-mass-1e-20", "storey_stiffness = [2000.0, 1500.0]",
+     "storey_stiffness = [2000.0, 1500.0]\nbase_mass = 1e-20", "base_mass", "1e-20"),
+    ("storey-height-1e308", "storey_stiffness = [2000.0, 1500.0]",
+     "storey_stiffness = [2000.0, 1500.0]\nstorey_height = 1e308", "storey_height", "1e+308"),
+    ("added-mass-1e308", "added_mass = [0.5, 0.5]", "added_mass = [1e308, 0.5]", "added_mass[0]", "1e+308"),
+    ("amplitude-1e308", "amplitude = 0.002", "amplitude = 1e308", "excitation.amplitude", "1e+308", "m"),
+    ("angular-frequency-1e308", "angular_frequency = 6.2832", "angular_frequency = 1e308",
+     "angular_frequency", "1e+308"),
+    ("frequency-1e308", "angular_frequency = 6.2832", "frequency = 1e308", "excitation.frequency", "1e+308", "Hz"),
+    ("tracking-error-1e308", 'type = "harmonic"', 'type = "harmonic"\ntracking_error = 1e308',
+     "tracking_error", "1e+308"),
 ]
 
 def _not_utf8(folder: Path):

@@ -20,7 +20,8 @@ import numpy as np
 
 from momentid.core.series import channel_unit
 from momentid.errors import SensorDataError
-from momentid.io.formats.base import MAX_ABS_SAMPLE, ExportFormat, Layout, first_absurd, read_text, register
+from momentid.io.formats.base import (MAX_ABS_SAMPLE, ExportFormat, Layout, first_absurd, read_text, register,
+                                      require_table_memory)
 
 __all__ = ["read_csv_run", "csv_error", "TIME_TOLERANCE", "MIN_SAMPLES"]
 
@@ -50,9 +51,14 @@ def csv_error(path: Path, row: int, column: str, message: str) -> SensorDataErro
 
 def _columns(path: Path, header: str, d: int) -> tuple[str, ...]:
     """Validate the header line (row 1) against the vocabulary for ``d`` storeys."""
+    names = tuple(c.strip() for c in header.split(","))
+    if d > len(names):  # before anything of size d is built
+        floors = sum(1 for n in names if n[:1] == "a" and n[1:].isdigit())
+        raise csv_error(path, 1, f"'a{floors + 1}'", f"missing: the header has {floors} floor accelerations of the "
+                                                     f"{d} storeys experiment.toml states; expected the columns "
+                                                     f"{_header_help(d)}")
     groups = {g: tuple(f"{g}{i + 1}" for i in range(d)) for g in ("a", "q", "v")}
     known = {"t", "zdd", "z", "zd", *groups["a"], *groups["q"], *groups["v"]}
-    names = tuple(c.strip() for c in header.split(","))
     seen: set[str] = set()
     for j, name in enumerate(names):
         if name not in known:
@@ -188,6 +194,7 @@ def read_csv_run(path, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.nd
     rows = body.count("\n") + 1 if body else 0
     if rows < MIN_SAMPLES:
         raise csv_error(path, rows + 2, "'t'", f"{rows} data rows; expected at least {MIN_SAMPLES} samples")
+    require_table_memory(path, rows, len(names))
     data = _parse(path, body, names)
     k = names.index("t")
     time = _uniform_time(path, data[:, k])

@@ -11,11 +11,22 @@ The file (as the Xsens DOT app writes it, gzip allowed): preamble lines
 * ``Acc_X, Acc_Y, Acc_Z``: specific force in m/s^2 in the sensor frame,
   gravity included.
 
+* ``PacketCounter``: a 16-bit packet counter (it wraps at 65536; the wrap
+  is undone); it places a row whose ``SampleTimeFine`` cell is empty.
+
 Other columns (``Euler_*``, ``Gyr_*``, ``Quat_*``, ...) are parsed for
 well-formedness and ignored.  The device writes its first row before it
-measures (all accelerations exactly zero): that row is dropped.  Rows the
-device lost (a step of k sample intervals in ``SampleTimeFine``) become
-``nan`` samples, so the time base stays uniform and the gap stays visible.
+measures (all accelerations exactly zero): that row is dropped.
+
+Lost packets show two ways: the clock steps k sample intervals (k - 1
+samples never arrived), or the app writes a row for the lost packet with
+``nan``/``inf`` in every channel, stamped with the stamp of the row before
+(whose own stamp then jumps two intervals) while ``PacketCounter`` runs on.
+Such rows are dropped and every sample is placed by its stamp; a missing
+sample (lost, or an empty cell) is then interpolated linearly when at most
+:data:`~momentid.io.formats.base.MAX_REPAIR_GAP` are missing in a row, with a
+note naming the rows; a longer gap is an error naming them.  An export in g
+(gravity reads ~1) is converted to m/s^2 with a note.
 """
 
 from __future__ import annotations
@@ -27,11 +38,15 @@ from pathlib import Path
 import numpy as np
 
 from momentid.errors import SensorDataError
-from momentid.io.formats.base import MAX_ABS_SAMPLE, ExportFormat, Layout, SensorRecord, first_absurd, read_text, register
+from momentid.io.formats.base import (MAX_ABS_SAMPLE, ExportFormat, Layout, SensorRecord, first_absurd, read_text,
+                                      register, repair_missing, require_table_memory)
 
 __all__ = ["read_xsens_dot", "CLOCK_COLUMN", "ACC_COLUMNS"]
 
 CLOCK_COLUMN = "SampleTimeFine"
+COUNTER_COLUMN = "PacketCounter"
+#: ``PacketCounter`` is a uint16 counter of packets.
+COUNTER_WRAP = 2 ** 16
 ACC_COLUMNS = ("Acc_X", "Acc_Y", "Acc_Z")
 #: Microseconds per second (``SampleTimeFine`` counts microseconds).
 CLOCK_TICKS_PER_SECOND = 1e6
@@ -51,6 +66,12 @@ MIN_SAMPLES = 3
 MAX_SPAN_PER_ROW = 2
 #: Cells read as a missing sample.
 MISSING_CELLS = ("", "nan", "NaN", "NAN")
+#: Standard gravity (m/s^2): an export in g is converted with it.
+STANDARD_GRAVITY = 9.80665
+#: Magnitude (m/s^2) of the mean acceleration of a sensor under gravity: 9.78-10.15 on the shipped
+#: DOTs (latitude, calibration and a tilt-dependent offset of a few percent); a wider band still
+#: tells m/s^2 from g (a factor 9.8) and refuses anything else (a unit neither, a broken sensor).
+GRAVITY_RANGE = (8.0, 11.6)
 
 
 def _error(path: Path, row: int, column: str, message: str) -> SensorDataError:
@@ -106,12 +127,60 @@ def _parse(path: Path, body: str, names: tuple[str, ...], first_row: int) -> np.
     return data
 
 
-def _grid(path: Path, ticks: np.ndarray, first_row: int) -> tuple[np.ndarray, float, float]:
-    """Sample index of each row on the device's uniform clock, the first tick and the interval (ticks)."""
+def _placeholders(path: Path, acc: np.ndarray, ticks: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Rows the app wrote for packets it lost: every acceleration non-finite (``nan``/``inf``).  Returns
+    the mask of those rows and a note naming them and the stamp each repeats (the app stamps such a
+    row with the time of the row before it, whose own stamp then jumps two intervals)."""
+    lost = ~np.any(np.isfinite(acc), axis=1)
+    if not lost.any():
+        return lost, []
+    repeats = [int(rows[i]) for i in np.flatnonzero(lost) if i > 0 and ticks[i] == ticks[i - 1]]
+    where = _row_list(rows[lost])
+    note = (f"{where}: no acceleration (every cell empty, nan or inf: {int(lost.sum())} lost "
+            f"packet{'s' if lost.sum() > 1 else ''}), row{'s' if lost.sum() > 1 else ''} dropped; the samples "
+            f"are placed by {CLOCK_COLUMN}")
+    if repeats:
+        note += f" ({_row_list(np.array(repeats))} repeat{'s' if len(repeats) == 1 else ''} the stamp of the row " \
+                f"before: the stamp of the lost packet)"
+    return lost, [note]
+
+
+def _stamps_from_counter(ticks: np.ndarray, counter: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Rows without a ``SampleTimeFine`` stamp placed by ``PacketCounter`` (uint16, its wrap undone)
+    from the nearest stamped row before them; left as they are (for :func:`_grid` to name) when the
+    counter cannot place them."""
+    missing = ~np.isfinite(ticks)
+    ok = np.isfinite(ticks)
+    if not missing.any() or not np.all(np.isfinite(counter)) or ok.sum() < 2 or not ok[0]:
+        return ticks, []
+    if np.any((counter < 0) | (counter >= COUNTER_WRAP) | (counter != np.round(counter))):
+        return ticks, []
+    packets = np.concatenate([[0.0], np.cumsum(np.diff(counter) % COUNTER_WRAP)])
+    moved = np.diff(packets[ok])
+    if not np.all(moved > 0):
+        return ticks, []
+    step = float(np.median(np.diff(ticks[ok]) / moved))
+    previous = np.maximum.accumulate(np.where(ok, np.arange(ticks.size), 0))
+    out = ticks.copy()
+    out[missing] = (ticks[previous[missing]] + (packets[missing] - packets[previous[missing]]) * step) % CLOCK_WRAP
+    return out, [f"{_row_list(rows[missing])}: no {CLOCK_COLUMN} stamp; placed by {COUNTER_COLUMN} "
+                 f"({step:.0f} us per packet)"]
+
+
+def _row_list(rows: np.ndarray) -> str:
+    """``"row 12"``, ``"rows 12, 40"`` or ``"rows 12, 40, 77 and 5 more"``."""
+    shown = ", ".join(str(int(r)) for r in rows[:3])
+    more = f" and {rows.size - 3} more" if rows.size > 3 else ""
+    return f"row{'s' if rows.size > 1 else ''} {shown}{more}"
+
+
+def _grid(path: Path, ticks: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, float, float]:
+    """Sample index of each row on the device's uniform clock, the first tick and the interval (ticks);
+    ``rows`` are the rows' line numbers, for the messages."""
     bad = np.flatnonzero(~((ticks >= 0) & (ticks < CLOCK_WRAP)))  # nan too
     if bad.size:
         i = int(bad[0])
-        raise _error(path, first_row + i, f"'{CLOCK_COLUMN}'",
+        raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
                      f"{float(ticks[i])!r}; expected the device clock (us, a uint32 counter from 0 to "
                      f"{CLOCK_WRAP - 1}) on every row")
     step_all = np.diff(ticks)
@@ -119,22 +188,44 @@ def _grid(path: Path, ticks: np.ndarray, first_row: int) -> tuple[np.ndarray, fl
     ticks = ticks[0] + np.concatenate([[0.0], np.cumsum(step_all)])
     step = float(np.median(step_all))
     if not step > 0:
-        raise _error(path, first_row, f"'{CLOCK_COLUMN}'", "does not advance; expected a running clock (us)")
+        raise _error(path, int(rows[0]), f"'{CLOCK_COLUMN}'", "does not advance; expected a running clock (us)")
+    same = np.flatnonzero(step_all == 0)
+    if same.size:
+        i = int(same[0]) + 1
+        raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
+                     f"{ticks[i]:.0f} us repeats the stamp of row {int(rows[i - 1])}; expected one row per "
+                     f"sample (a repeated stamp is the app's mark of a lost packet only on a row whose "
+                     f"accelerations are all nan/inf)")
     k = step_all / step
     off = np.flatnonzero((k < 1 - STEP_TOLERANCE) | (np.abs(k - np.round(k)) > STEP_TOLERANCE))
     if off.size:
         i = int(off[0]) + 1
-        raise _error(path, first_row + i, f"'{CLOCK_COLUMN}'",
-                     f"{ticks[i]:.0f} us is {step_all[i - 1]:.0f} us after the row before; expected a "
-                     f"whole number of sample intervals ({step:.0f} us): the clock went back or jittered")
+        what = "went back" if step_all[i - 1] < 0 else "jittered"
+        raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
+                     f"{ticks[i]:.0f} us is {step_all[i - 1]:.0f} us after row {int(rows[i - 1])}; expected a "
+                     f"whole number of sample intervals ({step:.0f} us): the clock {what}")
     index = np.round((ticks - ticks[0]) / step).astype(np.int64)
     if index[-1] + 1 > MAX_SPAN_PER_ROW * index.size:
         i = int(np.argmax(step_all)) + 1
-        raise _error(path, first_row + i, f"'{CLOCK_COLUMN}'",
+        raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
                      f"{ticks[i]:.0f} us is {step_all[i - 1]:.0f} us ({step_all[i - 1] / step:.0f} sample "
                      f"intervals) after the row before; expected at most {MAX_SPAN_PER_ROW - 1} lost samples "
                      f"per recorded one: the file lost more than it holds")
     return index, ticks[0], step
+
+
+def _units(path: Path, acc: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """Accelerations in m/s^2: an export in g (gravity reads ~1) is converted with a note; a gravity
+    that is neither is refused (a sensor at rest on Earth reads 1 g whatever its mounting)."""
+    gravity = float(np.linalg.norm(np.nanmean(acc, axis=0)))
+    if GRAVITY_RANGE[0] <= gravity <= GRAVITY_RANGE[1]:
+        return acc, []
+    if GRAVITY_RANGE[0] <= gravity * STANDARD_GRAVITY <= GRAVITY_RANGE[1]:
+        return acc * STANDARD_GRAVITY, [
+            f"accelerations in g (gravity reads {gravity:.3f}): converted to m/s^2 (x {STANDARD_GRAVITY})"]
+    raise SensorDataError(f"{path}: gravity reads {gravity:.4g} (the magnitude of the mean of "
+                          f"{', '.join(ACC_COLUMNS)}); expected {GRAVITY_RANGE[0]:g}-{GRAVITY_RANGE[1]:g} m/s^2 "
+                          f"(or the same in g): not accelerations of a sensor under gravity, or an unknown unit")
 
 
 def read_xsens_dot(path) -> SensorRecord:
@@ -148,15 +239,19 @@ def read_xsens_dot(path) -> SensorRecord:
     Returns
     -------
     SensorRecord
-        ``time`` (n,) s on the device clock (uniform; rows the device lost are
-        ``nan`` samples in ``acc``), ``acc`` (n, 3) m/s^2 along the sensor's
-        X, Y, Z with gravity, ``info`` the preamble (``DeviceTag``,
-        ``FirmwareVersion``, ``StartTime``, ...) plus ``lost_samples``.
+        ``time`` (n,) s on the device clock (uniform), ``acc`` (n, 3) m/s^2
+        along the sensor's X, Y, Z with gravity: lost packets and empty cells
+        (at most :data:`~momentid.io.formats.base.MAX_REPAIR_GAP` in a row)
+        interpolated, incomplete samples at either end dropped, an export in g
+        converted; ``info`` the preamble (``DeviceTag``, ``FirmwareVersion``,
+        ``StartTime``, ...) plus ``lost_samples``; ``notes`` what was repaired
+        or converted, naming the rows.
 
     Raises
     ------
     SensorDataError
-        Naming the file, row (1-based line number) and column.
+        Naming the file, row (1-based line number) and column; a gap longer
+        than ``MAX_REPAIR_GAP`` samples names its rows.
     """
     path = Path(path)
     lines = read_text(path).rstrip().split("\n")
@@ -171,24 +266,53 @@ def read_xsens_dot(path) -> SensorRecord:
     if len(lines) - h - 1 < MIN_SAMPLES or not body.strip():
         raise _error(path, first_row, f"'{CLOCK_COLUMN}'",
                      f"{len(lines) - h - 1} data rows; expected at least {MIN_SAMPLES} samples")
+    require_table_memory(path, len(lines) - h - 1, len(names))
     data = _parse(path, body, names, first_row)
+    rows = first_row + np.arange(data.shape[0])
     acc = data[:, [names.index(c) for c in ACC_COLUMNS]]
+    ticks = data[:, names.index(CLOCK_COLUMN)]
+    if np.all(acc[0] == 0.0):  # written before the device measures
+        acc, ticks, rows = acc[1:], ticks[1:], rows[1:]
+    lost, notes = _placeholders(path, acc, ticks, rows)
+    acc, ticks, rows = acc[~lost], ticks[~lost], rows[~lost]
+    if COUNTER_COLUMN in names:
+        counter = data[:, names.index(COUNTER_COLUMN)][data.shape[0] - lost.size:][~lost]
+        ticks, stamped = _stamps_from_counter(ticks, counter, rows)
+        notes += stamped
+    if rows.size < MIN_SAMPLES:
+        raise _error(path, first_row, f"'{CLOCK_COLUMN}'", f"{rows.size} rows with measured accelerations; "
+                                                          f"expected at least {MIN_SAMPLES} samples")
     absurd = first_absurd(acc)
     if absurd is not None:
         i, j = absurd
-        raise _error(path, first_row + i, f"'{ACC_COLUMNS[j]}'",
+        raise _error(path, int(rows[i]), f"'{ACC_COLUMNS[j]}'",
                      f"{float(acc[i, j])!r} m/s^2; expected a finite acceleration of magnitude at most "
                      f"{MAX_ABS_SAMPLE:g} m/s^2 (or an empty cell for a lost sample)")
-    ticks = data[:, names.index(CLOCK_COLUMN)]
-    if np.all(acc[0] == 0.0):  # written before the device measures
-        acc, ticks, first_row = acc[1:], ticks[1:], first_row + 1
-    index, start, step = _grid(path, ticks, first_row)
+    index, start, step = _grid(path, ticks, rows)
     full = np.full((int(index[-1]) + 1, 3), np.nan)
     full[index] = acc
-    info = dict(info, lost_samples=int(full.shape[0] - index.size))
-    time = (start + np.arange(full.shape[0]) * step) / CLOCK_TICKS_PER_SECOND
-    return SensorRecord(path=path, time=time, step=step / CLOCK_TICKS_PER_SECOND, acc=full,
-                        axes=("X", "Y", "Z"), info=info)
+    gaps = int(full.shape[0] - index.size)
+
+    dropped = np.flatnonzero(lost) + (data.shape[0] - lost.size) + first_row
+
+    def span(a: int, b: int) -> str:
+        """The file rows of grid samples a..b-1 (a lost sample lies between two rows)."""
+        inside = rows[(index >= a) & (index < b)]
+        before, after = rows[index < a], rows[index >= b]
+        if not inside.size and before.size and after.size:
+            inside = dropped[(dropped > before[-1]) & (dropped < after[0])]
+            if not inside.size:
+                return f"the {b - a} sample{'s' if b - a > 1 else ''} lost between rows {before[-1]} and {after[0]}"
+        if not inside.size:
+            return f"{b - a} samples"
+        return f"rows {inside[0]}-{inside[-1]}" if inside.size > 1 else f"row {inside[0]}"
+
+    full, keep, repaired = repair_missing(full, span, ACC_COLUMNS, str(path))
+    acc, units = _units(path, full)
+    info = dict(info, lost_samples=gaps + int(lost.sum()))
+    time = (start + np.arange(keep.start, keep.stop) * step) / CLOCK_TICKS_PER_SECOND
+    return SensorRecord(path=path, time=time, step=step / CLOCK_TICKS_PER_SECOND, acc=acc,
+                        axes=("X", "Y", "Z"), info=info, notes=tuple(notes + repaired + units))
 
 
 register(ExportFormat(name="xsens-dot", layout=Layout.SENSOR_FILES, read_sensor=read_xsens_dot,

@@ -1,0 +1,138 @@
+"""Processes: workers that die with their parent, and the signals a command handles.
+
+A forked worker blocked on its task queue outlives a parent killed by SIGTERM or SIGKILL: it is
+re-parented to init and waits forever, holding its memory (120-170 MB for a diagnosis trial).
+:func:`forked_pool` is the one way momentid starts worker processes (diagnosis trials, simulated
+runs with callback physics, sweep cases): every worker asks the kernel to kill it when its parent
+dies (:func:`die_with_parent`), and leaving the pool by an exception (Ctrl-C, or SIGTERM, which the
+command line turns into Ctrl-C) kills the workers at once instead of waiting for their tasks.
+
+A command (:func:`momentid.cli.main`) handles SIGTERM like Ctrl-C (:func:`sigterm_as_interrupt`:
+outputs are closed as on an interrupt, and it exits 143), and a reader of its output that goes away
+ends it quietly (:func:`quiet_broken_pipe`: exit 141, no text).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import io
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor
+from typing import Callable, Iterator
+
+__all__ = ["die_with_parent", "forked_pool", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
+           "quiet_broken_pipe"]
+
+#: ``prctl`` option asking for a signal when the parent dies (linux/prctl.h).
+PR_SET_PDEATHSIG = 1
+#: Where ``prctl`` does not exist (not Linux): how often (s) a worker's watchdog thread checks that
+#: its parent is alive.
+PARENT_POLL_S = 0.5
+
+
+def _watch(parent: int) -> None:
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
+
+
+def die_with_parent(parent: int) -> None:
+    """In a worker forked by process ``parent``: die when the parent does.
+
+    Linux: ``prctl(PR_SET_PDEATHSIG, SIGKILL)``, so the kernel kills the worker the moment its
+    parent ends, however it ends; a parent already gone before the request is caught by
+    comparing ``os.getppid()``.  Elsewhere (no ``prctl``): a daemon thread polls ``os.getppid()``
+    every :data:`PARENT_POLL_S` seconds and exits the worker once it has been re-parented.
+    SIGTERM is restored to its default (the command line's handler, inherited by the fork, would
+    turn it into a KeyboardInterrupt that the pool reports as the task's result).
+    """
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0) == 0:
+            if os.getppid() != parent:
+                os._exit(1)
+            return
+    threading.Thread(target=_watch, args=(parent,), daemon=True, name="momentid-parent-watch").start()
+
+
+def _start(parent: int, initializer: Callable | None, initargs: tuple) -> None:
+    die_with_parent(parent)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+@contextlib.contextmanager
+def forked_pool(workers: int, initializer: Callable | None = None, initargs: tuple = ()
+                ) -> Iterator[ProcessPoolExecutor]:
+    """A ``ProcessPoolExecutor`` of ``workers`` forked processes (spawned where fork does not exist)
+    that die with this process, and are killed when the ``with`` block is left by an exception.
+
+    Parameters
+    ----------
+    workers : int
+        Worker processes.
+    initializer, initargs
+        As for ``ProcessPoolExecutor``: run in each worker after :func:`die_with_parent`.
+    """
+    methods = multiprocessing.get_all_start_methods()
+    context = multiprocessing.get_context("fork" if "fork" in methods else None)
+    before = {p.pid for p in multiprocessing.active_children()}
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_start,
+                               initargs=(os.getpid(), initializer, initargs))
+    try:
+        yield pool
+    except BaseException:
+        # Interrupted: the tasks' results are not wanted; do not wait for them.
+        pool.shutdown(wait=False, cancel_futures=True)
+        for child in multiprocessing.active_children():
+            if child.pid not in before:
+                child.kill()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, handled like Ctrl-C: outputs are closed as on an interrupt (a recording keeps its
+    completed runs and notes the signal), worker processes are stopped, and the command exits 143
+    (128 + SIGTERM)."""
+
+    def __str__(self) -> str:
+        return "SIGTERM"
+
+
+def _raise_terminated(signum, frame) -> None:
+    raise Terminated
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While the block runs, SIGTERM raises :class:`Terminated` (main thread only: elsewhere Python
+    cannot install handlers, and the default, dying at once, stays)."""
+    try:
+        old = signal.signal(signal.SIGTERM, _raise_terminated)
+    except ValueError:   # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, old)
+
+
+def quiet_broken_pipe() -> int:
+    """The reader of stdout went away (``momentid identify --json | head -c 10``): nothing more is
+    written there (stdout now points at /dev/null, so the interpreter's last flush cannot complain
+    either); returns 141 (128 + SIGPIPE, what a shell shows for a pipeline's writer)."""
+    with contextlib.suppress(OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    return 128 + signal.SIGPIPE

@@ -1,0 +1,332 @@
+"""Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without joint friction.
+
+The twin (:class:`~momentid.lab.resim.RigModel`: stated floor masses, a full stiffness matrix, modal
+damping, ``joint_friction`` in chosen storeys, one gain and clock offset per floor sensor) is fitted by
+output error: every training trial is re-simulated through MuJoCo under its recorded table
+acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
+that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
+parameter set explains them all).  The optimiser is scipy's trust-region least squares; the Jacobian's
+physical columns are forward differences, all re-simulated in one batched rollout per trial
+(:func:`~momentid.lab.resim.simulate`); the sensors' columns need no re-simulation.
+
+Every NRMSE is :func:`~momentid.diagnosis.modal_check.nrmse` over the floor channels after the trial's
+quiet lead-in.  A trial's low-energy tail (after :data:`FIT_ENERGY` of its floor signal's energy) is not
+re-simulated while fitting; held-out trials are always simulated whole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.optimize
+
+from momentid.core.series import RunData
+from momentid.diagnosis import modal_check as mc
+from momentid.errors import IdentificationError, MomentidError
+from momentid.lab import resim
+from momentid.mechanisms import joint_friction as jf
+
+__all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "FIT_ENERGY", "friction_start",
+           "twin_modes"]
+
+#: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
+FIT_ENERGY = 0.99
+#: Forward-difference step, relative to each parameter's typical size.
+DIFF_STEP = 1e-3
+#: Optimiser's evaluation cap per fit (each evaluation re-simulates the training trials once).
+MAX_NFEV = 40
+#: Drift (m) at which the fit states a joint's stiffness loss (storey drifts of a bench rig: 0.1-10 mm).
+REFERENCE_DRIFT = 1e-3
+#: Bounds of the friction parameters in the fit: stiffness lost at REFERENCE_DRIFT (N/m), slip drift (m),
+#: exponent.
+FRICTION_BOUNDS = ((1e-3, 300.0), (2e-4, 0.05), (-0.9, 1.0))
+#: Bounds of the modal damping ratios and the sensors' log-gains and clock offsets (s).
+DAMPING_BOUNDS = (-0.01, 0.1)
+GAIN_BOUNDS = (-0.2, 0.2)
+OFFSET_BOUNDS = (-0.02, 0.02)
+#: Share of the linear twin's viscous damping an augmented fit starts from.
+START_DAMPING_SHARE = 0.3
+_INVALID = 10.0     # residual of a parameter set whose stiffness is not positive definite
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One recorded trial: table acceleration, floor accelerations, where its shaking starts.
+
+    Attributes
+    ----------
+    name : str
+    zdd : ndarray, shape (n,)
+    a : ndarray, shape (n, d)
+    dt : float
+    start : int
+        First sample after the quiet lead-in.
+    fit_stop : int
+        Samples re-simulated while fitting (:data:`FIT_ENERGY`).
+    norm : float
+        ``sqrt(sum |a - mean|^2)`` after ``start`` (the NRMSE's denominator).
+    """
+
+    name: str
+    zdd: np.ndarray
+    a: np.ndarray
+    dt: float
+    start: int
+    fit_stop: int
+    norm: float
+
+
+def trial(run: RunData, d: int) -> Trial:
+    """A :class:`Trial` from a run with ``zdd`` and ``a1..ad`` (m/s^2)."""
+    a = run.group("a", d)
+    start = mc.active_start(run)
+    active = a[start:]
+    energy = np.cumsum(np.sum(a ** 2, axis=1))
+    stop = int(min(len(a), np.searchsorted(energy, FIT_ENERGY * energy[-1]) + 1))
+    return Trial(run.name, np.asarray(run["zdd"], float), a, 1.0 / run.sample_rate, start, max(stop, start + 2),
+                 float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2))))
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A twin fitted by re-simulation.
+
+    Attributes
+    ----------
+    model : RigModel
+    trials : tuple of str
+        The trials it was fitted to.
+    nrmse : dict
+        Each training trial's NRMSE (whole trial).
+    cost : float
+        Sum of the training trials' squared NRMSE over the fitted spans.
+    nfev : int
+    """
+
+    model: resim.RigModel
+    trials: tuple
+    nrmse: dict
+    cost: float
+    nfev: int
+
+
+class _Layout:
+    """The parameter vector: K's upper triangle (N/m), damping ratios, per friction storey (log of the
+    stiffness its secant has lost at :data:`REFERENCE_DRIFT`, log slip drift, exponent), then log-gains and
+    clock offsets of the sensors.  Below the slip drift a joint's loss grows as a power of the drift, so
+    its stiffness and slip drift are nearly interchangeable; the loss at a drift the rig reaches is what
+    the trials determine."""
+
+    def __init__(self, template: resim.RigModel, storeys: tuple):
+        self.template = template
+        self.d = template.storeys
+        self.storeys = tuple(storeys)
+        self.iu = np.triu_indices(self.d)
+        self.n_phys = len(self.iu[0]) + self.d + 3 * len(self.storeys)
+        # each parameter's typical size, for the difference steps: K's entries (N/m), damping ratios,
+        # the friction's logs and exponents, the sensors' log-gains and clock offsets (s)
+        k = len(self.iu[0])
+        K = np.abs(np.asarray(template.stiffness))
+        self.scale = np.concatenate([np.maximum(K[self.iu], 0.01 * K.max()), np.full(self.d, 0.01),
+                                     np.ones(3 * len(self.storeys)), np.full(self.d, 0.01), np.full(self.d, 1e-3)])
+        assert self.scale.size == k + self.d + 3 * len(self.storeys) + 2 * self.d
+
+    def pack(self, model: resim.RigModel) -> np.ndarray:
+        friction = {m.location: dict(m.parameters) for m in model.friction}
+        parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
+        for s in self.storeys:
+            p = friction[s]
+            lost = p["stiffness"] * jf.lost_fraction(REFERENCE_DRIFT, p["slip_drift"], p["exponent"])
+            parts.append([np.log(lost), np.log(p["slip_drift"]), p["exponent"]])
+        parts += [np.log(model.gain), model.offset]
+        return np.concatenate([np.ravel(p) for p in parts])
+
+    def unpack(self, theta) -> resim.RigModel:
+        d, k = self.d, len(self.iu[0])
+        K = np.zeros((d, d))
+        K[self.iu] = theta[:k]
+        K = K + K.T - np.diag(np.diag(K))
+        zeta = np.asarray(theta[k:k + d])
+        i = k + d
+        params = []
+        for _ in self.storeys:
+            slip, chi = float(np.exp(theta[i + 1])), float(theta[i + 2])
+            stiffness = float(np.exp(theta[i])) / jf.lost_fraction(REFERENCE_DRIFT, slip, chi)
+            params.append({"stiffness": stiffness, "slip_drift": slip, "exponent": chi})
+            i += 3
+        return replace(self.template, stiffness=K, damping_ratio=zeta,
+                       friction=resim.friction_records(self.storeys, params),
+                       gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]))
+
+    def bounds(self):
+        k = len(self.iu[0])
+        lo = [-np.inf] * k + [DAMPING_BOUNDS[0]] * self.d
+        hi = [np.inf] * k + [DAMPING_BOUNDS[1]] * self.d
+        for _ in self.storeys:
+            lo += [np.log(FRICTION_BOUNDS[0][0]), np.log(FRICTION_BOUNDS[1][0]), FRICTION_BOUNDS[2][0]]
+            hi += [np.log(FRICTION_BOUNDS[0][1]), np.log(FRICTION_BOUNDS[1][1]), FRICTION_BOUNDS[2][1]]
+        # (the first friction bound is on the stiffness lost at REFERENCE_DRIFT, N/m)
+        lo += [GAIN_BOUNDS[0]] * self.d + [OFFSET_BOUNDS[0]] * self.d
+        hi += [GAIN_BOUNDS[1]] * self.d + [OFFSET_BOUNDS[1]] * self.d
+        return np.array(lo), np.array(hi)
+
+
+def _valid(model: resim.RigModel) -> bool:
+    K = np.asarray(model.stiffness)
+    if np.any(np.linalg.eigvalsh(K) <= 0):
+        return False
+    return all(dict(m.parameters)["stiffness"] < _storey_stiffness(K, m.location) for m in model.friction)
+
+
+def _storey_stiffness(K: np.ndarray, s: int) -> float:
+    """The stiffness of storey ``s``'s tendon in K (``ground1``, ``pair<s-1>_<s>``)."""
+    return float(np.sum(K[0])) if s == 1 else float(-K[s - 2, s - 1])
+
+
+def _simulate(models, tr: Trial, whole: bool, substeps: int) -> np.ndarray:
+    stop = len(tr.zdd) if whole else tr.fit_stop
+    compiled = resim.compile_models(models, tr.dt / substeps)
+    return resim.simulate(compiled, tr.zdd[:stop], tr.dt, substeps)
+
+
+def _residual(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
+    read = mc.sensors(a, model.gain, model.offset, tr.dt)
+    stop = a.shape[0]
+    return ((tr.a[tr.start:stop] - read[tr.start:stop]) / tr.norm).ravel()
+
+
+class _Problem:
+    """Residual and Jacobian of the output-error fit, sharing the simulations of the current point."""
+
+    def __init__(self, layout: _Layout, trials, substeps: int):
+        self.layout, self.trials, self.substeps = layout, tuple(trials), substeps
+        self.sizes = [(t.fit_stop - t.start) * layout.d for t in self.trials]
+        self.cache_key, self.cache = None, None
+        self.nsim = 0
+
+    def sims(self, theta):
+        key = theta.tobytes()
+        if key != self.cache_key:
+            model = self.layout.unpack(theta)
+            self.cache = None if not _valid(model) else [_simulate([model], t, False, self.substeps)[0]
+                                                         for t in self.trials]
+            self.cache_key = key
+            self.nsim += 1
+        return self.cache
+
+    def residual(self, theta):
+        sims = self.sims(theta)
+        if sims is None:
+            return np.full(sum(self.sizes), _INVALID)
+        model = self.layout.unpack(theta)
+        return np.concatenate([_residual(model, a, t) for a, t in zip(sims, self.trials)])
+
+    def jacobian(self, theta):
+        base = self.residual(theta)
+        sims = self.sims(theta)
+        n = theta.size
+        J = np.zeros((base.size, n))
+        if sims is None:
+            return J
+        lo, hi = self.layout.bounds()
+        steps = np.empty(n)
+        perturbed = []
+        for i in range(n):
+            h = DIFF_STEP * self.layout.scale[i]
+            if theta[i] + h > hi[i]:
+                h = -h
+            steps[i] = h
+            t = theta.copy()
+            t[i] += h
+            perturbed.append(t)
+        phys = [self.layout.unpack(perturbed[i]) for i in range(self.layout.n_phys)]
+        ok = [_valid(m) for m in phys]
+        runs = [_simulate([m for m, v in zip(phys, ok) if v], t, False, self.substeps) if any(ok) else None
+                for t in self.trials]
+        row = 0
+        for k, t in enumerate(self.trials):
+            size = self.sizes[k]
+            column = 0
+            for i in range(n):
+                if i < self.layout.n_phys:
+                    if not ok[i]:
+                        continue
+                    model, a = phys[i], runs[k][column]
+                    column += 1
+                else:
+                    model, a = self.layout.unpack(perturbed[i]), sims[k]
+                J[row:row + size, i] = (_residual(model, a, t) - base[row:row + size]) / steps[i]
+            row += size
+        self.nsim += 1
+        return J
+
+
+def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PER_SAMPLE,
+             max_nfev: int = MAX_NFEV) -> FitResult:
+    """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
+
+    Parameters
+    ----------
+    trials : sequence of Trial
+    start : RigModel
+        Starting point; its ``friction`` records say which storeys carry joint friction.
+
+    Raises
+    ------
+    IdentificationError
+        The start is not a valid model (stiffness not positive definite, friction stiffer than its storey).
+    """
+    trials = tuple(trials)
+    if not _valid(start):
+        raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
+                                  f"or a joint stiffer than its storey: {start.to_dict()}")
+    layout = _Layout(start, tuple(m.location for m in start.friction))
+    problem = _Problem(layout, trials, substeps)
+    lo, hi = layout.bounds()
+    theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
+    result = scipy.optimize.least_squares(problem.residual, theta0, jac=problem.jacobian, bounds=(lo, hi),
+                                          method="trf", x_scale="jac", max_nfev=max_nfev, ftol=1e-6, xtol=1e-8)
+    model = layout.unpack(result.x)
+    return FitResult(model=model, trials=tuple(t.name for t in trials),
+                     nrmse={t.name: nrmse(model, t, substeps) for t in trials},
+                     cost=float(2 * result.cost), nfev=int(problem.nsim))
+
+
+def predict(model: resim.RigModel, tr: Trial, substeps: int = resim.TIMESTEP_PER_SAMPLE) -> np.ndarray:
+    """``model``'s floor accelerations (n, d) on the whole of ``tr``, as its sensors read them."""
+    a = _simulate([model], tr, True, substeps)[0]
+    return mc.sensors(a, model.gain, model.offset, tr.dt)
+
+
+def nrmse(model: resim.RigModel, tr: Trial, substeps: int = resim.TIMESTEP_PER_SAMPLE) -> float:
+    """Held-out NRMSE of ``model`` on the whole of ``tr`` (floor channels, after the lead-in)."""
+    return mc.nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:])
+
+
+def twin_modes(model: resim.RigModel):
+    """``(omega (rad/s), zeta, residues (d modes, d floors))`` of the twin's stuck (small-drift) linear part,
+    in :func:`~momentid.diagnosis.modal_check.replay`'s form."""
+    m = np.asarray(model.masses, float)
+    m_half = np.sqrt(m)
+    w2, psi = np.linalg.eigh(np.asarray(model.stiffness) / m_half[:, None] / m_half[None, :])
+    phi = psi / m_half[:, None]                       # mass-normalised shapes, columns
+    gamma = phi.T @ m
+    return np.sqrt(w2), np.asarray(model.damping_ratio, float), gamma[:, None] * phi.T
+
+
+def friction_start(linear: resim.RigModel, storeys, loss: float, slip_drift: float,
+                   exponent: float) -> resim.RigModel:
+    """A start for the augmented fit: ``linear`` with joint friction in ``storeys`` that has lost ``loss``
+    of the storey's stiffness at :data:`REFERENCE_DRIFT`, fully slipping at ``slip_drift`` (m), exponent
+    ``exponent``; K stiffened by that loss (K is the stuck joints' stiffness) and the viscous damping
+    lowered by :data:`START_DAMPING_SHARE` (the friction dissipates the rest)."""
+    K = np.asarray(linear.stiffness)
+    share = jf.lost_fraction(REFERENCE_DRIFT, slip_drift, exponent)
+    params = [{"stiffness": loss * _storey_stiffness(K, s) / share, "slip_drift": slip_drift, "exponent": exponent}
+              for s in storeys]
+    if any(p["stiffness"] <= 0 for p in params):
+        raise MomentidError(f"storeys {list(storeys)} of stiffness {K.tolist()}: a storey with no positive stiffness "
+                            f"cannot carry joint friction")
+    return replace(linear, stiffness=K * (1.0 + loss), damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
+                   friction=resim.friction_records(storeys, params))

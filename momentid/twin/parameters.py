@@ -1,0 +1,347 @@
+"""What the calibrated twin is made of: the identified structure, its sensors, its extra modes.
+
+:class:`TwinParameters` holds everything the MJCF twin (:mod:`momentid.twin.spec`) is built from:
+floor masses, the full symmetric stiffness and damping matrices, each run's floor-sensor calibration
+(:class:`SensorModel`: gain, clock offset, bias), and resonances beyond the storeys
+(:class:`ExtraMode`).  :func:`from_identification` fills it from either identification momentid
+makes: the modal fit of runs without added mass (``ModalIdentification``: K and C from stated
+masses, or mass-normalised without them) or the added-mass identification (``Identification``:
+M, C, K and the mass-proportional damping ``mu`` that an added mass brings).
+
+:func:`tendon_layout` writes K and C exactly as fixed tendons (see ``models/twin/README.md``): every
+pair of levels ``i < j`` (level 0 is the table, level ``j`` floor ``j``) gets a tendon of length
+``q_j - q_i`` with stiffness ``-K_ij`` (``i >= 1``) or the row sum ``sum_l K_jl`` (``i = 0``), and
+damping likewise from C, so that ``sum_t k_t c_t c_t^T = K`` entry by entry.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from momentid.core.series import Experiment
+from momentid.errors import IdentificationError
+
+__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "from_identification",
+           "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
+
+#: Storey height (m) drawn when neither the recording's model nor the lab states one (drawing only).
+DEFAULT_STOREY_HEIGHT = 0.3
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """The floor sensors of one run, as the twin reads its floors.
+
+    Floor sensor ``j`` reads ``gain_j * a_j(t - clock_offset_j) + bias_j`` where ``a_j`` is the floor's
+    absolute acceleration and time is the table sensor's clock (the table sensor is the reference:
+    gain 1, no offset).
+
+    Attributes
+    ----------
+    gain : ndarray, shape (d,)
+        Gain (1) relative to the table sensor.
+    clock_offset : ndarray, shape (d,)
+        Clock offset (s) relative to the table sensor; positive: the sensor reads late.
+    bias : ndarray, shape (d,)
+        Constant offset (m/s^2).
+    """
+
+    gain: np.ndarray
+    clock_offset: np.ndarray
+    bias: np.ndarray
+
+    @classmethod
+    def ideal(cls, d: int) -> "SensorModel":
+        """Gain 1, no clock offset, no bias on ``d`` floors."""
+        return cls(np.ones(d), np.zeros(d), np.zeros(d))
+
+    def with_bias(self, bias) -> "SensorModel":
+        """The same sensors with ``bias`` (m/s^2, shape (d,))."""
+        return SensorModel(self.gain, self.clock_offset, np.asarray(bias, float))
+
+    def to_dict(self) -> dict:
+        return {"gain": self.gain.tolist(), "clock_offset_s": self.clock_offset.tolist(),
+                "bias_m_s2": self.bias.tolist()}
+
+
+@dataclass(frozen=True)
+class ExtraMode:
+    """A resonance beyond the storey modes, seen by the floor sensors but not carried by K and C
+    (torsion, out-of-plane sway, a loose part).
+
+    Floor sensor ``j`` reads ``residues[j] * eta''`` on top of its floor, with
+    ``eta'' + 2 zeta w eta' + w^2 eta = -z''`` (``w = 2 pi frequency``, ``z''`` the table acceleration):
+    the modal model's term ``-R_j s^2 / (s^2 + 2 zeta w s + w^2)`` of the table-to-floor transfer.
+
+    Attributes
+    ----------
+    frequency : float
+        Undamped natural frequency (Hz).
+    damping_ratio : float
+        Damping ratio (1).
+    residues : ndarray, shape (d,)
+        Per floor sensor (1).
+    """
+
+    frequency: float
+    damping_ratio: float
+    residues: np.ndarray
+
+    def to_dict(self) -> dict:
+        return {"frequency_hz": self.frequency, "damping_ratio": self.damping_ratio,
+                "residues": self.residues.tolist()}
+
+
+@dataclass(frozen=True)
+class TwinParameters:
+    """Everything the MJCF twin is built from (SI units; floor 1 is the lowest).
+
+    Attributes
+    ----------
+    masses : ndarray, shape (d,)
+        Floor masses (kg); for a mass-normalised twin, in proportion with mean 1 (:func:`masses_from_shapes`).
+    K, C : ndarray, shape (d, d)
+        Symmetric stiffness (N/m) and damping (N s/m) of the floors relative to the table.
+    storey_heights : ndarray, shape (d,)
+        Storey heights (m), for drawing.
+    sensors : dict of str to SensorModel
+        Each calibrated run's floor sensors.
+    nominal : SensorModel
+        The sensors the twin's MJCF carries (the mean over the calibrated runs): for a new simulation
+        and for runs the calibration did not use.
+    extra_modes : tuple of ExtraMode
+    mass_normalised : bool
+        No masses were stated: masses, K and C are the rig's divided by its (unknown) mean floor mass.
+    added_mass_damping : float
+        ``mu`` (1/s): joint damping per kilogram of added mass (added-mass identification; 0 otherwise).
+    source : str
+        ``"modal"`` (runs without added mass) or ``"added-mass"``.
+    runs : tuple of str
+        The runs the identification used.
+    notes : tuple of str
+    """
+
+    masses: np.ndarray
+    K: np.ndarray
+    C: np.ndarray
+    storey_heights: np.ndarray
+    sensors: dict
+    nominal: SensorModel
+    extra_modes: tuple = ()
+    mass_normalised: bool = False
+    added_mass_damping: float = 0.0
+    source: str = "modal"
+    runs: tuple = ()
+    notes: tuple = field(default=())
+
+    @property
+    def storeys(self) -> int:
+        return self.masses.shape[0]
+
+    def sensors_of(self, run: str) -> SensorModel:
+        """The calibrated sensors of ``run``, else the nominal ones."""
+        return self.sensors.get(run, self.nominal)
+
+
+@dataclass(frozen=True)
+class Tendon:
+    """One fixed tendon of the twin: length ``q_upper - q_lower`` (level 0 is the table).
+
+    Attributes
+    ----------
+    name : str
+        ``storey<j>`` when it joins neighbouring levels ``j-1`` and ``j``, else ``link<i>_<j>``.
+    lower, upper : int
+        Levels joined, ``0 <= lower < upper <= d``.
+    stiffness : float
+        N/m (negative on a link that stiffens the floors' difference less than the storeys imply).
+    damping : float
+        N s/m.
+    """
+
+    name: str
+    lower: int
+    upper: int
+    stiffness: float
+    damping: float
+
+
+def _pair_coefficient(X: np.ndarray, lower: int, upper: int) -> float:
+    """The tendon coefficient between levels ``lower < upper`` that puts ``X`` together exactly."""
+    if lower == 0:
+        return float(np.sum(X[upper - 1]))
+    return float(-X[lower - 1, upper - 1])
+
+
+def tendon_layout(K: np.ndarray, C: np.ndarray) -> tuple:
+    """Fixed tendons whose stiffnesses sum to ``K`` and damping to ``C`` exactly.
+
+    Storey tendons (neighbouring levels) always; a link tendon only where K or C needs one (a
+    shear building's tridiagonal K and C need none).
+
+    Parameters
+    ----------
+    K, C : ndarray, shape (d, d)
+        Symmetric (N/m, N s/m).
+
+    Returns
+    -------
+    tuple of Tendon
+        Storeys first (1..d), then links by lower level, upper level.
+    """
+    d = K.shape[0]
+    out = [Tendon(f"storey{j}", j - 1, j, _pair_coefficient(K, j - 1, j), _pair_coefficient(C, j - 1, j))
+           for j in range(1, d + 1)]
+    for i in range(d + 1):
+        for j in range(i + 2, d + 1):
+            k, c = _pair_coefficient(K, i, j), _pair_coefficient(C, i, j)
+            if k != 0.0 or c != 0.0:
+                out.append(Tendon(f"link{i}_{j}", i, j, k, c))
+    return tuple(out)
+
+
+def matrices_from_modes(frequency, damping_ratio, shapes, masses):
+    """Symmetric K and C with exactly these modes' frequencies and damping ratios and the mass matrix
+    ``diag(masses)``: the M-orthonormal set nearest to the shapes (polar decomposition of
+    ``M^1/2 Phi``), as :mod:`momentid.estimation.scaled` derives K and C from stated masses.
+
+    Parameters
+    ----------
+    frequency : ndarray, shape (d,)
+        Hz.
+    damping_ratio : ndarray, shape (d,)
+    shapes : ndarray, shape (d, d)
+        One mode per column.
+    masses : ndarray, shape (d,)
+        kg.
+
+    Returns
+    -------
+    K, C : ndarray, shape (d, d)
+    """
+    w = 2 * np.pi * np.asarray(frequency, float)
+    m_half = np.sqrt(np.asarray(masses, float))
+    phi = np.asarray(shapes, float)
+    phi = phi / np.sqrt(np.sum(masses * phi.T ** 2, axis=1))[None, :]
+    U, _, Vt = np.linalg.svd(m_half[:, None] * phi)
+    S = m_half[:, None] * (U @ Vt)
+    return S @ np.diag(w ** 2) @ S.T, S @ np.diag(2 * np.asarray(damping_ratio, float) * w) @ S.T
+
+
+def masses_from_shapes(shapes) -> np.ndarray | None:
+    """Floor masses, mean 1 kg, in the proportions that make the mode shapes most nearly orthogonal.
+
+    Orthogonality ``phi_i^T M phi_k = 0`` (``i < k``) is linear in the diagonal of ``M``: its least-squares
+    null vector (the right singular vector of the smallest singular value; exact for two storeys).
+
+    Parameters
+    ----------
+    shapes : ndarray, shape (d, d)
+        One mode per column.
+
+    Returns
+    -------
+    ndarray, shape (d,), or None
+        None when the null vector is not all of one sign (no positive masses make them orthogonal).
+    """
+    phi = np.asarray(shapes, float)
+    d = phi.shape[0]
+    if d == 1:
+        return np.ones(1)
+    phi = phi / np.linalg.norm(phi, axis=0)[None, :]
+    rows = [phi[:, i] * phi[:, k] for i in range(d) for k in range(i + 1, d)]
+    m = np.linalg.svd(np.array(rows))[2][-1]
+    m = m * np.sign(m.sum())
+    return m / m.mean() if np.all(m > 0) else None
+
+
+def _heights(experiment: Experiment, d: int) -> np.ndarray:
+    s, stated = experiment.structure, experiment.statement
+    for heights in (s.storey_heights if s is not None else None,
+                    stated.storey_heights if stated is not None else None):
+        if heights is not None and len(heights) == d:
+            return np.asarray(heights, float)
+    return np.full(d, DEFAULT_STOREY_HEIGHT)
+
+
+def _extra_modes(result, d: int) -> tuple:
+    """The identification's resonances beyond the storeys, if it reports any (``extra_modes``: items
+    with ``frequency`` (Hz), ``damping_ratio`` and ``residues`` (d,) per floor sensor)."""
+    # ``extra_modes`` is being added to ModalIdentification (the modal identification's resonances beyond the
+    # storeys); an identification without the field, or the added-mass one, has none.
+    found = getattr(result, "extra_modes", None) or ()
+    out = []
+    for mode in found:
+        residues = np.asarray(mode.residues, float).reshape(-1)
+        if residues.shape != (d,):
+            raise IdentificationError(f"extra mode at {mode.frequency:.4g} Hz has {residues.size} residues: "
+                                      f"expected one per floor sensor ({d})")
+        out.append(ExtraMode(float(mode.frequency), float(mode.damping_ratio), residues))
+    return tuple(out)
+
+
+def _mean_sensors(sensors: dict, d: int) -> SensorModel:
+    if not sensors:
+        return SensorModel.ideal(d)
+    models = list(sensors.values())
+    return SensorModel(np.mean([s.gain for s in models], axis=0), np.mean([s.clock_offset for s in models], axis=0),
+                       np.zeros(d))
+
+
+def from_identification(result, experiment: Experiment) -> TwinParameters:
+    """The twin's parameters from an identification of ``experiment``.
+
+    Parameters
+    ----------
+    result : ModalIdentification or Identification
+        From :func:`momentid.estimation.identification.identify` (diagonal mass matrix).
+    experiment : Experiment
+        The recording it was identified from (storey heights for drawing).
+
+    Returns
+    -------
+    TwinParameters
+
+    Raises
+    ------
+    IdentificationError
+        A full (non-diagonal) identified mass matrix, which the twin's floors cannot carry.
+    """
+    from momentid.estimation.scaled import ModalIdentification
+
+    d = experiment.storeys
+    heights = _heights(experiment, d)
+    if isinstance(result, ModalIdentification):
+        sensors = {run: SensorModel(np.asarray(result.sensor_gain[r], float),
+                                    np.asarray(result.sensor_offset[r], float), np.zeros(d))
+                   for r, run in enumerate(result.runs)}
+        notes = []
+        if result.K is not None:
+            masses, K, C, normalised = np.asarray(result.masses, float), result.K, result.C, False
+        else:
+            masses = masses_from_shapes(result.shapes)
+            how = "in the proportions that make the identified mode shapes orthogonal"
+            if masses is None:
+                masses, how = np.ones(d), "equal (no positive proportions make the identified shapes orthogonal)"
+            K, C = matrices_from_modes(result.frequency, result.damping_ratio, result.shapes, masses)
+            normalised = True
+            notes.append(f"no floor masses stated: a mass-normalised twin, floor masses {how}, "
+                         f"{', '.join(f'{m:.4g}' for m in masses)} (mean 1): its modes, damping ratios and sensor "
+                         f"readings are the rig's; its masses, K and C are the rig's divided by its mean floor mass "
+                         f"(kg), unknown")
+        return TwinParameters(masses=masses, K=np.asarray(K, float), C=np.asarray(C, float), storey_heights=heights,
+                              sensors=sensors, nominal=_mean_sensors(sensors, d),
+                              extra_modes=_extra_modes(result, d), mass_normalised=normalised, source="modal",
+                              runs=tuple(result.runs), notes=tuple(notes))
+    M = np.asarray(result.M, float)
+    if np.any(M - np.diag(np.diag(M))):
+        raise IdentificationError(f"{experiment.source}: the identified mass matrix is full: the twin's floors "
+                                  f"carry a diagonal one (identify with mass='diagonal')")
+    ideal = {run: SensorModel.ideal(d) for run in result.runs}
+    return TwinParameters(masses=np.diag(M).copy(), K=np.asarray(result.K, float), C=np.asarray(result.C, float),
+                          storey_heights=heights, sensors=ideal, nominal=SensorModel.ideal(d),
+                          added_mass_damping=float(result.mu), source="added-mass", runs=tuple(result.runs),
+                          notes=("the added-mass identification does not calibrate sensors: the twin's sensors "
+                                 "are ideal (gain 1, no clock offset)",))

@@ -1,0 +1,124 @@
+"""Workers die with their parent (issue 22 point 5): killing a command during its forked work
+(SIGTERM or SIGKILL) leaves no worker process behind."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import momentid as mi
+
+from conftest import SCENARIOS
+
+ROOT = Path(__file__).resolve().parents[1]
+ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
+#: The issue's bound: no process left this long after the kill.
+GONE_WITHIN_S = 5.0
+
+
+def _children(pid: int) -> list[int]:
+    """Live (not zombie) processes whose parent is ``pid`` (Linux /proc)."""
+    out = []
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            stat = Path(f"/proc/{entry}/stat").read_text()
+        except OSError:
+            continue
+        state, ppid = stat[stat.rindex(")") + 2:].split()[:2]
+        if int(ppid) == pid and state != "Z":
+            out.append(int(entry))
+    return out
+
+
+def _alive(pids) -> list[int]:
+    alive = []
+    for pid in pids:
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+        except OSError:
+            continue
+        if stat[stat.rindex(")") + 2] != "Z":
+            alive.append(pid)
+    return alive
+
+
+def _workers_of(proc: subprocess.Popen, count: int, timeout: float = 300) -> list[int]:
+    """Wait until ``proc`` has ``count`` forked workers (children running its own command line)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        assert proc.poll() is None, proc.stderr.read()
+        cmdline = Path(f"/proc/{proc.pid}/cmdline").read_bytes()   # read again: it changes at exec
+        kids = []
+        for k in _children(proc.pid):
+            try:
+                if Path(f"/proc/{k}/cmdline").read_bytes() == cmdline:
+                    kids.append(k)
+            except OSError:
+                pass
+        if len(kids) >= count:
+            return kids
+        time.sleep(0.05)
+    raise AssertionError(f"no {count} workers within {timeout} s")
+
+
+def _kill_and_check(proc: subprocess.Popen, workers: list[int], sig: int) -> None:
+    proc.send_signal(sig)
+    proc.wait(timeout=60)
+    deadline = time.monotonic() + GONE_WITHIN_S
+    while _alive(workers) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    left = _alive(workers)
+    for pid in left:   # do not leave them to the next test
+        os.kill(pid, signal.SIGKILL)
+    assert not left, f"workers {left} outlived their parent by {GONE_WITHIN_S} s ({signal.Signals(sig).name})"
+
+
+_POOL = """
+import time
+from momentid.core.processes import forked_pool
+with forked_pool(2) as pool:
+    list(pool.map(time.sleep, [3600, 3600]))
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM], ids=["SIGKILL", "SIGTERM"])
+def test_pool_workers_die_with_their_parent(sig):
+    """A pool whose workers block for an hour: killing the parent ends them within seconds."""
+    proc = subprocess.Popen([sys.executable, "-c", _POOL], env=ENV, stderr=subprocess.PIPE, text=True)
+    _kill_and_check(proc, _workers_of(proc, 2), sig)
+
+
+@pytest.fixture(scope="module")
+def friction_recording(tmp_path_factory):
+    """A hidden rig whose diagnosis tries its shortlist on forked workers."""
+    path = tmp_path_factory.mktemp("kill") / "friction.mcap"
+    mi.run_experiment(mi.load_scenario(SCENARIOS / "hidden" / "friction_storey2.toml"), path)
+    return path
+
+
+def _diagnose(recording: Path, out: Path) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "momentid", "diagnose", str(recording), "-o", str(out)], env=ENV,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+def test_sigterm_of_diagnose_is_an_interrupt_and_leaves_no_worker(friction_recording, tmp_path):
+    proc = _diagnose(friction_recording, tmp_path / "report")
+    _kill_and_check(proc, _workers_of(proc, 2), signal.SIGTERM)
+    assert proc.returncode == 143 and proc.stderr.read() == "error: terminated (SIGTERM)\n"
+    assert not (tmp_path / "report").exists()   # the report folder made for it, still empty, is gone
+
+
+@pytest.mark.slow
+def test_sigkill_of_diagnose_leaves_no_worker(friction_recording, tmp_path):
+    """SIGKILL cannot be handled: the workers' parent-death signal ends them (the pool test above
+    checks the same in the default run, in a second)."""
+    proc = _diagnose(friction_recording, tmp_path / "report")
+    _kill_and_check(proc, _workers_of(proc, 2), signal.SIGKILL)

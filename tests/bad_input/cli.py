@@ -110,7 +110,7 @@ def _aborted_rec(folder: Path) -> Path:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        experiment = read_recording(_rec(folder))
+        experiment = read_recording(recording_file(folder))
     path = folder / "aborted.mcap"
     try:
         with RecordingWriter(path, structure=experiment.structure, scenario=experiment.scenario,
@@ -143,7 +143,7 @@ def _while_held(kind: str, output: str, *argv, setup=None, rec=False):
     def act(folder: Path) -> CliResult:
         if setup is not None:
             setup(folder)
-        path = _rec(folder) if rec else None
+        path = recording_file(folder) if rec else None
         with held(kind, folder / output):
             return cli(*(path if a == "REC" else a for a in argv))
     return act

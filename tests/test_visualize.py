@@ -16,7 +16,7 @@ import momentid as mi
 from momentid.report import viewer
 from momentid.cli import main
 from momentid.errors import ViewerError
-from momentid.estimation.identification import equation_residual
+from momentid.estimation.equation_form import equation_residual
 from momentid.io.recording import write_experiment
 from momentid.lab.scenario import default_scenario_path
 from benchmarks.bench import scenario_variant_file

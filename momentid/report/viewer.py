@@ -252,7 +252,7 @@ def load_result(path, experiment: Experiment):
     ViewerError
         The file is missing or not such a JSON object, or belongs to another recording.
     """
-    from momentid.estimation.identification import Identification
+    from momentid.estimation.identified import Identification
 
     path = Path(path)
     try:
@@ -333,7 +333,7 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
         Bad exaggeration, unknown run name, or a result of another recording.
     """
     from momentid.estimation.comparison import compare
-    from momentid.estimation.identification import equation_residual
+    from momentid.estimation.equation_form import equation_residual
     from momentid.estimation.identification import identify as identify_experiment
 
     names = [r.name for r in experiment.runs]

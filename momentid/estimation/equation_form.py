@@ -327,7 +327,7 @@ def identify_stream(path, *, mass: str = "diagonal", return_structure: bool = Fa
         None)``: the nominal model the recording states, from the same single
         pass over the file.
     """
-    from momentid.io.recording import stream_recording
+    from momentid.io.recording_reader import stream_recording
 
     per_run: dict[str, tuple[Accumulator, np.ndarray]] = {}
     state: dict = {}

@@ -11,26 +11,25 @@ from momentid.errors import MomentidError
 __all__ = ["positive_float", "finite_time", "positive_int", "run_names"]
 
 
-def positive_float(text: str) -> float:
-    """argparse type: a positive finite number."""
+def _float(text: str, accept, expected: str) -> float:
+    """``text`` as a float that ``accept`` takes (a non-number never is), else argparse's usage error."""
     try:
         value = float(text)
     except ValueError:
         value = float("nan")
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number")
+    if not accept(value):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}")
     return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a positive finite number."""
+    return _float(text, lambda v: v > 0 and math.isfinite(v), "a positive number")
 
 
 def finite_time(text: str) -> float:
     """argparse type: a finite time (s), at least 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a finite time in seconds, at least 0")
-    return value
+    return _float(text, lambda v: math.isfinite(v) and v >= 0, "a finite time in seconds, at least 0")
 
 
 def positive_int(text: str) -> int:

@@ -311,13 +311,15 @@ def _cmd_diagnose(args) -> int:
 
 
 def _cmd_twin(args) -> int:
+    from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
     from momentid.twin import build_twin, write_twin
 
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
     experiment = read_recording(args.recording)
-    twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
-    names = write_twin(twin, experiment, out, plots=not args.no_plots)
+    with exclusive(out):   # one writer per twin folder, refused before the twin is built
+        twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
+        names = write_twin(twin, experiment, out, plots=not args.no_plots)
     if args.json:
         print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
     else:

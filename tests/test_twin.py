@@ -26,6 +26,7 @@ from momentid.lab import rig
 from momentid.lab.scenario import parse_scenario
 from momentid.twin import (ExtraMode, SensorModel, TwinParameters, build_twin, model_matrices, read_twin,
                            replay_run, tendon_layout, transfer, twin_spec, write_twin)
+from momentid.twin.build import misfit_warning
 from momentid.twin.files import TwinFolderError
 from momentid.twin.spec import MIN_LATENCY_STEPS, latency, timing
 
@@ -145,6 +146,21 @@ def test_twin_of_a_simulated_rig_is_that_rig(twin, truth):
         # A linear twin of a linear rig explains each trial to its noise: the NRMSE is the noise's
         # (x1.3: the identified parameters' own errors add a little).
         assert replay.calibrated and replay.nrmse < 1.3 * replay.noise_nrmse + 0.005, replay.to_dict()
+    assert misfit_warning(twin.replays) == ()     # ... so no warning that it does not predict them
+
+
+def test_a_twin_that_does_not_predict_its_trials_says_so(twin):
+    from dataclasses import replace
+
+    small, large = twin.replays
+    # 4x the noise and 5 % above it: beyond both of the warning's limits (3x, and noise + 5 %).
+    off = replace(large, nrmse=max(4 * large.noise_nrmse, large.noise_nrmse + 0.06))
+    (warning,) = misfit_warning((small, off))
+    assert warning.startswith("the linear twin does not predict 1 of 2 trials") and f"{large.run} " in warning
+    assert f"{small.run} " not in warning and "momentid diagnose" in warning
+    # A replay above 3x a tiny noise but within 5 % of it (a near noise-free recording) is no warning.
+    quiet = replace(large, noise_nrmse=1e-4, nrmse=0.01)
+    assert misfit_warning((small, quiet)) == ()
 
 
 def test_twin_reads_the_table_back_exactly(twin, experiment):
@@ -331,6 +347,8 @@ def test_shipped_rig(tmp_path):
     assert [t["run"] for t in data["trials"]] == ["northridge", "sine_1p0", "sine_1p5", "sine_2p0", "bonus_event"]
     assert [t["calibration"] for t in data["trials"]] == [True] * 4 + [False]
     assert all(np.isfinite(t["nrmse"]) and t["nrmse"] > t["noise_nrmse"] for t in data["trials"])
+    # The rig is not linear (30-80 % replays against 1-7 % of noise): the twin says it does not predict them.
+    assert any("the linear twin does not predict" in w for w in data["warnings"])
     mujoco.MjModel.from_xml_path(str(out / "twin.xml"))
 
 

@@ -10,7 +10,6 @@ import argparse
 import contextlib
 import io
 import json
-import math
 import os
 import signal
 import sys
@@ -21,6 +20,7 @@ from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_in
 from momentid.core.series import json_safe
 from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
+from momentid.cli_values import finite_time, positive_float, positive_int, run_names
 
 __all__ = ["main", "only_json_on_stdout"]
 
@@ -35,50 +35,6 @@ _EPILOG = """examples:
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
   momentid twin lab.mcap -o twin/                     # the calibrated MuJoCo twin of the rig
 """
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a positive number")
-    return value
-
-
-def _finite_time(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a finite time in seconds, at least 0")
-    return value
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        value = 0
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected an integer >= 1")
-    return value
-
-
-def _run_names(text: str | None) -> list[str] | None:
-    """``--runs a,b``: the names, each once (a run named twice would count its data twice)."""
-    if text is None:
-        return None
-    names = [n.strip() for n in text.split(",")]
-    if not all(names):
-        raise MomentidError(f"--runs {text!r}: expected comma-separated run names, got an empty one")
-    twice = [n for i, n in enumerate(names) if n in names[:i]]
-    if twice:
-        raise MomentidError(f"--runs {text}: run {twice[0]!r} is named twice; expected each run once (the same "
-                            f"data counted twice would shrink every standard error by sqrt(2))")
-    return names
 
 
 def _output_path(out: str | None, name: str) -> Path:
@@ -166,7 +122,7 @@ def _report(experiment, args) -> int:
     from momentid.estimation.scaled import ModalIdentification
 
     times = args.time if args.time else None
-    runs = _run_names(args.runs)
+    runs = run_names(args.runs)
     try:
         result = identify(experiment, estimator=args.estimator, runs=runs, times=times, mass=args.mass)
     except IdentificationError as exc:
@@ -202,7 +158,7 @@ def _cmd_run(args) -> int:
 
     path = Path(args.scenario) if args.scenario else default_scenario_path()
     scenario = load_scenario(path)
-    unknown = [n for n in _run_names(args.runs) or () if n not in {r.name for r in scenario.runs}]
+    unknown = [n for n in run_names(args.runs) or () if n not in {r.name for r in scenario.runs}]
     if unknown:   # before minutes of simulation, not after
         raise MomentidError(f"--runs {args.runs}: {path} has no run named {unknown[0]!r}; its runs are "
                             f"{', '.join(r.name for r in scenario.runs)}")
@@ -217,7 +173,7 @@ def _cmd_run(args) -> int:
         from momentid.report.viewer import view
 
         view(experiment, identify_options={"estimator": args.estimator, "times": args.time or None,
-                                           "runs": _run_names(args.runs)})
+                                           "runs": run_names(args.runs)})
     return status
 
 
@@ -227,7 +183,7 @@ def _cmd_identify(args) -> int:
     if args.stream:
         return _identify_stream(args)
     experiment = read_recording(args.recording)
-    runs = _run_names(args.runs)
+    runs = run_names(args.runs)
     if args.per_run:
         from momentid.estimation.scaled import amplitude_trend, identify_per_run
 
@@ -353,13 +309,15 @@ def _cmd_diagnose(args) -> int:
 
 
 def _cmd_twin(args) -> int:
+    from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
     from momentid.twin import build_twin, write_twin
 
     out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
     experiment = read_recording(args.recording)
-    twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
-    names = write_twin(twin, experiment, out, plots=not args.no_plots)
+    with exclusive(out):   # one writer per twin folder, refused before the twin is built
+        twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
+        names = write_twin(twin, experiment, out, plots=not args.no_plots)
     if args.json:
         print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
     else:
@@ -424,7 +382,7 @@ def _add_identify_options(p: argparse.ArgumentParser) -> None:
                         "by sensor noise, with standard errors")
     p.add_argument("--mass", choices=("diagonal", "full"), default="diagonal",
                    help="identify a diagonal (default) or full symmetric mass matrix")
-    p.add_argument("--time", type=_finite_time, action="append", metavar="T",
+    p.add_argument("--time", type=finite_time, action="append", metavar="T",
                    help="use only the sample nearest time T (s); repeat for several instants "
                         "(e.g. --estimator difference --time 5 reproduces the paper's system)")
     p.add_argument("--runs", metavar="NAMES", help="comma-separated run names to use (default: all)")
@@ -453,7 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<name>.mcap) or a .mcap file (default: out/)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
-    p.add_argument("-j", "--workers", type=_positive_int, metavar="N",
+    p.add_argument("-j", "--workers", type=positive_int, metavar="N",
                    help="simulate up to N runs at once in worker processes (default: one per core; "
                         "1 = in this process)")
     _add_identify_options(p)
@@ -561,10 +519,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "recommend the cheapest design whose every parameter reaches the target "
                                    "relative standard deviation.")
     p.add_argument("scenario", help="scenario TOML file; its [sensors] give the noise")
-    p.add_argument("--target", type=_positive_float, default=0.01,
+    p.add_argument("--target", type=positive_float, default=0.01,
                    help="target relative standard deviation of every parameter (default 0.01)")
-    p.add_argument("--max-runs", type=_positive_int, default=4, help="largest number of runs to consider")
-    p.add_argument("--time-limit", type=_positive_float, default=PLAN_TIME_LIMIT_S, metavar="SECONDS",
+    p.add_argument("--max-runs", type=positive_int, default=4, help="largest number of runs to consider")
+    p.add_argument("--time-limit", type=positive_float, default=PLAN_TIME_LIMIT_S, metavar="SECONDS",
                    help=f"refuse, before it starts, a plan estimated to take longer on this machine (default "
                         f"{PLAN_TIME_LIMIT_S:g} s; the estimate times its first candidate run)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -580,7 +538,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("spec", help="sweep TOML file ([sweep] base = scenario file, [grid] key = [values])")
     p.add_argument("-o", "--output", metavar="PATH",
                    help="result table, .csv or .json (default: out/<spec name>.csv)")
-    p.add_argument("-j", "--workers", type=_positive_int, metavar="N",
+    p.add_argument("-j", "--workers", type=positive_int, metavar="N",
                    help="local worker processes (default: one per core)")
     p.add_argument("--address", metavar="ADDR",
                    help="run on the Dask cluster whose scheduler is at ADDR (e.g. tcp://host:8786; needs "

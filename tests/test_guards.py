@@ -78,7 +78,7 @@ def _tall(tmp_path, storeys: int):
 
 def test_identifying_200_storeys_is_refused_with_its_size_before_the_solve(tmp_path, monkeypatch):
     """Issue 12: a 200-storey recording was written, then identification grew to 24 GB and was killed."""
-    from momentid.estimation.identification import Layout, equation_form_bytes
+    from momentid.estimation.layout import Layout, equation_form_bytes
 
     # 200 storeys: 40,401 unknowns; the solve's p x p arrays alone are tens of GB (d^4 growth).  A 64 GB
     # machine, so that the figures in the message do not depend on this one's memory.
@@ -134,7 +134,7 @@ def test_the_eiv_fit_steps_back_from_an_absurd_trial_model_without_warnings():
 
     from momentid.errors import IdentificationError
     from momentid.estimation.eiv import spectra, whitened_residual
-    from momentid.estimation.identification import Layout
+    from momentid.estimation.layout import Layout
 
     experiment = mi.simulate(mi.load_scenario(mi.default_scenario_path()))
     run = experiment.runs[0]

@@ -14,7 +14,7 @@ import momentid as mi
 from momentid.cli import main
 from momentid.core.series import Experiment
 from momentid.estimation.design import cramer_rao
-from momentid.estimation.identification import damping_models
+from momentid.estimation.identified import damping_models
 from momentid.lab.scenario import Instrument, Sensors, parse_scenario
 from momentid.estimation.checks import check_run
 from momentid.lab.sensors import measure

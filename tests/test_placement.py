@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 import momentid.estimation.identification as identification
+import momentid.estimation.scaled as scaled
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SensorDataError
 from momentid.io.importer import import_folder
@@ -263,7 +264,7 @@ def test_identify_warns_about_sensors_on_other_floors(shipped, monkeypatch):
     class Result:
         warnings: tuple = ("an estimator's own warning",)
 
-    monkeypatch.setattr(identification, "_identify_modal", lambda experiment, runs, times: Result())
+    monkeypatch.setattr(scaled, "identify_modal", lambda experiment, runs: Result())
     runs = list(shipped.runs)
     runs[2] = relabelled(runs[2], (0, 1, 3, 2))
     warned = identification.identify(Experiment(runs=tuple(runs), statement=shipped.statement)).warnings

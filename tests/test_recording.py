@@ -27,7 +27,8 @@ import momentid as mi
 from momentid.core.series import Experiment, RunData
 from momentid.errors import RecordingError, RecoveryWarning, TruncatedRecordingError
 from momentid.io.recording import (SCHEMA_DATA, SCHEMA_NAME, SENSOR_BLOCK_PROTO, RecordingWriter,
-                                SensorBlock, _encode_block, read_recording, write_experiment)
+                                SensorBlock, read_recording, write_experiment)
+from momentid.io.recording_format import encode_block
 from momentid.core.structure import Structure
 
 from bad_input.faults import fill_disk_at
@@ -106,7 +107,7 @@ def test_fast_block_encoder_matches_protobuf():
     run = make_run(1, n=10)
     args = dict(run="r1", first_sample=3, n_samples=10, channels=CHANNELS)
     expected = SensorBlock(**args, time=run.time, values=run.values.ravel()).SerializeToString()
-    assert _encode_block("r1", 3, CHANNELS, run.time, run.values) == expected
+    assert encode_block("r1", 3, CHANNELS, run.time, run.values) == expected
 
 
 def test_stock_decoder_reads_every_block(tmp_path):

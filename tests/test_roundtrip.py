@@ -68,7 +68,7 @@ def test_truncated_recording_recovers_completed_runs(tmp_path):
 
 def test_streamed_identification_equals_in_memory(tmp_path):
     """identify_stream folds recording blocks into QR factors: same answer, no samples kept."""
-    from momentid.estimation import identification as identify_module
+    from momentid.estimation import equation_form as identify_module
     sc = load("default")
     path = tmp_path / "default.mcap"
     mi.run_experiment(sc, path)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 import momentid as mi
-from momentid.report import viewer
+from momentid.report import panels, viewer
 from momentid.cli import main
 from momentid.errors import ViewerError
-from momentid.estimation.identification import equation_residual
+from momentid.estimation.equation_form import equation_residual
 from momentid.io.recording import write_experiment
 from momentid.lab.scenario import default_scenario_path
 from benchmarks.bench import scenario_variant_file
@@ -155,7 +155,7 @@ def test_result_json_round_trip(rec, tmp_path, capsys):
     result = viewer.load_result(path, rec["experiment"])
     assert result.runs == ("reference", "uniform") and result.M.shape == (3, 3)
     scene = viewer.prepare(rec["experiment"], result=result)
-    assert scene.result is result and "runs reference, uniform" in viewer._parameters_markdown(scene)
+    assert scene.result is result and "runs reference, uniform" in panels.parameters_markdown(scene)
 
 
 def test_auto_exaggeration_is_a_nice_factor(rec):
@@ -174,10 +174,10 @@ def test_shows_what_it_can_without_identification_or_structure(rec, tmp_path):
                 rerun_chunk.RrdReader(viewer.write_rrd(one, tmp_path / "one.rrd")).store().stream().to_chunks()}
     assert "/runs/reference/sensors/a1" in entities and "/runs/reference/rig/base/floor3" in entities
     assert not {"/identification/modes", "/identification/rel_error", "/runs/reference/residual/r1"} & entities
-    assert "not identified" in viewer._experiment_markdown(viewer.prepare(one))
+    assert "not identified" in panels.experiment_markdown(viewer.prepare(one))
     scene = viewer.prepare(dataclasses.replace(e, structure=None))
     assert scene.result is not None and scene.comparison is None and len(scene.residuals) == 3
-    assert "n/a" in viewer._modes_markdown(scene) and "no analytic comparison" in " ".join(scene.notes)
+    assert "n/a" in panels.modes_markdown(scene) and "no analytic comparison" in " ".join(scene.notes)
 
 
 def _free_port() -> int:

@@ -1,7 +1,10 @@
 """Estimation: M, C, K and the Rayleigh coefficients from recorded runs.
 
 - :mod:`~momentid.estimation.identification`: :func:`identify` (equation (3) by least squares,
-  the paper's eq. (2), or errors-in-variables) and the streamed variant.
+  the paper's eq. (2), or errors-in-variables); :mod:`~momentid.estimation.equation_form` (the
+  equation forms by streaming QR, and the streamed variant), :mod:`~momentid.estimation.identified`
+  (the result, its warnings, damping-model tests), :mod:`~momentid.estimation.layout` (where each
+  unknown sits, the memory guard).
 - :mod:`~momentid.estimation.reconstruct`: velocities and displacements from what was measured.
 - :mod:`~momentid.estimation.linear`: exact discretisation and simulation of the linear model.
 - :mod:`~momentid.estimation.eiv`: frequency-domain errors-in-variables maximum likelihood.

@@ -13,7 +13,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from momentid.core.analytic import Modes, modal_properties
-from momentid.estimation.identification import Identification, damping_models
+from momentid.estimation.identified import Identification, damping_models
 from momentid.core.structure import Structure
 
 __all__ = ["Entry", "Comparison", "analytic_parameters", "compare"]

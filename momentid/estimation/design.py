@@ -25,7 +25,7 @@ import numpy as np
 from momentid.core.series import RunData
 from momentid.estimation.eiv import fisher_information
 from momentid.errors import IdentificationError, ScenarioError, TimeLimitError
-from momentid.estimation.identification import Layout
+from momentid.estimation.layout import Layout
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.lab.scenario import BandLimitedNoise, Run, Scenario
 from momentid.lab.sensors import noise_std

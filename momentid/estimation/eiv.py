@@ -139,7 +139,7 @@ def whitened_residual(layout, theta, sp: Spectra, *, noise=True):
 
     Parameters
     ----------
-    layout : momentid.estimation.identification.Layout
+    layout : momentid.estimation.layout.Layout
     theta : ndarray, shape (p,) or (p + m,)
         Parameters (plus force coefficients when ``sp`` carries forces).
     sp : Spectra
@@ -327,7 +327,7 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
 
     Parameters
     ----------
-    layout : momentid.estimation.identification.Layout
+    layout : momentid.estimation.layout.Layout
     runs : sequence of RunData
         With ``zdd`` and floor accelerations (and displacements/velocities
         where measured), uniformly sampled.

@@ -1,7 +1,9 @@
 """File formats: strict TOML, MCAP recordings, and lab exports to import.
 
 - :mod:`~momentid.io.toml_reader`: TOML with one-line errors naming file, key and value.
-- :mod:`~momentid.io.recording`: the MCAP recording format (write, read, stream, recover).
+- :mod:`~momentid.io.recording`: the MCAP recording format: writing; reading, streaming and recovery in
+  :mod:`~momentid.io.recording_reader`, record names and the sensor-block schema in
+  :mod:`~momentid.io.recording_format`.
 - :mod:`~momentid.io.importer`: a lab folder (``experiment.toml`` plus its data files) to a recording.
 - :mod:`~momentid.io.formats`: the export formats the importer reads (one module each, a registry).
 - :mod:`~momentid.io.align`: one file per sensor -> one run (clocks, shaking axis, sign, gravity).

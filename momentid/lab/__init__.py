@@ -4,7 +4,7 @@
 - :mod:`~momentid.lab.excitation`: ground motions (harmonics, AT2 records, band-limited noise).
 - :mod:`~momentid.lab.rig`: the MJCF shear building on a driven slide-joint base (``MjSpec``).
 - :mod:`~momentid.lab.simulation`: one run per added-mass pattern, ``mujoco.rollout``, recording.
-- :mod:`~momentid.lab.sensors`: noise, bias, gain and delay of the instruments; data checks.
+- :mod:`~momentid.lab.sensors`: noise, bias, gain and delay of the instruments.
 """
 
 from momentid.lab.scenario import Scenario, default_scenario_path, load_scenario

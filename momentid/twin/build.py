@@ -23,12 +23,19 @@ from momentid.twin.parameters import TwinParameters, from_identification
 from momentid.twin.replay import Replay, replay_run
 from momentid.twin.spec import Timing, model_matrices, timing, twin_spec
 
-__all__ = ["Twin", "build_twin", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS"]
+__all__ = ["Twin", "build_twin", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
 
 #: Trials a twin is calibrated on at least: one trial cannot tell the rig from that trial.
 MIN_TRIALS = 2
 #: Steps the written MJCF is stepped, unforced, to show it runs without MuJoCo warnings.
 CHECK_STEPS = 1000
+#: A trial whose replay misfit exceeds both this multiple of the noise alone's NRMSE and the noise plus
+#: :data:`MISFIT_MARGIN` is one the linear twin does not predict: warned, naming the trials.  A
+#: linear rig replays at its noise (the simulated rigs of tests/test_twin.py at 1.0-1.3 x, their sensor
+#: gains and clock offsets fitted), so 3x is far outside what estimation scatter leaves.
+MISFIT_FACTOR = 3.0
+#: See :data:`MISFIT_FACTOR`: an NRMSE margin (fraction) that keeps near-noise-free replays quiet.
+MISFIT_MARGIN = 0.05
 
 
 @dataclass(frozen=True)
@@ -264,5 +271,20 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     # each calibrated run's sensors with the bias its replay fitted
     params = replace(params, sensors={r.run: r.sensors for r in replays if r.calibrated})
     return Twin(parameters=params, identification=result, timing=t, xml=xml, modes=check_xml(xml),
-                replays=replays, source=experiment.source, warnings=tuple(accepted))
+                replays=replays, source=experiment.source, warnings=tuple(accepted) + misfit_warning(replays))
+
+
+def misfit_warning(replays) -> tuple:
+    """A WARNING (one-tuple) when some trials replay far above their noise (:data:`MISFIT_FACTOR`), else ().
+
+    The twin is still written: it is the best linear model of the rig, and the gap is what
+    ``momentid diagnose`` sets out to explain; but its replay is not a prediction of those trials.
+    """
+    far = [r for r in replays if r.nrmse > max(MISFIT_FACTOR * r.noise_nrmse, r.noise_nrmse + MISFIT_MARGIN)]
+    if not far:
+        return ()
+    said = ", ".join(f"{r.run} {100 * r.nrmse:.1f} % (noise alone {100 * r.noise_nrmse:.1f} %)" for r in far)
+    return (f"the linear twin does not predict {len(far)} of {len(replays)} trials: replay NRMSE {said}; the rig "
+            f"does something the linear model leaves out (amplitude dependence, a mode it lacks, a sensor "
+            f"fault): see `momentid diagnose`",)
 

@@ -3,7 +3,9 @@
 :func:`write_twin` builds every file in a temporary folder beside ``DIR`` and renames it into place at
 the end, so ``DIR`` never holds a half-built file: an error (or an interrupt) leaves ``DIR`` as it was.
 A ``DIR`` that exists must be empty or a previous twin (it holds ``twin.json``): it is replaced whole;
-a folder with other files is refused rather than emptied.
+a folder with other files is refused rather than emptied.  One writer per folder: ``DIR`` is held
+(:func:`momentid.io.exclusive.exclusive`) while the twin is written, so a second writer of the same
+folder gets one line naming it and the first finishes intact.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import numpy as np
 
 from momentid.core.series import json_safe
 from momentid.errors import MomentidError, RecordingError
+from momentid.io.exclusive import exclusive
 from momentid.twin.parameters import ExtraMode, SensorModel, TwinParameters
 
 __all__ = ["write_twin", "read_twin", "check_against", "TWIN_XML", "TWIN_JSON", "TRANSFER_PNG", "TwinFolderError"]
@@ -81,9 +84,17 @@ def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
     ------
     TwinFolderError
         ``out`` is a file, or a folder holding other files.
+    OutputBusyError
+        Another process is writing ``out`` (left as that process writes it).
     """
     out = Path(out)
     _check_out(out)
+    with exclusive(out):    # one writer per folder (a new one is made here, and removed on failure)
+        return _replace(twin, experiment, out, plots)
+
+
+def _replace(twin, experiment, out: Path, plots: bool) -> list:
+    """Build the folder beside ``out`` and rename it into place (see :func:`write_twin`)."""
     parent = out.absolute().parent
     parent.mkdir(parents=True, exist_ok=True)
     building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))

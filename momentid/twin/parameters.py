@@ -266,20 +266,25 @@ def _heights(experiment: Experiment, d: int) -> np.ndarray:
     return np.full(d, DEFAULT_STOREY_HEIGHT)
 
 
-def _extra_modes(result, d: int) -> tuple:
-    """The identification's resonances beyond the storeys, if it reports any (``extra_modes``: items
-    with ``frequency`` (Hz), ``damping_ratio`` and ``residues`` (d,) per floor sensor)."""
-    # ``extra_modes`` is being added to ModalIdentification (the modal identification's resonances beyond the
-    # storeys); an identification without the field, or the added-mass one, has none.
-    found = getattr(result, "extra_modes", None) or ()
+def _extra_modes(result) -> tuple:
+    """The modal identification's resonances beyond the storeys
+    (:attr:`~momentid.estimation.scaled.ModalIdentification.extra_modes`), each as the twin's oscillator
+    with its in-phase residues."""
+    return tuple(ExtraMode(float(mode.frequency), float(mode.damping_ratio), np.asarray(mode.residues, float).copy())
+                 for mode in result.extra_modes)
+
+
+def _complex_extra_modes(result) -> list[str]:
+    """Notes on extra modes fitted as complex (quadrature residues): the twin's oscillator reads its
+    in-phase residues only."""
     out = []
-    for mode in found:
-        residues = np.asarray(mode.residues, float).reshape(-1)
-        if residues.shape != (d,):
-            raise IdentificationError(f"extra mode at {mode.frequency:.4g} Hz has {residues.size} residues: "
-                                      f"expected one per floor sensor ({d})")
-        out.append(ExtraMode(float(mode.frequency), float(mode.damping_ratio), residues))
-    return tuple(out)
+    for mode in result.extra_modes:
+        quadrature = mode.residues_quadrature
+        if quadrature is not None and np.any(quadrature):
+            in_phase, off = (", ".join(f"{x:.3g}" for x in values) for values in (mode.residues, quadrature))
+            out.append(f"extra mode at {mode.frequency:.4g} Hz was fitted as a complex mode (quadrature residues "
+                       f"{off}; in phase {in_phase}): the twin's oscillator carries the in-phase residues only")
+    return out
 
 
 def _mean_sensors(sensors: dict, d: int) -> SensorModel:
@@ -331,9 +336,10 @@ def from_identification(result, experiment: Experiment) -> TwinParameters:
                          f"{', '.join(f'{m:.4g}' for m in masses)} (mean 1): its modes, damping ratios and sensor "
                          f"readings are the rig's; its masses, K and C are the rig's divided by its mean floor mass "
                          f"(kg), unknown")
+        notes += _complex_extra_modes(result)
         return TwinParameters(masses=masses, K=np.asarray(K, float), C=np.asarray(C, float), storey_heights=heights,
                               sensors=sensors, nominal=_mean_sensors(sensors, d),
-                              extra_modes=_extra_modes(result, d), mass_normalised=normalised, source="modal",
+                              extra_modes=_extra_modes(result), mass_normalised=normalised, source="modal",
                               runs=tuple(result.runs), notes=tuple(notes))
     M = np.asarray(result.M, float)
     if np.any(M - np.diag(np.diag(M))):

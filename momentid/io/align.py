@@ -197,18 +197,36 @@ def _band(x: np.ndarray, step: float) -> np.ndarray:
     return signal.sosfiltfilt(sos, x - np.mean(x, axis=0), axis=0)
 
 
-def _lag(table: np.ndarray, floor: np.ndarray) -> tuple[float, float]:
-    """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there."""
+def _lag(table: np.ndarray, floor: np.ndarray, near: float | None = None) -> tuple[float, float]:
+    """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there.
+
+    With ``near`` (a lag the shared clock gives), only lags within :data:`CLOCK_AGREEMENT` + 1 samples
+    of it are candidates and each is normalised by the two records' energy over the samples they
+    share at that lag: a record that stops early (a table sensor that died halfway) is then judged on
+    what it recorded, not against a lag where a periodic motion matches more samples.
+    """
     xc = signal.correlate(floor, table, mode="full", method="fft")
     lags = signal.correlation_lags(floor.size, table.size, mode="full")
-    i = int(np.argmax(np.abs(xc)))
+    if near is None:
+        norm = np.full(xc.shape, np.sqrt(np.sum(table ** 2) * np.sum(floor ** 2)))
+        candidate = norm > 0
+    else:
+        lo = np.clip(-lags, 0, table.size)             # the table samples shared at each lag: lo..hi
+        hi = np.clip(floor.size - lags, lo, table.size)
+        energy_t = np.concatenate([[0.0], np.cumsum(table ** 2)])
+        energy_f = np.concatenate([[0.0], np.cumsum(floor ** 2)])
+        norm = np.sqrt((energy_t[hi] - energy_t[lo]) * (energy_f[hi + lags] - energy_f[lo + lags]))
+        candidate = (np.abs(lags - near) <= CLOCK_AGREEMENT + 1) & (hi - lo >= 3) & (norm > 0)
+    if not candidate.any():
+        return float(lags[0] if near is None else near), 0.0
+    r = np.where(candidate, xc / np.where(candidate, norm, 1.0), 0.0)
+    i = int(np.argmax(np.abs(r)))
     frac = 0.0
-    if 0 < i < xc.size - 1:  # parabola through the peak and its neighbours
-        y0, y1, y2 = np.abs(xc[i - 1:i + 2])
+    if 0 < i < r.size - 1 and candidate[i - 1] and candidate[i + 1]:  # parabola through the peak and its neighbours
+        y0, y1, y2 = np.abs(r[i - 1:i + 2])
         curvature = y0 - 2 * y1 + y2
         frac = 0.5 * (y0 - y2) / curvature if curvature < 0 else 0.0
-    norm = np.sqrt(np.sum(table ** 2) * np.sum(floor ** 2))
-    return lags[i] + frac, float(xc[i] / norm) if norm > 0 else 0.0
+    return lags[i] + frac, float(r[i])
 
 
 def min_align_samples(step: float) -> int:
@@ -321,6 +339,9 @@ def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndar
     reliable = abs(corr) >= MIN_ALIGN_CORRELATION
     if overlap > 0:  # a shared clock: trust it if the data agree
         clock_start = int(round((rec.time[0] - table.time[0]) / step))
+        near_lag, near_corr = _lag(table_band, band, near=-clock_start)
+        if abs(near_corr) >= MIN_ALIGN_CORRELATION:  # the data confirm the clock where both recorded
+            lag, corr, reliable = near_lag, near_corr, True
         error = (-lag - clock_start) * step
         if abs(-lag - clock_start) <= CLOCK_AGREEMENT or not reliable:
             notes = () if reliable else (f"the data cannot confirm the clock (r = {corr:+.2f} with the "

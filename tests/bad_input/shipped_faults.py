@@ -109,4 +109,8 @@ CASES = [
     # Floor 3's clock 300 ppm fast: over the 40 s of shaking its lag to the table grows 1.4 samples.
     Case(Group.IMU, "shipped-clock-drift-300ppm", Outcome.RECOVERY, _importing(_clock_fast(300), check=_drift_read(300)),
          ("its clock drifts from the table's by", "ppm", "resampled onto the table's clock")),
+    # One file listed for floors 1 and 2: the message used to read "already run 'this run''s".
+    Case(Group.IMU, "shipped-one-file-two-floors", Outcome.ERROR,
+         _importing(None, TOML.replace('"f1.csv", "f2.csv"', '"f1.csv", "f1.csv"')),
+         ("experiment.toml", "runs[0].floors", "f1.csv is already this run's floor 1")),
 ]

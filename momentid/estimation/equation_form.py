@@ -66,6 +66,15 @@ def check_times(selected, times) -> None:
         if outside.size:
             raise IdentificationError(f"times = {list(times)}: {outside.tolist()} s lies outside run "
                                       f"{run.name!r}, recorded from {lo:g} to {hi:g} s")
+        picked = _nearest(run, values)
+        _, first, count = np.unique(picked, return_index=True, return_counts=True)
+        if np.any(count > 1):
+            k = int(first[np.argmax(count > 1)])
+            same = values[picked == picked[k]]
+            raise IdentificationError(
+                f"times = {list(times)}: {', '.join(f'{x:g}' for x in same)} s pick the same sample of run "
+                f"{run.name!r} (t = {run.time[picked[k]]:g} s); expected distinct instants (one instant "
+                f"counted twice would shrink every standard error)")
 
 
 def _rows(run: RunData, signals: dict, times) -> np.ndarray:
@@ -79,14 +88,17 @@ def _rows(run: RunData, signals: dict, times) -> np.ndarray:
                               f"(run {run.name!r} has accelerations only)")
 
 
+def _nearest(run: RunData, times: np.ndarray) -> np.ndarray:
+    """The index of the sample nearest each of ``times`` (s), in their order."""
+    idx = np.clip(np.searchsorted(run.time, times), 1, run.n_samples - 1)
+    left = run.time[idx - 1]
+    return np.where(np.abs(times - left) <= np.abs(run.time[idx] - times), idx - 1, idx)
+
+
 def _sample_index(run: RunData, times) -> np.ndarray:
     if times is None:
         return np.arange(run.n_samples)
-    times = np.asarray(times, float)
-    idx = np.clip(np.searchsorted(run.time, times), 1, run.n_samples - 1)
-    left = run.time[idx - 1]
-    idx = np.where(np.abs(times - left) <= np.abs(run.time[idx] - times), idx - 1, idx)
-    return np.unique(idx)
+    return np.unique(_nearest(run, np.asarray(times, float)))
 
 
 class Accumulator:

@@ -27,8 +27,9 @@ What was done per sensor is a :class:`SensorReport`.
 
 from __future__ import annotations
 
+
 import enum
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from scipy import signal
@@ -63,6 +64,13 @@ STILL_RMS = 0.01
 #: table's: below the first mode a floor moves at least as much as the table
 #: (1.0-2.8 times on the shipped data), a loose or dead sensor far less.
 STILL_FRACTION = 0.2
+#: Clock drift (samples of lag gained over the shaking a sensor shares with the table) above which
+#: it is resampled onto the table's clock with a note.  The floors' own phase in ALIGN_BAND moves
+#: the lag as the motion's content changes: the shipped synchronised trials read 0.05-0.6 samples;
+#: a clock 300 ppm fast reads 1.4 over their 60 s of shaking (15 deg of phase at the 17 Hz mode).
+DRIFT_LIMIT = 1.0
+#: Window (s) in which the lag is read to find the drift: a few of the slowest cycles of ALIGN_BAND.
+DRIFT_WINDOW = 10.0
 #: Largest relative difference between two sensors' sample intervals.
 STEP_TOLERANCE = 1e-3
 #: Fewest periods of the lowest frequency of :data:`ALIGN_BAND` a sensor's record must span: the
@@ -197,18 +205,38 @@ def _band(x: np.ndarray, step: float) -> np.ndarray:
     return signal.sosfiltfilt(sos, x - np.mean(x, axis=0), axis=0)
 
 
-def _lag(table: np.ndarray, floor: np.ndarray) -> tuple[float, float]:
-    """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there."""
+def _lag(table: np.ndarray, floor: np.ndarray, near: float | None = None) -> tuple[float, float]:
+    """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there.
+
+    With ``near`` (a lag the shared clock gives), only lags within :data:`CLOCK_AGREEMENT` + 1 samples
+    of it are candidates and each is normalised by the two records' energy over the samples they
+    share at that lag: a record that stops early (a table sensor that died halfway) is then judged on
+    what it recorded, not against a lag where a periodic motion matches more samples.
+    """
     xc = signal.correlate(floor, table, mode="full", method="fft")
     lags = signal.correlation_lags(floor.size, table.size, mode="full")
-    i = int(np.argmax(np.abs(xc)))
+    if near is None:
+        norm = np.full(xc.shape, np.sqrt(np.sum(table ** 2) * np.sum(floor ** 2)))
+        candidate = norm > 0
+    else:
+        lo = np.clip(-lags, 0, table.size)             # the table samples shared at each lag: lo..hi
+        hi = np.clip(floor.size - lags, lo, table.size)
+        energy_t = np.concatenate([[0.0], np.cumsum(table ** 2)])
+        energy_f = np.concatenate([[0.0], np.cumsum(floor ** 2)])
+        norm = np.sqrt((energy_t[hi] - energy_t[lo]) * (energy_f[hi + lags] - energy_f[lo + lags]))
+        candidate = (np.abs(lags - near) <= CLOCK_AGREEMENT + 1) & (hi - lo >= 3) & (norm > 0)
+    if not candidate.any():
+        return float(lags[0] if near is None else near), 0.0
+    r = np.where(candidate, xc / np.where(candidate, norm, 1.0), 0.0)
+    i = int(np.argmax(np.abs(r)))
+    if near is not None and not (0 < i < r.size - 1 and candidate[i - 1] and candidate[i + 1]):
+        return float(lags[i]), 0.0  # the best lag near the clock's is at the window's edge: no peak there
     frac = 0.0
-    if 0 < i < xc.size - 1:  # parabola through the peak and its neighbours
-        y0, y1, y2 = np.abs(xc[i - 1:i + 2])
+    if 0 < i < r.size - 1 and candidate[i - 1] and candidate[i + 1]:  # parabola through the peak and its neighbours
+        y0, y1, y2 = np.abs(r[i - 1:i + 2])
         curvature = y0 - 2 * y1 + y2
         frac = 0.5 * (y0 - y2) / curvature if curvature < 0 else 0.0
-    norm = np.sqrt(np.sum(table ** 2) * np.sum(floor ** 2))
-    return lags[i] + frac, float(xc[i] / norm) if norm > 0 else 0.0
+    return lags[i] + frac, float(r[i])
 
 
 def min_align_samples(step: float) -> int:
@@ -292,7 +320,27 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
                                   f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz, the table {table_rms:.3g}); "
                                   f"expected a sensor fixed to the floor, moving with the table")
         links.append(_offset(records[0], rec, ch, axes[0][2], band, step))
+    records, links = _correct_drift(records, axes, links, step)
     return _assemble(records, channels, axes, links, step)
+
+
+def _correct_drift(records: list, axes: list, links: list, step: float) -> tuple[list, list]:
+    """Each floor sensor whose clock drifts from the table's by more than :data:`DRIFT_LIMIT` samples
+    over the span they share, resampled onto the table's clock, with a note naming the drift."""
+    records, links = list(records), list(links)
+    table_band = axes[0][2]
+    for k in range(1, len(records)):
+        rec, link, band = records[k], links[k], axes[k][2]
+        drift = _drift(table_band, band, link.start, step)
+        if drift is None or abs(drift[0] * drift[1]) <= DRIFT_LIMIT:
+            continue
+        rate, span, centre = drift
+        records[k] = _dedrift(rec, rate, link.start, centre)
+        note = (f"its clock drifts from the table's by {rate * 1e6:+.0f} ppm ({rate * span:+.1f} samples over "
+                f"the {span * step:.0f} s of shaking, read from the lag in {DRIFT_WINDOW:g} s windows): "
+                f"resampled onto the table's clock")
+        links[k] = replace(link, notes=link.notes + (note,))
+    return records, links
 
 
 @dataclass(frozen=True)
@@ -321,6 +369,9 @@ def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndar
     reliable = abs(corr) >= MIN_ALIGN_CORRELATION
     if overlap > 0:  # a shared clock: trust it if the data agree
         clock_start = int(round((rec.time[0] - table.time[0]) / step))
+        near_lag, near_corr = _lag(table_band, band, near=-clock_start)
+        if abs(near_corr) >= MIN_ALIGN_CORRELATION:  # the data confirm the clock where both recorded
+            lag, corr, reliable = near_lag, near_corr, True
         error = (-lag - clock_start) * step
         if abs(-lag - clock_start) <= CLOCK_AGREEMENT or not reliable:
             notes = () if reliable else (f"the data cannot confirm the clock (r = {corr:+.2f} with the "
@@ -335,6 +386,35 @@ def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndar
                               f"{MIN_ALIGN_CORRELATION}); cannot align it")
     note = f"its clock does not overlap the table's: offset {data_start * step:+.4f} s estimated"
     return _Link(data_start, Alignment.DATA, corr, float("nan"), (note,))
+
+
+def _drift(table_band: np.ndarray, band: np.ndarray, start: int, step: float) -> tuple[float, int, float] | None:
+    """The sensor's clock drift against the table's (samples of lag gained per sample), the span
+    (samples) it was read over and that span's centre (an index of the table's grid): the slope of the lag read in windows of :data:`DRIFT_WINDOW` s of the
+    span both recorded, over the windows where the data confirm it (|r| >=
+    :data:`MIN_ALIGN_CORRELATION`: a quiet lead-in or tail does not); None with fewer than three."""
+    lo, hi = max(0, start), min(table_band.size, start + band.size)
+    width = max(int(DRIFT_WINDOW / step), min_align_samples(step))
+    centres, lags = [], []
+    for a in range(lo, hi - width + 1, width):
+        lag, corr = _lag(table_band[a:a + width], band[a - start:a - start + width], near=0.0)
+        if abs(corr) >= MIN_ALIGN_CORRELATION:
+            centres.append(a + 0.5 * width)
+            lags.append(lag)
+    if len(lags) < 3:
+        return None
+    return float(np.polyfit(centres, lags, 1)[0]), int(centres[-1] - centres[0] + width), float(np.mean(centres))
+
+
+def _dedrift(rec: SensorRecord, rate: float, start: int, centre: float) -> SensorRecord:
+    """``rec`` resampled so that its lag to the table no longer grows by ``rate`` per sample; the lag
+    at ``centre`` (the table grid's index where the drift was read) is kept: the offset stays as read."""
+    centre = centre - start
+    k = np.arange(rec.acc.shape[0], dtype=float)
+    source = k + rate * (k - centre)
+    acc = np.column_stack([np.interp(source, k, rec.acc[:, j], left=np.nan, right=np.nan)
+                           for j in range(rec.acc.shape[1])])
+    return replace(rec, acc=acc)
 
 
 def _assemble(records: list[SensorRecord], channels: tuple[str, ...], axes: list, links: list[_Link],

@@ -159,14 +159,13 @@ def _description(folder: Path) -> _Description:
 def _check_not_listed(tab: Table, files: tuple[Path, ...], runs: list[_RunSpec]) -> None:
     """A data file already read for another run (or another sensor of this one): the same trial listed
     twice would validate an identification on its own training data."""
-    seen = {f.resolve(): (r.name, k) for r in runs for k, f in enumerate(r.files)}
+    seen = {f.resolve(): f"run {r.name!r}'s" for r in runs for f in r.files}
     for k, f in enumerate(files):
         if f.resolve() in seen:
-            other, _ = seen[f.resolve()]
             raise tab.error("file" if len(files) == 1 else "table" if k == 0 else "floors",
-                            f"files not used by another run; {f.name} is already run {other!r}'s (the same trial "
+                            f"files not used twice; {f.name} is already {seen[f.resolve()]} (the same file "
                             f"listed twice?)")
-        seen[f.resolve()] = ("this run", k)
+        seen[f.resolve()] = "this run's " + ("table" if k == 0 else f"floor {k}") if len(files) > 1 else "this run's"
 
 
 # ----------------------------------------------------------------------------- the import

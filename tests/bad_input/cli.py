@@ -265,6 +265,10 @@ CASES = [
          ("--time", "100")),
     Case(Group.CLI, "identify-time-nan", Outcome.ERROR, _with_rec("identify", "REC", "--time", "nan"),
          ("--time", "nan")),
+    # the same instant twice used to collapse silently into one equation (np.unique)
+    Case(Group.CLI, "identify-time-twice", Outcome.ERROR,
+         _with_rec("identify", "REC", "--estimator", "equation", "--time", "0.2", "--time", "0.2", "--time", "0.4"),
+         ("--time 0.2 --time 0.2 --time 0.4", "0.2, 0.2 s pick the same sample", "expected distinct instants")),
     Case(Group.CLI, "identify-floors-in-g", Outcome.REFUSAL, _edited(_floors_in_g), ("refused",)),
     Case(Group.CLI, "identify-added-mass-in-grams", Outcome.REFUSAL, _edited(_grams), ("refused",)),
     Case(Group.CLI, "identify-swapped-floor-columns", Outcome.REFUSAL, _edited(_swapped), ("refused",)),

@@ -1,0 +1,116 @@
+"""Doctored copies of the shipped mini shake-table trials (data/mini_shake_table/): faults a real lab
+makes with real, periodic table motion (a sine), where a simulated broadband record would hide them."""
+
+from __future__ import annotations
+
+import gzip
+import re
+from pathlib import Path
+
+import numpy as np
+
+from momentid.io.importer import import_folder
+
+from ._core import Case, Group, Outcome
+from .import_faults import _notes
+
+SHIPPED = Path(__file__).resolve().parents[2] / "data" / "mini_shake_table" / "flexible_3storey"
+#: The sine 1.5 trial: table, floors 1-3 (160 s at 120 Hz; a 1.5 Hz sine after a 15.6 s quiet lead-in).
+TRIAL = ("Ground Floor/(Sine 1.5)Xsens DOT_20250306_121949.csv.gz",
+         "1st Floor/(Sine 1.5)Xsens DOT_20250306_121949.csv.gz",
+         "2nd Floor/(Sine 1.5)left leg_20250306_121949.csv.gz",
+         "3rd Floor (Top floor)/(Sine 1.5)Xsens DOT_20250306_121949.csv.gz")
+NAMES = ("table.csv", "f1.csv", "f2.csv", "f3.csv")
+TOML = """\
+[structure]
+storeys = 3
+masses = [0.160, 0.160, 0.142]
+
+[sensors]
+format = "xsens-dot"
+
+[[runs]]
+name = "sine_1p5"
+table = "table.csv"
+floors = ["f1.csv", "f2.csv", "f3.csv"]
+"""
+#: Xsens DOT columns: the data rows start after the header line ``PacketCounter,...``.
+ACC_X = 5
+
+
+def shipped_lab(folder: Path, edit=None, toml: str = TOML) -> Path:
+    """The sine 1.5 trial as plain files in ``folder/lab``; ``edit(k, header, rows)`` may change
+    sensor ``k``'s (0: table) header lines and data rows (lists of str) in place."""
+    lab = folder / "lab"
+    lab.mkdir()
+    (lab / "experiment.toml").write_text(toml)
+    for k, (source, name) in enumerate(zip(TRIAL, NAMES)):
+        lines = gzip.decompress((SHIPPED / source).read_bytes()).decode("utf-8").splitlines()
+        first = next(i for i, line in enumerate(lines) if line.startswith("PacketCounter")) + 1
+        header, rows = lines[:first], [line for line in lines[first:] if line]
+        if edit is not None:
+            edit(k, header, rows)
+        (lab / name).write_text("\n".join(header + rows) + "\n")
+    return lab
+
+
+def _importing(edit, toml: str = TOML, check=None):
+    def act(folder: Path):
+        experiment = import_folder(shipped_lab(folder, edit, toml))
+        if check is not None:
+            check(experiment)
+        return _notes(experiment)
+    return act
+
+
+def _table_stops_halfway(k, header, rows):
+    if k == 0:
+        del rows[len(rows) // 2:]
+
+
+def _no_sensor_reversed(experiment):
+    """Every shipped sensor is mounted the right way round: a flip is a wrong answer."""
+    flipped = [s["channel"] for s in experiment.runs[0].meta["sensors"] if s["sign"] < 0]
+    if flipped:
+        raise AssertionError(f"sensors {flipped} flipped: the table stopping early misaligned them")
+
+
+def _clock_fast(ppm: float):
+    """Floor 3's device samples ``ppm`` faster than its stamps say: its data are the shipped
+    samples read at ``k (1 + ppm 1e-6)`` (linear interpolation) under the same stamps."""
+    def edit(k, header, rows):
+        if k != 3:
+            return
+        cells = np.array([[float(c) for c in row.split(",")] for row in rows])
+        n = np.arange(len(rows), dtype=float)
+        for j in range(ACC_X, ACC_X + 3):
+            cells[:, j] = np.interp(n * (1 + ppm * 1e-6), n, cells[:, j])
+        rows[:] = [",".join(row.split(",")[:ACC_X] + [f"{v:.8f}" for v in c[ACC_X:ACC_X + 3]] + row.split(",")[ACC_X + 3:])
+                   for row, c in zip(rows, cells)]
+    return edit
+
+
+def _drift_read(ppm: float):
+    """Floor 3's note gives the drift to 15 % (the floors' own phase moves the lag read in 10 s
+    windows by up to 0.6 samples on the shipped trials, of the 1.4 samples 300 ppm adds there);
+    no other sensor is resampled."""
+    def check(experiment):
+        notes = {s["channel"]: " ".join(s["notes"]) for s in experiment.runs[0].meta["sensors"]}
+        found = re.search(r"drifts from the table's by ([-+]\d+) ppm", notes["a3"])
+        if found is None or abs(-float(found.group(1)) / ppm - 1) > 0.15 or any("drifts" in notes[c] for c in ("a1", "a2")):
+            raise AssertionError(f"drift {ppm} ppm on a3 read as: {notes}")
+    return check
+
+
+CASES = [
+    # The table's sensor stops at half its 7307 rows: the run keeps the 3653 samples all four share.
+    Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
+         _importing(_table_stops_halfway, check=_no_sensor_reversed), ("kept the 3653 samples every sensor covers",)),
+    # Floor 3's clock 300 ppm fast: over the 40 s of shaking its lag to the table grows 1.4 samples.
+    Case(Group.IMU, "shipped-clock-drift-300ppm", Outcome.RECOVERY, _importing(_clock_fast(300), check=_drift_read(300)),
+         ("its clock drifts from the table's by", "ppm", "resampled onto the table's clock")),
+    # One file listed for floors 1 and 2: the message used to read "already run 'this run''s".
+    Case(Group.IMU, "shipped-one-file-two-floors", Outcome.ERROR,
+         _importing(None, TOML.replace('"f1.csv", "f2.csv"', '"f1.csv", "f1.csv"')),
+         ("experiment.toml", "runs[0].floors", "f1.csv is already this run's floor 1")),
+]

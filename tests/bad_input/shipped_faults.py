@@ -102,6 +102,22 @@ def _drift_read(ppm: float):
     return check
 
 
+def _decimal_commas(k, header, rows):
+    """Floor 2's export written in a locale with decimal commas: cells separated by ';'."""
+    if k == 2:
+        header[:] = [line.replace(",", ";") for line in header]
+        rows[:] = [row.replace(",", ";").replace(".", ",") for row in rows]
+
+
+def _same_as_clean(experiment):
+    """The decimal-comma file reads exactly as the shipped one."""
+    clean_folder = Path(experiment.runs[0].meta["source_files"][0]).parents[1] / "clean"
+    clean_folder.mkdir()
+    clean = import_folder(shipped_lab(clean_folder))
+    if not np.array_equal(experiment.runs[0].values, clean.runs[0].values):
+        raise AssertionError("the decimal-comma export reads differently from the shipped one")
+
+
 CASES = [
     # The table's sensor stops at half its 7307 rows: the run keeps the 3653 samples all four share.
     Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
@@ -113,4 +129,7 @@ CASES = [
     Case(Group.IMU, "shipped-one-file-two-floors", Outcome.ERROR,
          _importing(None, TOML.replace('"f1.csv", "f2.csv"', '"f1.csv", "f1.csv"')),
          ("experiment.toml", "runs[0].floors", "f1.csv is already this run's floor 1")),
+    # A decimal-comma locale's export: 'missing from the header' used to name a column it holds.
+    Case(Group.IMU, "shipped-decimal-commas", Outcome.RECOVERY, _importing(_decimal_commas, check=_same_as_clean),
+         ("cells separated by ';' with decimal commas",)),
 ]

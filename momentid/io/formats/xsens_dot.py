@@ -84,12 +84,22 @@ def _preamble(path: Path, lines: list[str]) -> tuple[int, dict]:
     for i, line in enumerate(lines[:MAX_PREAMBLE_LINES]):
         if line.startswith("PacketCounter") or line.startswith(CLOCK_COLUMN):
             return i, info
-        key, sep, value = line.partition(",")
+        key, sep, value = line.replace(";", ",", 1).partition(",")  # ';' in a decimal-comma locale
         if sep and key.strip().endswith(":"):
             info[key.strip().rstrip(":").strip()] = value.strip()
     raise SensorDataError(f"{path}: no header line starting 'PacketCounter,{CLOCK_COLUMN}' in the first "
                           f"{MAX_PREAMBLE_LINES} lines; expected an Xsens DOT CSV export "
                           f"(preamble, then the header, then one row per sample)")
+
+
+def _decimal_commas(lines: list[str], h: int) -> tuple[list[str], list[str]]:
+    """``lines`` with the header at ``h`` read as written: an export of a locale that writes decimal
+    commas separates its cells by ';' (header ``PacketCounter;SampleTimeFine;...``); its cells are
+    rewritten with '.' and ',' and a note says so."""
+    if "," in lines[h] or ";" not in lines[h]:
+        return lines, []
+    rows = [line.replace(",", ".").replace(";", ",") for line in lines[h:]]
+    return lines[:h] + rows, ["cells separated by ';' with decimal commas (a locale's export): read as such"]
 
 
 def _parse_slowly(path: Path, rows: list[str], names: tuple[str, ...], first_row: int) -> np.ndarray:
@@ -256,6 +266,7 @@ def read_xsens_dot(path) -> SensorRecord:
     path = Path(path)
     lines = read_text(path).rstrip().split("\n")
     h, info = _preamble(path, lines)
+    lines, locale = _decimal_commas(lines, h)
     names = tuple(c.strip() for c in lines[h].split(","))
     for column in (CLOCK_COLUMN, *ACC_COLUMNS):
         if column not in names:
@@ -274,6 +285,7 @@ def read_xsens_dot(path) -> SensorRecord:
     if np.all(acc[0] == 0.0):  # written before the device measures
         acc, ticks, rows = acc[1:], ticks[1:], rows[1:]
     lost, notes = _placeholders(path, acc, ticks, rows)
+    notes = locale + notes
     acc, ticks, rows = acc[~lost], ticks[~lost], rows[~lost]
     if COUNTER_COLUMN in names:
         counter = data[:, names.index(COUNTER_COLUMN)][data.shape[0] - lost.size:][~lost]

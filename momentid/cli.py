@@ -39,14 +39,14 @@ _EPILOG = """examples:
 
 def _output_path(out: str | None, name: str) -> Path:
     """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``."""
-    if out is None:
-        return Path("out") / f"{name}.mcap"
-    p = Path(out)
-    if p.suffix == ".mcap":
-        if p.is_dir():
-            raise _OutputError(out, "a folder of that name exists; expected a .mcap file path")
-        return p
-    return _output_folder(out) / f"{name}.mcap"
+    p = Path("out") / f"{name}.mcap" if out is None else Path(out)
+    if p.suffix != ".mcap":
+        p = _output_folder(out) / f"{name}.mcap"
+    if p.is_dir():
+        raise _OutputError(str(p), "a folder of that name exists; expected a .mcap file path")
+    if p.exists():  # replaced, and said so: it can be made again (the same scenario and seed, the same lab folder)
+        print(f"note: {p}: an existing file, replaced by this recording", file=sys.stderr)
+    return p
 
 
 class _OutputError(MomentidError):

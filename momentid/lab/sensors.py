@@ -28,7 +28,7 @@ from momentid.core.series import RunData
 from momentid.errors import SensorDataError
 from momentid.lab.scenario import Instrument, Sensors
 
-__all__ = ["measure", "noise_std", "check_run", "MAX_REPAIR_GAP", "ANTIALIAS_ORDER"]
+__all__ = ["measure", "noise_std", "check_run", "check_clipping", "MAX_REPAIR_GAP", "ANTIALIAS_ORDER"]
 
 #: Longest run of missing (NaN) samples that :func:`check_run` interpolates over.
 MAX_REPAIR_GAP = 5
@@ -189,11 +189,11 @@ def check_run(run: RunData, source: str = "<memory>", *, clip_samples: int = 3) 
             ok = ~missing
             x[missing] = np.interp(t[missing], t[ok], x[ok])
             notes.append(f"{where}: channel {name}: interpolated {int(missing.sum())} missing samples")
-        _check_clipping(where, name, x, clip_samples)
+        check_clipping(where, name, x, clip_samples)
     return replace(run, values=values), tuple(notes)
 
 
-def _check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int) -> None:
+def check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int = 3) -> None:
     """A flat run at the channel's extreme, entered or left by a step larger
     than the channel's quantisation, is clipping (a quantised smooth peak is
     entered by one quantum)."""

@@ -118,6 +118,16 @@ def _same_as_clean(experiment):
         raise AssertionError("the decimal-comma export reads differently from the shipped one")
 
 
+def _clipped(k, header, rows):
+    """Floor 3's accelerometer saturates at +-1 m/s^2 on its shaking axis (X)."""
+    if k == 3:
+        def clip(row):
+            cells = row.split(",")
+            cells[ACC_X] = f"{min(max(float(cells[ACC_X]), -1.0), 1.0):.8f}"
+            return ",".join(cells)
+        rows[:] = [clip(row) for row in rows]
+
+
 CASES = [
     # The table's sensor stops at half its 7307 rows: the run keeps the 3653 samples all four share.
     Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
@@ -132,4 +142,7 @@ CASES = [
     # A decimal-comma locale's export: 'missing from the header' used to name a column it holds.
     Case(Group.IMU, "shipped-decimal-commas", Outcome.RECOVERY, _importing(_decimal_commas, check=_same_as_clean),
          ("cells separated by ';' with decimal commas",)),
+    # A saturated floor sensor: import used to read its clipped shape as floors 2 and 3 swapped, and relabel.
+    Case(Group.IMU, "shipped-floor-clipped", Outcome.ERROR, _importing(_clipped),
+         ("f3.csv", "channel a3 is clipped", "consecutive samples at")),
 ]

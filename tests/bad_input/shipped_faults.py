@@ -128,6 +128,15 @@ def _clipped(k, header, rows):
         rows[:] = [clip(row) for row in rows]
 
 
+def _clock_step(k, header, rows):
+    """Floor 1's device clock steps +50 ms halfway (a re-synchronisation); PacketCounter runs on."""
+    if k == 1:
+        for i in range(len(rows) // 2, len(rows)):
+            cells = rows[i].split(",")
+            cells[1] = str(int(cells[1]) + 50_000)
+            rows[i] = ",".join(cells)
+
+
 CASES = [
     # The table's sensor stops at half its 7307 rows: the run keeps the 3653 samples all four share.
     Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
@@ -145,4 +154,7 @@ CASES = [
     # A saturated floor sensor: import used to read its clipped shape as floors 2 and 3 swapped, and relabel.
     Case(Group.IMU, "shipped-floor-clipped", Outcome.ERROR, _importing(_clipped),
          ("f3.csv", "channel a3 is clipped", "consecutive samples at")),
+    # A clock step with the packet counter running on used to be named "6 samples lost".
+    Case(Group.IMU, "shipped-clock-step", Outcome.ERROR, _importing(_clock_step),
+         ("f1.csv", "'SampleTimeFine'", "the device clock stepped +50.0 ms and no packet was lost")),
 ]

@@ -177,6 +177,33 @@ def _stamps_from_counter(ticks: np.ndarray, counter: np.ndarray, rows: np.ndarra
                  f"({step:.0f} us per packet)"]
 
 
+def _check_clock_step(path: Path, ticks: np.ndarray, counter: np.ndarray, rows: np.ndarray) -> None:
+    """Refuse stamps that move on by more sample intervals than ``PacketCounter`` counts packets, and
+    never make it up: the device clock stepped (a re-synchronisation), no sample was lost.  (The app's
+    lost-packet mark jumps a stamp and repeats it on the next row: that evens out at once.)"""
+    if ticks.size < 3 or not (np.all(np.isfinite(counter)) and np.all(np.isfinite(ticks))):
+        return
+    packets = np.concatenate([[0.0], np.cumsum(np.diff(counter) % COUNTER_WRAP)])
+    moved = np.diff(ticks)
+    moved[moved < -CLOCK_WRAP / 2] += CLOCK_WRAP  # the uint32 counter wrapped
+    forward = moved[moved > 0]
+    if forward.size < 2:
+        return
+    step = float(np.median(forward))
+    slots = np.concatenate([[0.0], np.cumsum(np.round(moved / step))])
+    ahead = slots - packets  # sample intervals the stamps are ahead of the packets counted
+    if ahead[-1] <= 0:
+        return
+    i = int(np.flatnonzero(ahead != ahead[-1])[-1]) + 1 if np.any(ahead != ahead[-1]) else 0
+    if i == 0:
+        return
+    raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
+                 f"{ticks[i]:.0f} us is {moved[i - 1]:.0f} us after row {int(rows[i - 1])} while {COUNTER_COLUMN} "
+                 f"moves on by {packets[i] - packets[i - 1]:.0f}: the device clock stepped {ahead[-1] * step / 1e3:+.1f} ms "
+                 f"and no packet was lost; expected stamps that follow the packet counter (re-export, or cut "
+                 f"the record there)")
+
+
 def _row_list(rows: np.ndarray) -> str:
     """``"row 12"``, ``"rows 12, 40"`` or ``"rows 12, 40, 77 and 5 more"``."""
     shown = ", ".join(str(int(r)) for r in rows[:3])
@@ -291,6 +318,7 @@ def read_xsens_dot(path) -> SensorRecord:
         counter = data[:, names.index(COUNTER_COLUMN)][data.shape[0] - lost.size:][~lost]
         ticks, stamped = _stamps_from_counter(ticks, counter, rows)
         notes += stamped
+        _check_clock_step(path, ticks, counter, rows)
     if rows.size < MIN_SAMPLES:
         raise _error(path, first_row, f"'{CLOCK_COLUMN}'", f"{rows.size} rows with measured accelerations; "
                                                           f"expected at least {MIN_SAMPLES} samples")

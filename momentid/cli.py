@@ -39,14 +39,19 @@ _EPILOG = """examples:
 
 def _output_path(out: str | None, name: str) -> Path:
     """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``."""
-    if out is None:
-        return Path("out") / f"{name}.mcap"
-    p = Path(out)
-    if p.suffix == ".mcap":
-        if p.is_dir():
-            raise _OutputError(out, "a folder of that name exists; expected a .mcap file path")
-        return p
-    return _output_folder(out) / f"{name}.mcap"
+    p = Path("out") / f"{name}.mcap" if out is None else Path(out)
+    if p.suffix != ".mcap":
+        p = _output_folder(out) / f"{name}.mcap"
+    if p.is_dir():
+        raise _OutputError(str(p), "a folder of that name exists; expected a .mcap file path")
+    return p
+
+
+def _replaced(out: Path, existed: bool) -> None:
+    """An existing recording at ``-o`` is replaced once written (it can be made again: the same
+    scenario and seed, the same lab folder), and said so."""
+    if existed:
+        print(f"note: {out}: an existing file, replaced by this recording", file=sys.stderr)
 
 
 class _OutputError(MomentidError):
@@ -163,8 +168,9 @@ def _cmd_run(args) -> int:
         raise MomentidError(f"--runs {args.runs}: {path} has no run named {unknown[0]!r}; its runs are "
                             f"{', '.join(r.name for r in scenario.runs)}")
     out = _output_path(args.output, scenario.name)
-    progress = not args.quiet and sys.stderr.isatty()
+    progress, existed = not args.quiet and sys.stderr.isatty(), out.exists()
     experiment = run_experiment(scenario, out, progress=progress, workers=args.workers)
+    _replaced(out, existed)
     if not args.json:
         print(f"scenario {scenario.name}: {len(experiment.runs)} runs x {scenario.duration:g} s at "
               f"{scenario.sample_rate:g} Hz -> {out}\n")
@@ -242,7 +248,10 @@ def _cmd_import(args) -> int:
     from momentid.io.importer import import_folder, report, summary, write_import
 
     experiment = import_folder(args.folder, relabel=not args.refuse_mislabelled)
-    out = write_import(experiment, _output_path(args.output, Path(args.folder).resolve().name))
+    out = _output_path(args.output, Path(args.folder).resolve().name)
+    existed = out.exists()
+    out = write_import(experiment, out)
+    _replaced(out, existed)
     for line in report(experiment):
         print(line)
     print(summary(experiment, out))

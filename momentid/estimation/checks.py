@@ -14,7 +14,7 @@ import numpy as np
 from momentid.core.series import RunData, channel_unit
 from momentid.errors import SensorDataError
 
-__all__ = ["check_run", "MAX_REPAIR_GAP"]
+__all__ = ["check_run", "check_clipping", "MAX_REPAIR_GAP"]
 
 #: Longest run of missing (NaN) samples that :func:`check_run` interpolates over.
 MAX_REPAIR_GAP = 5
@@ -84,11 +84,11 @@ def check_run(run: RunData, source: str = "<memory>", *, clip_samples: int = 3) 
             ok = ~missing
             x[missing] = np.interp(t[missing], t[ok], x[ok])
             notes.append(f"{where}: channel {name}: interpolated {int(missing.sum())} missing samples")
-        _check_clipping(where, name, x, clip_samples)
+        check_clipping(where, name, x, clip_samples)
     return replace(run, values=values), tuple(notes)
 
 
-def _check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int) -> None:
+def check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int = 3) -> None:
     """A flat run at the channel's extreme, entered or left by a step larger
     than the channel's quantisation, is clipping (a quantised smooth peak is
     entered by one quantum)."""

@@ -194,9 +194,11 @@ def estimate_noise(run: RunData, *, f_max: float | None = None, stated=None,
                                 else (0.25 * fs, 0.45 * fs))
     sigma = high_band_noise(run, low, high)
     if sigma is None:
+        band = (f"fewer than {MIN_BINS} DFT bins between {low:.3g} and {high:.3g} Hz" if low < high else
+                f"no band above the structure's response ({low:.3g} Hz, {HIGH_BAND_FACTOR:g} x its highest "
+                f"mode) below {high:.3g} Hz")
         raise IdentificationError(
             f"run {run.name!r}: no source for the sensor noise level: no stated level (experiment.toml "
-            f"[noise]), no quiet lead-in of at least {MIN_LEAD_IN:g} s before the table moves, and fewer "
-            f"than {MIN_BINS} DFT bins between {low:.3g} and {high:.3g} Hz at {fs:.4g} Hz sampling: "
-            f"expected one of them (record a few seconds of rest before shaking)")
+            f"[noise]), no quiet lead-in of at least {MIN_LEAD_IN:g} s before the table moves, and {band} "
+            f"at {fs:.4g} Hz sampling: expected one of them (record a few seconds of rest before shaking)")
     return NoiseEstimate(sigma, NoiseSource.HIGH_BAND, f"high band {low:.3g}-{high:.3g} Hz")

@@ -191,7 +191,11 @@ def _read_run(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
         return _read_run_file(spec, fmt, storeys)
     channels = ("zdd", *(f"a{i + 1}" for i in range(storeys)))
     records = [fmt.read_sensor(f) for f in spec.files]
+    from momentid.estimation.checks import check_clipping  # estimation imports io: here, not at the top
+
     aligned = align_sensors(records, channels)
+    for j, (ch, f) in enumerate(zip(channels, spec.files)):  # before the placement check reads the shapes
+        check_clipping(f"{f}: run {spec.name!r}", ch, aligned.values[:, j])
     notes = list(aligned.notes)
     rate = 1.0 / (aligned.time[1] - aligned.time[0])
     near = resonances_near_nyquist(aligned.values, rate)

@@ -209,6 +209,10 @@ CASES = [
          _in("run", "s.toml", "-q", "-o", "/proc/momentid_x", setup=_scenario), ("/proc/momentid_x",)),
     Case(Group.CLI, "run-output-is-a-file", Outcome.ERROR,
          _in("run", "s.toml", "-o", "taken", setup=lambda f: (_scenario(f), _file("taken")(f))), ("taken",)),
+    # an existing recording is replaced (a simulation can be made again: same scenario, same seed), and said
+    Case(Group.CLI, "run-output-exists", Outcome.RECOVERY,
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: (_scenario(f), _file("o.mcap")(f))),
+         ("o.mcap: an existing file, replaced by this recording",)),
     Case(Group.CLI, "run-mass-1e308", Outcome.ERROR,
          _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: write(f, "masses = [10.0, 12.0]",
                                                                            "masses = [1e308, 12.0]")),

@@ -102,6 +102,41 @@ def _drift_read(ppm: float):
     return check
 
 
+def _decimal_commas(k, header, rows):
+    """Floor 2's export written in a locale with decimal commas: cells separated by ';'."""
+    if k == 2:
+        header[:] = [line.replace(",", ";") for line in header]
+        rows[:] = [row.replace(",", ";").replace(".", ",") for row in rows]
+
+
+def _same_as_clean(experiment):
+    """The decimal-comma file reads exactly as the shipped one."""
+    clean_folder = Path(experiment.runs[0].meta["source_files"][0]).parents[1] / "clean"
+    clean_folder.mkdir()
+    clean = import_folder(shipped_lab(clean_folder))
+    if not np.array_equal(experiment.runs[0].values, clean.runs[0].values):
+        raise AssertionError("the decimal-comma export reads differently from the shipped one")
+
+
+def _clipped(k, header, rows):
+    """Floor 3's accelerometer saturates at +-1 m/s^2 on its shaking axis (X)."""
+    if k == 3:
+        def clip(row):
+            cells = row.split(",")
+            cells[ACC_X] = f"{min(max(float(cells[ACC_X]), -1.0), 1.0):.8f}"
+            return ",".join(cells)
+        rows[:] = [clip(row) for row in rows]
+
+
+def _clock_step(k, header, rows):
+    """Floor 1's device clock steps +50 ms halfway (a re-synchronisation); PacketCounter runs on."""
+    if k == 1:
+        for i in range(len(rows) // 2, len(rows)):
+            cells = rows[i].split(",")
+            cells[1] = str(int(cells[1]) + 50_000)
+            rows[i] = ",".join(cells)
+
+
 CASES = [
     # The table's sensor stops at half its 7307 rows: the run keeps the 3653 samples all four share.
     Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
@@ -113,4 +148,13 @@ CASES = [
     Case(Group.IMU, "shipped-one-file-two-floors", Outcome.ERROR,
          _importing(None, TOML.replace('"f1.csv", "f2.csv"', '"f1.csv", "f1.csv"')),
          ("experiment.toml", "runs[0].floors", "f1.csv is already this run's floor 1")),
+    # A decimal-comma locale's export: 'missing from the header' used to name a column it holds.
+    Case(Group.IMU, "shipped-decimal-commas", Outcome.RECOVERY, _importing(_decimal_commas, check=_same_as_clean),
+         ("cells separated by ';' with decimal commas",)),
+    # A saturated floor sensor: import used to read its clipped shape as floors 2 and 3 swapped, and relabel.
+    Case(Group.IMU, "shipped-floor-clipped", Outcome.ERROR, _importing(_clipped),
+         ("f3.csv", "channel a3 is clipped", "consecutive samples at")),
+    # A clock step with the packet counter running on used to be named "6 samples lost".
+    Case(Group.IMU, "shipped-clock-step", Outcome.ERROR, _importing(_clock_step),
+         ("f1.csv", "'SampleTimeFine'", "the device clock stepped +50.0 ms and no packet was lost")),
 ]

@@ -84,12 +84,22 @@ def _preamble(path: Path, lines: list[str]) -> tuple[int, dict]:
     for i, line in enumerate(lines[:MAX_PREAMBLE_LINES]):
         if line.startswith("PacketCounter") or line.startswith(CLOCK_COLUMN):
             return i, info
-        key, sep, value = line.partition(",")
+        key, sep, value = line.replace(";", ",", 1).partition(",")  # ';' in a decimal-comma locale
         if sep and key.strip().endswith(":"):
             info[key.strip().rstrip(":").strip()] = value.strip()
     raise SensorDataError(f"{path}: no header line starting 'PacketCounter,{CLOCK_COLUMN}' in the first "
                           f"{MAX_PREAMBLE_LINES} lines; expected an Xsens DOT CSV export "
                           f"(preamble, then the header, then one row per sample)")
+
+
+def _decimal_commas(lines: list[str], h: int) -> tuple[list[str], list[str]]:
+    """``lines`` with the header at ``h`` read as written: an export of a locale that writes decimal
+    commas separates its cells by ';' (header ``PacketCounter;SampleTimeFine;...``); its cells are
+    rewritten with '.' and ',' and a note says so."""
+    if "," in lines[h] or ";" not in lines[h]:
+        return lines, []
+    rows = [line.replace(",", ".").replace(";", ",") for line in lines[h:]]
+    return lines[:h] + rows, ["cells separated by ';' with decimal commas (a locale's export): read as such"]
 
 
 def _parse_slowly(path: Path, rows: list[str], names: tuple[str, ...], first_row: int) -> np.ndarray:
@@ -165,6 +175,33 @@ def _stamps_from_counter(ticks: np.ndarray, counter: np.ndarray, rows: np.ndarra
     out[missing] = (ticks[previous[missing]] + (packets[missing] - packets[previous[missing]]) * step) % CLOCK_WRAP
     return out, [f"{_row_list(rows[missing])}: no {CLOCK_COLUMN} stamp; placed by {COUNTER_COLUMN} "
                  f"({step:.0f} us per packet)"]
+
+
+def _check_clock_step(path: Path, ticks: np.ndarray, counter: np.ndarray, rows: np.ndarray) -> None:
+    """Refuse stamps that move on by more sample intervals than ``PacketCounter`` counts packets, and
+    never make it up: the device clock stepped (a re-synchronisation), no sample was lost.  (The app's
+    lost-packet mark jumps a stamp and repeats it on the next row: that evens out at once.)"""
+    if ticks.size < 3 or not (np.all(np.isfinite(counter)) and np.all(np.isfinite(ticks))):
+        return
+    packets = np.concatenate([[0.0], np.cumsum(np.diff(counter) % COUNTER_WRAP)])
+    moved = np.diff(ticks)
+    moved[moved < -CLOCK_WRAP / 2] += CLOCK_WRAP  # the uint32 counter wrapped
+    forward = moved[moved > 0]
+    if forward.size < 2:
+        return
+    step = float(np.median(forward))
+    slots = np.concatenate([[0.0], np.cumsum(np.round(moved / step))])
+    ahead = slots - packets  # sample intervals the stamps are ahead of the packets counted
+    if ahead[-1] <= 0:
+        return
+    i = int(np.flatnonzero(ahead != ahead[-1])[-1]) + 1 if np.any(ahead != ahead[-1]) else 0
+    if i == 0:
+        return
+    raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
+                 f"{ticks[i]:.0f} us is {moved[i - 1]:.0f} us after row {int(rows[i - 1])} while {COUNTER_COLUMN} "
+                 f"moves on by {packets[i] - packets[i - 1]:.0f}: the device clock stepped {ahead[-1] * step / 1e3:+.1f} ms "
+                 f"and no packet was lost; expected stamps that follow the packet counter (re-export, or cut "
+                 f"the record there)")
 
 
 def _row_list(rows: np.ndarray) -> str:
@@ -256,6 +293,7 @@ def read_xsens_dot(path) -> SensorRecord:
     path = Path(path)
     lines = read_text(path).rstrip().split("\n")
     h, info = _preamble(path, lines)
+    lines, locale = _decimal_commas(lines, h)
     names = tuple(c.strip() for c in lines[h].split(","))
     for column in (CLOCK_COLUMN, *ACC_COLUMNS):
         if column not in names:
@@ -274,11 +312,13 @@ def read_xsens_dot(path) -> SensorRecord:
     if np.all(acc[0] == 0.0):  # written before the device measures
         acc, ticks, rows = acc[1:], ticks[1:], rows[1:]
     lost, notes = _placeholders(path, acc, ticks, rows)
+    notes = locale + notes
     acc, ticks, rows = acc[~lost], ticks[~lost], rows[~lost]
     if COUNTER_COLUMN in names:
         counter = data[:, names.index(COUNTER_COLUMN)][data.shape[0] - lost.size:][~lost]
         ticks, stamped = _stamps_from_counter(ticks, counter, rows)
         notes += stamped
+        _check_clock_step(path, ticks, counter, rows)
     if rows.size < MIN_SAMPLES:
         raise _error(path, first_row, f"'{CLOCK_COLUMN}'", f"{rows.size} rows with measured accelerations; "
                                                           f"expected at least {MIN_SAMPLES} samples")

@@ -110,10 +110,17 @@ def _diagnose(recording: Path, out: Path) -> subprocess.Popen:
 
 
 def test_sigterm_of_diagnose_is_an_interrupt_and_leaves_no_worker(friction_recording, tmp_path):
-    proc = _diagnose(friction_recording, tmp_path / "report")
-    _kill_and_check(proc, _workers_of(proc, 2), signal.SIGTERM)
+    # On a loaded machine the workers first seen may be those of the diagnosis's last forked stage,
+    # and it can finish (exit 0) before the signal lands: that attempt proves nothing, so try again
+    # (three times; a diagnosis that outlives the signal, or a worker left behind, fails at once).
+    for attempt in range(3):
+        out = tmp_path / f"report{attempt}"
+        proc = _diagnose(friction_recording, out)
+        _kill_and_check(proc, _workers_of(proc, 2), signal.SIGTERM)
+        if proc.returncode != 0:
+            break
     assert proc.returncode == 143 and proc.stderr.read() == "error: terminated (SIGTERM)\n"
-    assert not (tmp_path / "report").exists()   # the report folder made for it, still empty, is gone
+    assert not out.exists()   # the report folder made for it, still empty, is gone
 
 
 @pytest.mark.slow

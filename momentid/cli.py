@@ -344,6 +344,9 @@ def _cmd_diagnose(args) -> int:
         write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
+    elif hasattr(diag, "twin_xml"):
+        print(diag.summary)
+        print(f"\nreport written to {out}/ (report.json, summary.txt, twin.xml, model_augmented.xml, replay.png)")
     else:
         print(diag.summary)
         print(f"\nreport written to {out}/ (report.json, summary.txt"

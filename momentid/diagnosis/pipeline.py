@@ -73,10 +73,15 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
 
     Returns
     -------
-    Diagnosis, or ModalDiagnosis when no run adds mass (accelerometer-only labs:
-    :func:`momentid.diagnosis.real.diagnose_modal`)
+    Diagnosis; when no run adds mass (accelerometer-only labs), TwinDiagnosis
+    (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`: stated floor masses and three trials or
+    more), else ModalDiagnosis (:func:`momentid.diagnosis.real.diagnose_modal`)
     """
     if not any(np.any(run.added_mass) for run in experiment.runs):
+        from momentid.diagnosis import twin_diagnose
+        if twin_diagnose.applies(experiment):        # stated masses, 3+ trials: on the MuJoCo twin
+            with threadpool_limits(limits=1, user_api="blas"):
+                return twin_diagnose.diagnose_twin(experiment, hold_out=hold_out)
         from momentid.diagnosis.real import diagnose_modal
         return replace(diagnose_modal(experiment, hold_out=hold_out), notes=tuple(experiment.notes))
     if hold_out is not None:

@@ -111,6 +111,9 @@ def write_report(diag: Diagnosis, folder) -> Path:
     """``report.json``, ``summary.txt``, ``model_augmented.xml``, ``diagnosis.rrd`` and the PNG plots
     ``replay.png`` (recorded vs. linear vs. augmented), ``locate.png`` (where the mismatch is) and, when
     the open search found a force, ``discovered.png`` (its force against the drift or displacement)."""
+    if hasattr(diag, "twin_xml"):          # a diagnosis on the real rig's twin
+        from momentid.diagnosis.twin_words import write_twin_report
+        return write_twin_report(diag, folder)
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))

@@ -215,6 +215,9 @@ class MechanismKind:
     fitted: ClassVar[Param | None] = None
     #: Built into rigs but outside the diagnosis library (its answer is "unexplained").
     truth_only: ClassVar[bool] = False
+    #: Fitted by re-simulation on a real rig's MuJoCo twin (the accelerometer-only diagnosis,
+    #: :mod:`momentid.diagnosis.twin_diagnose`), whatever ``truth_only`` says of the added-mass one.
+    real_rig: ClassVar[bool] = False
     #: A storey force (``Target.STOREY``) or floor force (``Target.FLOOR``) the MJCF cannot express,
     #: applied by the simulator's control callback.
     callback: ClassVar[bool] = False

@@ -1,0 +1,104 @@
+"""What a twin diagnosis (:mod:`~momentid.diagnosis.twin_diagnose`) says and writes: the summary in
+words, the replay plot, and the report folder (``report.json``, ``summary.txt``, ``twin.xml``,
+``model_augmented.xml``, ``replay.png``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from momentid.core.series import json_safe
+from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
+from momentid.diagnosis.twin_diagnose import explained
+from momentid.mechanisms import registry
+
+__all__ = ["summary", "write_twin_report", "plot_replay"]
+
+_ROWS = (("nrmse_before", "linear twin (`momentid twin` on the training trials)"),
+         ("nrmse_linear_refit", "linear twin refitted to the training trials by re-simulation"),
+         ("nrmse_after", "twin with joint friction, fitted the same way"),
+         ("nrmse_linear_own", "linear twin fitted to the held-out trial itself"),
+         ("noise_nrmse", "sensor noise alone"))
+
+
+def summary(diag) -> str:
+    """The report's lines (places in words, never JSON)."""
+    lines = [f"Held-out trial {diag.held_out} (training trials: {', '.join(diag.training)}); floor-acceleration "
+             f"NRMSE after its quiet lead-in:"]
+    for key, words in _ROWS:
+        lines.append(f"  {100 * getattr(diag, key):7.2f} %  {words}")
+    ref = diag.reference
+    if "nrmse" in ref:
+        lines.append(f"  {100 * ref['nrmse']:7.2f} %  amplitude-dependent viscous damping (a reference, not an answer: "
+                     f"modes set by the held-out trial's own amplitude, {ref['held_out_amplitude_m_s2']:.3g} m/s^2)")
+    refit, after, noise = diag.nrmse_linear_refit, diag.nrmse_after, diag.noise_nrmse
+    share = explained(refit, after, noise)
+    if diag.mechanism == "none":
+        lines.append(f"No missing physics: a linear twin explains the held-out trial to within {EXCESS:g} x the noise.")
+    elif diag.mechanism == "joint_friction":
+        lines.append(f"Verdict: joint friction (micro-slip in the storeys' joints): it removes {100 * share:.0f} % of "
+                     f"the linear refit's held-out misfit above noise ({100 * EXPLAINED:.0f} % needed); "
+                     f"{after / refit:.2f} x the linear refit, {after / diag.nrmse_linear_own:.2f} x the trial's own "
+                     f"linear fit.")
+        kind = registry.get("joint_friction")
+        for m in diag.mechanisms:
+            p = diag.fits["augmented"]["friction"][m.location["storey"] - 1]
+            lines.append("  " + kind.describe(m.location, {k: p[k] for k in ("stiffness", "slip_drift", "exponent")}, {})
+                         + f" Stiffness lost to slip: {m.parameters['stiffness_lost_at_1mm_n_per_m']:.3g} N/m at 1 mm, "
+                           f"{m.parameters['stiffness_lost_at_5mm_n_per_m']:.3g} N/m at 5 mm of drift.")
+        if after > EXCESS * noise:
+            lines.append(f"WARNING: joint friction explains only part of the mismatch: the held-out NRMSE is still "
+                         f"{100 * after:.2f} % ({after / noise:.1f} x noise); the rest is largest at the "
+                         f"{diag.location['words']}.")
+    else:
+        lines.append(f"Verdict: unexplained mismatch at the {diag.location['words']}: joint friction removes "
+                     f"{100 * share:.0f} % of the linear refit's held-out misfit above noise ({100 * EXPLAINED:.0f} % "
+                     f"needed).")
+    lines += [f"Rig state: {s}." for s in diag.excluded]
+    if diag.state.tested and not diag.excluded:
+        lines.append(f"Rig state: every trial's modes lie on the others' trend (within {diag.state.spread():.1f} "
+                     f"standard errors): one rig state.")
+    lines += [f"note: {n}" for n in diag.notes if "twin" in n]
+    return "\n".join(lines)
+
+
+def plot_replay(diag, path: Path) -> Path:
+    """Per floor sensor, the held-out trial recorded and as the three twins replay it."""
+    from momentid.twin.plots import pyplot
+
+    plt = pyplot()
+    c = diag.curves
+    t, d = c["time"], c["measured"]["a"].shape[1]
+    fig, axes = plt.subplots(d, 1, figsize=(12, 2.4 * d), sharex=True, squeeze=False)
+    for j, ax in enumerate(axes[:, 0]):
+        ax.plot(t, c["measured"]["a"][:, j], "k", lw=0.6, label="recorded")
+        ax.plot(t, c["linear_refit"]["a"][:, j], color="tab:blue", lw=0.5, alpha=0.7,
+                label=f"linear twin refitted ({100 * diag.channel_nrmse[f'a{j + 1}']['linear_refit']:.1f} %)")
+        ax.plot(t, c["augmented"]["a"][:, j], color="tab:red", lw=0.5, alpha=0.8,
+                label=f"twin with joint friction ({100 * diag.channel_nrmse[f'a{j + 1}']['after']:.1f} %)")
+        ax.set_ylabel(f"floor-{j + 1} sensor\n(m/s^2)", fontsize=8)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("time (s)")
+    where = f"; misfit left largest at the {diag.location['words']}" if diag.location else ""
+    fig.suptitle(f"Held-out trial {diag.held_out}: {diag.mechanism.replace('_', ' ')}; NRMSE linear twin "
+                 f"{100 * diag.nrmse_before:.1f} %, refitted {100 * diag.nrmse_linear_refit:.1f} %, with joint friction "
+                 f"{100 * diag.nrmse_after:.1f} %{where}", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def write_twin_report(diag, folder) -> Path:
+    """``report.json``, ``summary.txt``, ``twin.xml``, ``model_augmented.xml`` and ``replay.png``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))
+    (folder / "summary.txt").write_text(diag.summary + "\n")
+    (folder / "twin.xml").write_text(diag.twin_xml)
+    (folder / "model_augmented.xml").write_text(diag.augmented_xml)
+    if diag.curves:
+        plot_replay(diag, folder / "replay.png")
+    return folder

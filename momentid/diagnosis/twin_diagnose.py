@@ -99,6 +99,8 @@ class TwinDiagnosis:
     curves: dict = field(default_factory=dict, repr=False)
     notes: tuple = ()
     seconds: dict = field(default_factory=dict)
+    #: The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin_folds.Fold`).
+    fold: object = field(default=None, repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"mechanism": self.mechanism, "location": self.location, "summary": self.summary,
@@ -189,7 +191,7 @@ def diagnose_twin(experiment: Experiment, *, hold_out: str | None = None) -> Twi
                          excluded=excluded, channel_nrmse=per, fits=fits, summary="",
                          twin_xml=twin.xml if twin is not None else _xml(fold.linear.model, tr.dt),
                          augmented_xml=_xml(fold.augmented.model, tr.dt), curves=curves, notes=notes,
-                         seconds=seconds)
+                         seconds=seconds, fold=fold)
     from momentid.diagnosis.twin_words import summary
     return _with_summary(diag, summary(diag))
 

@@ -208,9 +208,8 @@ def _residual(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
 class _Problem:
     """Residual and Jacobian of the output-error fit, sharing the simulations of the current point."""
 
-    def __init__(self, layout: _Layout, trials, substeps: int, refresh: int = 1):
-        self.layout, self.trials, self.substeps, self.refresh = layout, tuple(trials), substeps, max(1, refresh)
-        self.calls, self.last = 0, None
+    def __init__(self, layout: _Layout, trials, substeps: int):
+        self.layout, self.trials, self.substeps = layout, tuple(trials), substeps
         self.sizes = [(t.fit_stop - t.start) * layout.d for t in self.trials]
         self.cache_key, self.cache = None, None
         self.nsim = 0
@@ -233,28 +232,6 @@ class _Problem:
         return np.concatenate([_residual(model, a, t) for a, t in zip(sims, self.trials)])
 
     def jacobian(self, theta):
-        """The Jacobian at ``theta``: by re-simulation every :attr:`refresh`-th call (and the first), else
-        Broyden's rank-one update of the last one along the step taken (in the parameters' typical
-        sizes), its sensor columns exact (they need no re-simulation)."""
-        if self.last is None or self.calls % self.refresh == 0:
-            J = self.full_jacobian(theta, physical=True)
-        else:
-            x, r, J = self.last
-            s = (theta - x) / self.layout.scale
-            Js = J * self.layout.scale
-            dr = self.residual(theta) - r
-            if float(s @ s) > 0:
-                Js = Js + np.outer(dr - Js @ s, s) / float(s @ s)
-            J = Js / self.layout.scale
-            n = self.layout.n_phys
-            J[:, n:] = self.full_jacobian(theta, physical=False)[:, n:]
-        self.calls += 1
-        self.last = (theta.copy(), self.residual(theta), J)
-        return J
-
-    def full_jacobian(self, theta, physical: bool = True):
-        """Forward differences; the physical columns (one batched re-simulation per trial) only when
-        ``physical``, else zeros there."""
         base = self.residual(theta)
         sims = self.sims(theta)
         n = theta.size
@@ -273,7 +250,7 @@ class _Problem:
             t[i] += h
             perturbed.append(t)
         phys = [self.layout.unpack(perturbed[i]) for i in range(self.layout.n_phys)]
-        ok = [_valid(m) and physical for m in phys]
+        ok = [_valid(m) for m in phys]
         runs = [_simulate([m for m, v in zip(phys, ok) if v], t, False, self.substeps) if any(ok) else None
                 for t in self.trials]
         row = 0
@@ -290,12 +267,12 @@ class _Problem:
                     model, a = self.layout.unpack(perturbed[i]), sims[k]
                 J[row:row + size, i] = (_residual(model, a, t) - base[row:row + size]) / steps[i]
             row += size
-        self.nsim += int(physical)
+        self.nsim += 1
         return J
 
 
 def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PER_SAMPLE,
-             max_nfev: int = MAX_NFEV, refresh: int = 1) -> FitResult:
+             max_nfev: int = MAX_NFEV) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
     Parameters
@@ -303,9 +280,6 @@ def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PE
     trials : sequence of Trial
     start : RigModel
         Starting point; its ``friction`` records say which storeys carry joint friction.
-    refresh : int
-        The Jacobian is re-simulated every ``refresh``-th iteration, updated by Broyden's rule in
-        between (1: always re-simulated).
 
     Raises
     ------
@@ -317,7 +291,7 @@ def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PE
         raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
                                   f"or a joint stiffer than its storey: {start.to_dict()}")
     layout = _Layout(start, tuple(m.location for m in start.friction))
-    problem = _Problem(layout, trials, substeps, refresh)
+    problem = _Problem(layout, trials, substeps)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
     result = scipy.optimize.least_squares(problem.residual, theta0, jac=problem.jacobian, bounds=(lo, hi),

@@ -40,8 +40,6 @@ __all__ = ["Fold", "hold_out", "linear_start", "amplitude_trend", "FRICTION_STAR
 FRICTION_STARTS = ((0.02, 0.03, -0.5),)
 #: Optimiser evaluations of the augmented fit (each costs a Jacobian of all its physical parameters).
 AUGMENTED_NFEV = 12
-#: The augmented fit re-simulates its Jacobian every this many iterations (Broyden updates between).
-AUGMENTED_REFRESH = 3
 #: Seed of the sensor noise added to a simulated trial before it is identified.
 NOISE_SEED = 7
 
@@ -92,8 +90,7 @@ def linear_start(experiment: Experiment, names) -> resim.RigModel:
 
 def hold_out(experiment: Experiment, held: str, training, *, substeps: int = resim.TIMESTEP_PER_SAMPLE,
              max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
-             starts=FRICTION_STARTS, start: resim.RigModel | None = None,
-             refresh: int = AUGMENTED_REFRESH) -> Fold:
+             starts=FRICTION_STARTS, start: resim.RigModel | None = None) -> Fold:
     """Fit the linear and the augmented twin on ``training`` and check them on ``held`` (module docstring).
 
     Parameters
@@ -119,7 +116,7 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int = res
     augmented = None
     for loss, slip, chi in starts:
         guess = twin_fit.friction_start(linear.model, tuple(range(1, d + 1)), loss, slip, chi)
-        fit = twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, refresh=refresh)
+        fit = twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev)
         if augmented is None or fit.cost < augmented.cost:
             augmented = fit
     own = twin_fit.fit_twin([trials[held]], linear.model, substeps=substeps, max_nfev=max_nfev)

@@ -48,9 +48,12 @@ __all__ = ["Candidate", "Diagnosis", "diagnose", "write_report", "verdicts", "EX
 
 def verdicts() -> tuple[str, ...]:
     """Every verdict :func:`diagnose` can give: ``none``, ``unexplained``, a mechanism of the library, or
-    (recordings without added mass) ``amplitude_dependence``."""
+    (recordings without added mass) ``amplitude_dependence``, a real rig's kind (``joint_friction``) or
+    ``another_rig_state``."""
     from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE
-    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library()) + (AMPLITUDE_DEPENDENCE,)
+    from momentid.diagnosis.twin_diagnose import ANOTHER_RIG_STATE
+    real = tuple(kind.name for kind in mechanisms.registry.real_rig_kinds()) + (ANOTHER_RIG_STATE,)
+    return ("none", "unexplained") + tuple(kind.name for kind in mechanisms.library()) + (AMPLITUDE_DEPENDENCE,) + real
 
 #: Candidates listed in the report, best first.
 REPORTED_CANDIDATES = 8

@@ -21,7 +21,8 @@ masses:
 5. **Reference**: amplitude-dependent viscous damping (each mode's frequency and damping ratio
    regressed on the training trials' response amplitude, predicted at the held-out trial's) replayed
    on the linear refit's modes: a figure to compare with, not an answer.
-6. **Verdict**: ``none`` when a linear twin is within ``EXCESS`` x noise; ``joint_friction`` when the
+6. **Verdict**: ``another_rig_state`` when the held-out trial is one the rig-state check left out
+   (its misfit is a different rig, not missing physics); ``none`` when a linear twin is within ``EXCESS`` x noise; ``joint_friction`` when the
    augmented twin removes at least ``EXPLAINED`` of the linear refit's held-out misfit above noise
    (a WARNING when what is left is still above noise); otherwise ``unexplained``, located in words
    (floor sensor, mode band).
@@ -45,9 +46,12 @@ from momentid.estimation.scaled import identify_per_run, weighted_line
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
 
-__all__ = ["TwinDiagnosis", "diagnose_twin", "applies", "default_hold_out", "explained", "JOINT_FRICTION", "MIN_TRAINING"]
+__all__ = ["TwinDiagnosis", "diagnose_twin", "applies", "default_hold_out", "explained", "JOINT_FRICTION",
+           "ANOTHER_RIG_STATE", "MIN_TRAINING"]
 
 JOINT_FRICTION = "joint_friction"
+#: Verdict on a held-out trial the rig-state check puts in another rig state: its misfit is not physics.
+ANOTHER_RIG_STATE = "another_rig_state"
 #: Training trials the twin's fits need at least: one parameter set over several amplitudes.
 MIN_TRAINING = 2
 
@@ -59,7 +63,7 @@ class TwinDiagnosis:
     Attributes
     ----------
     mechanism : str
-        ``"none"``, ``"joint_friction"`` or ``"unexplained"``.
+        ``"none"``, ``"joint_friction"``, ``"unexplained"`` or ``"another_rig_state"``.
     location : dict
         Where the held-out misfit left is largest: ``sensor``, ``floor``, ``mode``, ``band_hz``,
         ``band_share``, ``words``.
@@ -169,7 +173,7 @@ def diagnose_twin(experiment: Experiment, *, hold_out: str | None = None) -> Twi
     measured = tr.a[tr.start:]
     before = twin.replay(held).nrmse if twin is not None else fold.nrmse_linear_refit
     reference = _reference(per_run, training, held, start, tr)
-    mech = _verdict(before, fold)
+    mech = ANOTHER_RIG_STATE if held in state.outliers else _verdict(before, fold)
     residual_of = curves["augmented"]["a"] if mech == JOINT_FRICTION else curves["linear_refit"]["a"]
     location = {} if mech == "none" else _location(measured, residual_of, fold, tr.dt)
     excluded = tuple(state.sentence(r) for r in state.outliers)

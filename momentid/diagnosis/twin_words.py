@@ -52,6 +52,10 @@ def summary(diag) -> str:
             lines.append(f"WARNING: joint friction explains only part of the mismatch: the held-out NRMSE is still "
                          f"{100 * after:.2f} % ({after / noise:.1f} x noise); the rest is largest at the "
                          f"{diag.location['words']}.")
+    elif diag.mechanism == "another_rig_state":
+        lines.append(f"Verdict: the held-out trial is from another rig state, so its misfit is not evidence of "
+                     f"missing physics (largest at the {diag.location['words']}); hold out a trial recorded with the "
+                     f"others to test the physics.")
     else:
         lines.append(f"Verdict: unexplained mismatch at the {diag.location['words']}: joint friction removes "
                      f"{100 * share:.0f} % of the linear refit's held-out misfit above noise ({100 * EXPLAINED:.0f} % "

@@ -85,7 +85,7 @@ def plot_replay(diag, path: Path) -> Path:
         ax.set_ylabel(f"floor-{j + 1} sensor\n(m/s^2)", fontsize=8)
         ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
-    where = f"; misfit left largest at the {diag.location['words']}" if diag.location else ""
+    where = f"\nmisfit left largest at the {diag.location['words']}" if diag.location else ""
     fig.suptitle(f"Held-out trial {diag.held_out}: {diag.mechanism.replace('_', ' ')}; NRMSE linear twin "
                  f"{100 * diag.nrmse_before:.1f} %, refitted {100 * diag.nrmse_linear_refit:.1f} %, with joint friction "
                  f"{100 * diag.nrmse_after:.1f} %{where}", fontsize=9)

@@ -87,3 +87,18 @@ def test_shipped_rig_default_hold_out(tmp_path, capsys):
     assert out["rig_state"]["outliers"] == ["bonus_event"]          # another day: said, not physics
     assert out["held_out"] != "bonus_event" and "bonus_event" not in out["training"]
     assert out["nrmse_after"] < out["nrmse_linear_refit"]
+
+
+@pytest.mark.slow
+def test_trial_of_another_rig_state_is_said_not_physics(monkeypatch):
+    import test_real_diagnose as sim
+
+    runs = [run("r1", 0.3, 1), run("r2", 0.6, 2), run("r3", 0.45, 3)]
+    monkeypatch.setattr(sim, "STIFFNESS", (450.0, 500.0, 470.0))     # storey 3 re-clamped 10 % softer
+    runs.append(run("r4", 0.5, 4))
+    diag = diagnose(lab(*runs), hold_out="r4")
+    # modes 2 and 3 move off the line the others' modes follow against mode 1 (11.9 standard errors
+    # when written); the three linear trials lie within 1
+    assert diag.state.outliers == ("r4",) and diag.training == ("r1", "r2", "r3")
+    assert diag.mechanism == "another_rig_state" and not diag.mechanisms
+    assert "run r4 does not belong with the others" in diag.summary

@@ -5,7 +5,8 @@
 The flexible 3-storey model of ``data/mini_shake_table/flexible_3storey`` softens and gains damping as
 it shakes harder.  Its four trials of 2025-03-06 (northridge, sine_1p0, sine_1p5, sine_2p0; synchronised
 clocks) are held out one at a time, each fold run as ``momentid diagnose flex3.mcap --hold-out TRIAL``
-runs it (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin` on the whole recording): the
+runs it (:func:`momentid.diagnosis.pipeline.diagnose` on the whole recording, which runs
+:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`): the
 held-out NRMSE of the linear twin refitted on the three training trials by re-simulation, of the
 augmented twin (the same plus Iwan joint friction in every storey, fitted the same way), of a linear
 twin fitted to the held-out trial itself, and of noise alone; the fitted parameters; and the amplitude
@@ -28,7 +29,7 @@ import numpy as np
 
 import momentid as mi
 from momentid.diagnosis import twin_folds, twin_fit
-from momentid.diagnosis.twin_diagnose import diagnose_twin
+from momentid.diagnosis.pipeline import diagnose
 from momentid.estimation.scaled import amplitude_trend, identify_per_run
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
@@ -48,7 +49,7 @@ def _fold(job):
     """One fold exactly as ``momentid diagnose flex3.mcap --hold-out HELD`` runs it (the rig-state check
     leaves ``bonus_event`` out of the training trials), and the augmented twin's amplitude trend."""
     experiment, held, substeps = job
-    diag = diagnose_twin(experiment, hold_out=held)
+    diag = diagnose(experiment, hold_out=held)       # the command's path (one BLAS thread: the same bytes)
     fold = replace(diag.fold, seconds=diag.seconds["total"], cpu_seconds=diag.seconds["cpu"])
     trend = twin_folds.amplitude_trend(experiment, fold.augmented.model, TRIALS, substeps)
     return fold, _trend_dict(trend)

@@ -14,7 +14,8 @@ import momentid as mi
 from momentid.core.series import RunData
 from momentid.diagnosis import modal_check as mc
 from momentid.diagnosis.modal_discovery import MIN_HELD_OUT_GAIN, discover_modal
-from momentid.diagnosis.pipeline import diagnose
+from momentid.diagnosis.real import diagnose_modal as diagnose    # the modal path itself: `diagnose` runs
+                                                                     # 3+ trials with stated masses on the twin
 from momentid.diagnosis.report import write_report
 
 from test_real_diagnose import DURATION, FS, LEAD_IN, MASSES, SIGMA, STIFFNESS, lab

@@ -149,7 +149,7 @@ def _linear_twin(experiment: Experiment, training):
 
     try:
         twin = build_twin(experiment, runs=training)
-    except IdentificationError as err:
+    except MomentidError as err:               # a refusal of the twin builder (identification, sensors, step)
         start = twin_folds.linear_start(experiment, training)
         return None, start, f"the linear twin of `momentid twin` was refused ({err}); the linear refit stands for it"
     p = twin.parameters

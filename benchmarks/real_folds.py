@@ -1,15 +1,18 @@
 """Joint friction on the shipped real rig, proven by leave-one-trial-out over its four same-day trials.
 
-    python -m benchmarks.real_folds [--workers 2] [--substeps 3] [--max-nfev 30]
+    python -m benchmarks.real_folds [--out DIR]
 
 The flexible 3-storey model of ``data/mini_shake_table/flexible_3storey`` softens and gains damping as
 it shakes harder.  Its four trials of 2025-03-06 (northridge, sine_1p0, sine_1p5, sine_2p0; synchronised
-clocks) are held out one at a time.  Per fold (:func:`momentid.diagnosis.twin_folds.hold_out`): the
+clocks) are held out one at a time, each fold run as ``momentid diagnose flex3.mcap --hold-out TRIAL``
+runs it (:func:`momentid.diagnosis.pipeline.diagnose` on the whole recording, which runs
+:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`): the
 held-out NRMSE of the linear twin refitted on the three training trials by re-simulation, of the
 augmented twin (the same plus Iwan joint friction in every storey, fitted the same way), of a linear
 twin fitted to the held-out trial itself, and of noise alone; the fitted parameters; and the amplitude
 trend of mode 1 the augmented twin predicts (its simulated trials identified like the recordings)
-against the recordings' own.  ``bonus_event`` (another day, sensors re-mounted) is left out.
+against the recordings' own.  ``bonus_event`` (another day, sensors re-mounted) is left out of every
+fold's training by the diagnosis's own rig-state check.
 
 Writes ``benchmarks/results/real_folds.json``, ``real_folds.md`` and ``real_folds_*.png``.
 """
@@ -19,13 +22,14 @@ from __future__ import annotations
 import argparse
 import json
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 import momentid as mi
 from momentid.diagnosis import twin_folds, twin_fit
-from momentid.diagnosis.workers import run_forked
+from momentid.diagnosis.pipeline import diagnose
 from momentid.estimation.scaled import amplitude_trend, identify_per_run
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
@@ -42,10 +46,12 @@ TREND_SIGMAS = 2.0
 
 
 def _fold(job):
-    experiment, held, substeps, max_nfev = job
-    resim.ROLLOUT_THREADS = 1          # the folds run side by side, one core each
-    fold = twin_folds.hold_out(experiment, held, [n for n in TRIALS if n != held], substeps=substeps,
-                               max_nfev=max_nfev)
+    """One fold exactly as ``momentid diagnose flex3.mcap --hold-out HELD`` runs it (the rig-state check
+    leaves ``bonus_event`` out of the training trials), and the augmented twin's amplitude trend."""
+    experiment, held, substeps = job
+    diag = diagnose(experiment, hold_out=held)       # the command's path (one BLAS thread: the same bytes)
+    evidence = diag.evidence                         # TwinEvidence: the fold and the stages' seconds
+    fold = replace(evidence.fold, seconds=evidence.seconds["total"], cpu_seconds=evidence.seconds["cpu"])
     trend = twin_folds.amplitude_trend(experiment, fold.augmented.model, TRIALS, substeps)
     return fold, _trend_dict(trend)
 
@@ -167,17 +173,13 @@ def _table(rows, verdict) -> list:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m benchmarks.real_folds", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--workers", type=int, default=2)
-    p.add_argument("--substeps", type=int, default=resim.TIMESTEP_PER_SAMPLE)
-    p.add_argument("--max-nfev", type=int, default=twin_fit.MAX_NFEV)
     p.add_argument("--out", type=Path, default=ROOT / "benchmarks" / "results")
     args = p.parse_args(argv)
     began = time.perf_counter()
     experiment = mi.import_folder(RIG)
     data_trend = _trend_dict(amplitude_trend(identify_per_run(experiment, TRIALS)))
-    from momentid.diagnosis import workers
-    workers.WORKERS = args.workers
-    results = run_forked(_fold, [(experiment, held, args.substeps, args.max_nfev) for held in TRIALS])
+    substeps = resim.TIMESTEP_PER_SAMPLE
+    results = [_fold((experiment, held, substeps)) for held in TRIALS]     # one after another, both cores each
     folds, trends = [f for f, _ in results], [t for _, t in results]
     rows = []
     for fold, trend in zip(folds, trends):
@@ -193,12 +195,12 @@ def main(argv=None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     total = time.perf_counter() - began
     (args.out / "real_folds.json").write_text(json.dumps(
-        {"rig": str(RIG.relative_to(ROOT)), "trials": list(TRIALS), "substeps": args.substeps,
-         "max_nfev": args.max_nfev, "data_trend": data_trend, "folds": rows, "verdict": verdict,
+        {"rig": str(RIG.relative_to(ROOT)), "trials": list(TRIALS), "substeps": substeps,
+         "data_trend": data_trend, "folds": rows, "verdict": verdict,
          "seconds": total}, indent=1))
     lines = _table(rows, verdict)
     (args.out / "real_folds.md").write_text("\n".join(lines) + "\n")
-    _plots(args.out, experiment, folds, trends, data_trend, args.substeps)
+    _plots(args.out, experiment, folds, trends, data_trend, substeps)
     print("\n".join(lines))
     print(f"total {total:.0f} s")
     return 0

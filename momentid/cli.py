@@ -492,15 +492,22 @@ def build_parser() -> argparse.ArgumentParser:
                                    "mechanisms (" + ", ".join(kind.name for kind in mechanisms.library()) + "), "
                                    "add the best one to the MuJoCo model and "
                                    "replay a held-out run before and after. Recordings without added mass (accelerometers "
-                                   "only): the modal model fitted on the other runs is checked on a held-out run "
-                                   "against the noise level, and amplitude dependence is tested.")
+                                   "only), with stated floor masses and three trials or more: on the rig's MuJoCo twin "
+                                   "(the linear twin, and the twin with " + ", ".join(
+                                       kind.name for kind in mechanisms.registry.real_rig_kinds()) + " fitted by "
+                                   "re-simulation over the training trials, checked on a held-out trial; a trial of "
+                                   "another rig state is said, not called physics; DIR/twin.xml and "
+                                   "DIR/model_augmented.xml); otherwise the modal model fitted on the other runs is "
+                                   "checked on a held-out run against the noise level, and amplitude dependence is "
+                                   "tested.")
     p.add_argument("recording", help="MCAP recording (momentid run or momentid import)")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="report folder (default: out/<recording>_diagnosis)")
     p.add_argument("--json", action="store_true", help="print report.json to stdout")
     p.add_argument("--hold-out", metavar="RUN", default=None,
                    help="recordings without added mass: the run to hold out for the before/after check "
-                        "(default: the last run)")
+                        "(default: on the twin, the last trial of the others' rig state inside their amplitudes; "
+                        "else the last run)")
     p.set_defaults(func=_cmd_diagnose)
 
     p = sub.add_parser("twin", help="the calibrated MuJoCo twin of a rig: MJCF, parameters, replay of every trial",

@@ -19,7 +19,7 @@ from momentid.cli import main
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
 from momentid.diagnosis.pipeline import diagnose
-from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE
+from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE, diagnose_modal
 from momentid.diagnosis.result import Diagnosis, ModalEvidence
 from momentid.diagnosis.verdict import Verdict
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
@@ -86,7 +86,9 @@ def consistent(diag: Diagnosis) -> None:
 
 
 def test_linear_rig_no_mechanism():
-    diag = diagnose(lab(run("r1", 0.3, 1), run("r2", 0.6, 2), run("r3", 0.45, 3)))
+    # the modal path itself (`diagnose` runs three or more trials with stated masses on the twin:
+    # tests/test_twin_diagnose.py)
+    diag = diagnose_modal(lab(run("r1", 0.3, 1), run("r2", 0.6, 2), run("r3", 0.45, 3)))
     assert diag.held_out == "r3"
     consistent(diag)
     assert diag.mechanism == "none", diag.summary
@@ -101,7 +103,7 @@ def test_amplitude_dependent_rig_named():
     # and its damping by ~3.7 x over its four trials (0.5-4.6 m/s^2).
     kw = {"softening": 0.015, "damping_growth": 0.5}
     runs = [run("r1", 0.2, 11, **kw), run("r2", 0.5, 12, **kw), run("r3", 0.8, 13, **kw), run("r4", 0.65, 14, **kw)]
-    diag = diagnose(lab(*runs))
+    diag = diagnose_modal(lab(*runs))
     consistent(diag)
     assert diag.mechanism == AMPLITUDE_DEPENDENCE, diag.summary
     assert diag.nrmse_before > EXCESS * diag.noise_nrmse       # the linear model misses it on r4
@@ -129,13 +131,11 @@ def test_shipped_real_recordings(tmp_path, capsys):
     capsys.readouterr()
     assert main(["diagnose", str(path), "-o", str(tmp_path / "rep"), "--hold-out", "sine_2p0", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)                    # exactly one JSON object on stdout
-    assert out["held_out"] == "sine_2p0"
+    assert out["held_out"] == "sine_2p0" and out["path"].startswith("twin")
     assert out["nrmse_before"] > 0 and out["nrmse_after"] > 0 and out["noise_nrmse"] > 0
-    assert out["mechanism"] in ("none", "unexplained", AMPLITUDE_DEPENDENCE)
-    if out["nrmse_before"] <= EXCESS * out["noise_nrmse"]:
+    assert out["mechanism"] in ("none", "unexplained", "joint_friction")
+    if min(out["nrmse_before"], out["nrmse_linear_refit"]) <= EXCESS * out["noise_nrmse"]:
         assert out["mechanism"] == "none"
-    elif out["mechanism"] == AMPLITUDE_DEPENDENCE:
-        assert out["candidate"]["explained"] >= EXPLAINED
     assert (tmp_path / "rep" / "report.json").exists()
 
 

@@ -13,7 +13,12 @@
 - :mod:`~momentid.diagnosis.result` and :mod:`~momentid.diagnosis.verdict`: the :class:`Diagnosis`
   every recording gets, its :class:`Verdict`; :mod:`~momentid.diagnosis.report`: its summary and
   report folder (7);
-- :mod:`~momentid.diagnosis.real`: recordings without added mass (the modal path, the same result);
+- :mod:`~momentid.diagnosis.twin_diagnose` (with :mod:`~momentid.diagnosis.rig_state`,
+  :mod:`~momentid.diagnosis.twin_fit`, :mod:`~momentid.diagnosis.twin_folds` and
+  :mod:`~momentid.diagnosis.twin_words`): recordings without added mass, with stated floor masses and
+  three trials or more, on the rig's MuJoCo twin (the same result);
+- :mod:`~momentid.diagnosis.real`: the other recordings without added mass (the modal path, the same
+  result);
 - :mod:`~momentid.diagnosis.thresholds`: the decision thresholds every stage shares.
 
 The mechanisms themselves live in :mod:`momentid.mechanisms`, one module per kind; the stages know

@@ -26,8 +26,9 @@
    a sparse force from a function library, located, put into the MuJoCo model and replayed on the
    held-out run (``discovered``; the verdict stays ``unexplained``, at the discovered place).
 
-Recordings without added mass (accelerometers only) take the modal path
-(:func:`momentid.diagnosis.real.diagnose_modal`); its result is the same
+Recordings without added mass (accelerometers only) run on the rig's MuJoCo twin when the lab states
+its floor masses and recorded three trials or more (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`),
+else take the modal path (:func:`momentid.diagnosis.real.diagnose_modal`); their result is the same
 :class:`~momentid.diagnosis.result.Diagnosis`.
 """
 
@@ -62,18 +63,25 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
     experiment : Experiment
         At least two runs (one with added mass); with three or more, the last
         run is held out for the before/after replay.  Runs without added mass
-        (accelerometer-only labs) take :func:`momentid.diagnosis.real.diagnose_modal`.
+        (accelerometer-only labs) run on the twin
+        (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`: stated floor masses and three trials or
+        more), else take :func:`momentid.diagnosis.real.diagnose_modal`.
     replay : bool
         Replay the held-out run through the linear and augmented MuJoCo models
         (the NRMSE figures); off only for quick screening.
     hold_out : str, optional
-        Runs without added mass only: the run to hold out (default: the last).
+        Runs without added mass only: the run to hold out (default: the last; on the twin, the last
+        trial of the others' rig state inside their amplitudes).
 
     Returns
     -------
     Diagnosis
     """
     if not any(np.any(run.added_mass) for run in experiment.runs):
+        from momentid.diagnosis import twin_diagnose
+        if twin_diagnose.applies(experiment):        # stated masses, 3+ trials: on the MuJoCo twin
+            with threadpool_limits(limits=1, user_api="blas"):
+                return twin_diagnose.diagnose_twin(experiment, hold_out=hold_out)
         from momentid.diagnosis.real import diagnose_modal
         return replace(diagnose_modal(experiment, hold_out=hold_out), notes=tuple(experiment.notes))
     if hold_out is not None:

@@ -13,7 +13,7 @@ from momentid import mechanisms
 from momentid.core.series import json_safe
 from momentid.diagnosis.discovery import plot_discovered
 from momentid.diagnosis.modal_discovery import ModalDiscovery, plot_modal_discovered
-from momentid.diagnosis.result import AddedMassEvidence, Diagnosis
+from momentid.diagnosis.result import AddedMassEvidence, Diagnosis, TwinEvidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
 from momentid.mechanisms.place import Place
@@ -24,9 +24,13 @@ __all__ = ["summary", "write_report"]
 def summary(diag: Diagnosis) -> str:
     """The report's text: for a rig identified with added masses, residuals vs. noise, where, the
     sensor check, the verdict, the replay and the open search's force; for accelerometer-only
-    recordings, :func:`momentid.diagnosis.real.summary`.  A compound diagnosis names every mechanism,
+    recordings, :func:`momentid.diagnosis.twin_words.summary` (on the twin) or
+    :func:`momentid.diagnosis.real.summary`.  A compound diagnosis names every mechanism,
     one sentence each."""
     evidence = diag.evidence
+    if isinstance(evidence, TwinEvidence):
+        from momentid.diagnosis.twin_words import summary as twin_summary
+        return twin_summary(diag)
     if not isinstance(evidence, AddedMassEvidence):
         from momentid.diagnosis.real import summary as modal_summary
         return modal_summary(diag)
@@ -76,20 +80,28 @@ def summary(diag: Diagnosis) -> str:
 
 def write_report(diag: Diagnosis, folder) -> tuple[str, ...]:
     """Write the report folder; returns the names of the files written, in this order:
-    ``report.json``, ``summary.txt``, ``model_augmented.xml`` (when there is an augmented model),
-    ``replay.png`` (recorded vs. linear vs. augmented) and ``diagnosis.rrd`` (the same for ``rerun``),
-    ``locate.png`` (where the mismatch is, added-mass path) and ``discovered.png`` (the open search's
-    force, when it found one)."""
+    ``report.json``, ``summary.txt``, ``twin.xml`` (the linear twin, on the twin path),
+    ``model_augmented.xml`` (when there is an augmented model), ``replay.png`` (recorded vs. linear vs.
+    augmented) and ``diagnosis.rrd`` (the same for ``rerun``), ``locate.png`` (where the mismatch is,
+    added-mass path) and ``discovered.png`` (the open search's force, when it found one)."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))
     (folder / "summary.txt").write_text(diag.summary + "\n")
     written = ["report.json", "summary.txt"]
+    twin = isinstance(diag.evidence, TwinEvidence)
+    if twin:
+        (folder / "twin.xml").write_text(diag.evidence.twin_xml)
+        written.append("twin.xml")
     if diag.augmented_xml:
         (folder / "model_augmented.xml").write_text(diag.augmented_xml)
         written.append("model_augmented.xml")
     if diag.curves:
-        _plots(diag, folder)
+        if twin:
+            from momentid.diagnosis.twin_words import plot_replay
+            plot_replay(diag, folder / "replay.png")
+        else:
+            _plots(diag, folder)
         _rerun(diag, folder / "diagnosis.rrd")
         written += ["replay.png", "diagnosis.rrd"]
     if isinstance(diag.evidence, AddedMassEvidence):

@@ -16,8 +16,8 @@ contract, ``report.json`` and ``--json``):
 - the **evidence** of the path that produced it: :class:`AddedMassEvidence` (a rig identified with
   added masses: residuals, screening, selection, localisation) or :class:`ModalEvidence`
   (accelerometers only: the modal model's per-channel misfit, its training fits, the amplitude
-  model).  A new path (a calibrated MuJoCo twin of a real rig) adds its own evidence type and fills
-  the same fields.
+  model) or :class:`TwinEvidence` (accelerometers only, on the rig's calibrated MuJoCo twin: the
+  rig-state check, the training trials, the fitted twins, the reference figure, ``twin.xml``).
 """
 
 from __future__ import annotations
@@ -32,10 +32,11 @@ if TYPE_CHECKING:
     from momentid.diagnosis.locate import Localisation
     from momentid.diagnosis.modal_check import AmplitudeModel
     from momentid.diagnosis.modal_discovery import ModalDiscovery
+    from momentid.diagnosis.rig_state import StateCheck
     from momentid.diagnosis.screening import Candidate
     from momentid.diagnosis.selection import Selection
 
-__all__ = ["Diagnosis", "AddedMassEvidence", "ModalEvidence", "Evidence"]
+__all__ = ["Diagnosis", "AddedMassEvidence", "ModalEvidence", "TwinEvidence", "Evidence"]
 
 
 @dataclass(frozen=True)
@@ -114,8 +115,51 @@ class ModalEvidence:
                 "findings": list(self.findings), "path": "modal (no added mass)"}
 
 
+@dataclass(frozen=True)
+class TwinEvidence:
+    """What a diagnosis of accelerometer-only recordings on the rig's MuJoCo twin shows beside its
+    verdict (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`).
+
+    Attributes
+    ----------
+    training : tuple of str
+        The training trials (of the held-out trial's rig state unless it was named from another).
+    state : StateCheck
+        Which trials belong to one rig state (:mod:`momentid.diagnosis.rig_state`).
+    excluded : tuple of str
+        One sentence per trial left out as another rig state.
+    channel_nrmse : dict
+        Per floor sensor: held-out NRMSE of the linear twin, the linear refit and the augmented twin.
+    fits : dict
+        The fitted twins (linear refit, augmented, the held-out trial's own) and their training NRMSE.
+    reference : dict
+        Amplitude-dependent viscous damping: its held-out NRMSE and slopes (a figure, not an answer).
+    twin_xml : str
+        The linear twin's MJCF (``twin.xml``; loads in stock MuJoCo).
+    seconds : dict
+        Wall-clock seconds per stage, and the CPU seconds of the whole.
+    fold : Fold
+        The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin_folds.Fold`).
+    """
+
+    training: tuple[str, ...]
+    state: StateCheck
+    excluded: tuple[str, ...]
+    channel_nrmse: dict
+    fits: dict
+    reference: dict
+    twin_xml: str
+    seconds: dict = field(default_factory=dict)
+    fold: object = field(default=None, repr=False, compare=False)
+
+    def to_dict(self) -> dict:
+        return {"training": list(self.training), "reference": self.reference, "rig_state": self.state.to_dict(),
+                "excluded": list(self.excluded), "channel_nrmse": self.channel_nrmse, "fits": self.fits,
+                "seconds": self.seconds, "path": "twin (no added mass)"}
+
+
 #: The evidence types of the diagnosis paths.
-Evidence = Union[AddedMassEvidence, ModalEvidence]
+Evidence = Union[AddedMassEvidence, ModalEvidence, TwinEvidence]
 
 
 @dataclass(frozen=True)
@@ -130,14 +174,16 @@ class Diagnosis:
         The verdict in words: ``none``, ``unexplained`` or the primary mechanism's name.
     location, parameters, std : dict
         The primary mechanism's place and its parameters in the lab's terms, or where an
-        ``unexplained`` mismatch is.
+        ``unexplained`` mismatch is.  On the twin path, ``location`` is where the held-out misfit
+        left is largest whatever the verdict (the joints' places and parameters are in
+        ``mechanisms``) and ``parameters``, ``std`` are empty.
     mechanisms : tuple of Named
         Every named mechanism, primary first; empty for ``none`` and ``unexplained``.
     held_out : str
         The held-out run (with a note when none could be held out).
     nrmse_before, nrmse_after, noise_nrmse : float
         The held-out run's NRMSE through the linear and the augmented model, and of sensor noise alone.
-    evidence : AddedMassEvidence or ModalEvidence
+    evidence : AddedMassEvidence, ModalEvidence or TwinEvidence
     nrmse_linear_refit, nrmse_linear_own : float or None
         Held-out NRMSE of the linear model refitted on the training runs as the augmented one was,
         and of a linear model fitted to the held-out run itself; None where the path does not

@@ -32,6 +32,8 @@ __all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "FIT_E
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
+#: Seconds of a trial's quiet lead-in simulated before its shaking starts (the rest is the floors at rest).
+LEAD_IN_MARGIN = 1.0
 #: Forward-difference step, relative to each parameter's typical size.
 DIFF_STEP = 1e-3
 #: Optimiser's evaluation cap per fit (each evaluation re-simulates the training trials once).
@@ -180,14 +182,21 @@ def _valid(model: resim.RigModel) -> bool:
 
 
 def _storey_stiffness(K: np.ndarray, s: int) -> float:
-    """The stiffness of storey ``s``'s tendon in K (``ground1``, ``pair<s-1>_<s>``)."""
+    """The stiffness of storey ``s``'s tendon in K (``storey<s>`` of :func:`momentid.twin.parameters.tendon_layout`)."""
     return float(np.sum(K[0])) if s == 1 else float(-K[s - 2, s - 1])
 
 
 def _simulate(models, tr: Trial, whole: bool, substeps: int) -> np.ndarray:
+    """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
+    floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
+    its last :data:`LEAD_IN_MARGIN` seconds."""
     stop = len(tr.zdd) if whole else tr.fit_stop
+    first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
     compiled = resim.compile_models(models, tr.dt / substeps)
-    return resim.simulate(compiled, tr.zdd[:stop], tr.dt, substeps)
+    out = np.empty((len(compiled), stop, tr.a.shape[1]))
+    out[:, :first] = tr.zdd[None, :first, None]
+    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps)
+    return out
 
 
 def _residual(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:

@@ -72,15 +72,16 @@ class Fold:
                 "cpu_seconds": self.cpu_seconds}
 
 
-def linear_start(experiment: Experiment, name: str) -> resim.RigModel:
-    """The linear twin of the modal identification of run ``name`` with the lab's stated masses.
+def linear_start(experiment: Experiment, names) -> resim.RigModel:
+    """The linear twin of the modal identification of run(s) ``names`` (a name or a list) with the lab's
+    stated masses.
 
     Raises
     ------
     IdentificationError
         No stated masses (the twin's forces need them).
     """
-    ident = identify_modal(experiment, [name])
+    ident = identify_modal(experiment, [names] if isinstance(names, str) else list(names))
     if ident.K is None:
         raise IdentificationError(f"{experiment.source}: no floor masses stated: the twin needs them "
                                   f"(experiment.toml [structure] masses)")
@@ -89,7 +90,7 @@ def linear_start(experiment: Experiment, name: str) -> resim.RigModel:
 
 def hold_out(experiment: Experiment, held: str, training, *, substeps: int = resim.TIMESTEP_PER_SAMPLE,
              max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
-             starts=FRICTION_STARTS) -> Fold:
+             starts=FRICTION_STARTS, start: resim.RigModel | None = None) -> Fold:
     """Fit the linear and the augmented twin on ``training`` and check them on ``held`` (module docstring).
 
     Parameters
@@ -100,6 +101,8 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int = res
         The held-out run.
     training : sequence of str
         The training runs (``held`` not among them).
+    start : RigModel, optional
+        The linear fit's start (default: the modal identification of the quietest training run).
     """
     import time
 
@@ -108,7 +111,7 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int = res
     trials = {n: twin_fit.trial(experiment.run(n), d) for n in list(training) + [held]}
     train = [trials[n] for n in training]
     quietest = min(training, key=lambda n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))))
-    start = linear_start(experiment, quietest)
+    start = linear_start(experiment, quietest) if start is None else start
     linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
     augmented = None
     for loss, slip, chi in starts:

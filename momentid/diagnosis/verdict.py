@@ -9,12 +9,15 @@ __all__ = ["Verdict", "Named"]
 
 
 class Verdict(enum.Enum):
-    """What a diagnosis concludes (``report.json``'s ``mechanism`` is ``none``, ``unexplained`` or the
-    named mechanism)."""
+    """What a diagnosis concludes (``report.json``'s ``mechanism`` is ``none``, ``unexplained``,
+    ``another_rig_state`` or the named mechanism)."""
 
     NONE = "none"                    # the linear model explains the recordings to the noise level
     UNEXPLAINED = "unexplained"      # a mismatch no candidate of the library explains
     MECHANISM = "mechanism"          # a named mechanism
+    #: The held-out trial is of another rig state than the training trials (another day, sensors or
+    #: joints re-mounted: :mod:`momentid.diagnosis.rig_state`): its misfit is not evidence of physics.
+    ANOTHER_RIG_STATE = "another_rig_state"
 
 
 @dataclass(frozen=True)

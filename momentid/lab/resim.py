@@ -6,10 +6,11 @@ so floors two apart are coupled), its damping is modal, and what it leaves out i
 joint friction (:mod:`momentid.mechanisms.joint_friction`).  :class:`RigModel` holds such a model;
 :func:`build_spec` writes it as MJCF in the rig's layout (:mod:`momentid.lab.rig`: a ``base`` body on
 the slide joint ``base_x`` driven by the ``table`` integrator actuator, floors on slide joints ``q<i>``
-relative to it, accelerometers ``a<i>``).  Any symmetric K and C is carried exactly by fixed tendons:
-``ground<i> = q_i`` (a spring to the table) and ``pair<i>_<j> = q_j - q_i`` (between two floors), so
-``K_ij = -k_pair`` and ``K_ii = k_ground_i + sum_j k_pair``; a storey's joint friction rides on the
-tendon of that storey (``ground1``, ``pair<s-1>_<s>``).
+relative to it, accelerometers ``a<i>``).  Any symmetric K and C is carried exactly by fixed tendons, laid out as
+the ``momentid twin`` builder lays them (:func:`momentid.twin.parameters.tendon_layout`: ``storey<j>``
+between neighbouring levels, ``link<i>_<j>`` where K or C couples levels further apart); a storey's
+joint friction rides on the tendon of its place (``storey<s>``), which its kind's ``storey_tendon``
+hook changes (joint friction: it keeps ``k - stiffness``).
 
 :func:`simulate` rolls out many such models at once (``mujoco.rollout``, one thread per core, no
 Python in the loop) under a recorded table acceleration, held piecewise linear between samples (the
@@ -30,6 +31,7 @@ from momentid.core.structure import Mechanism
 from momentid.errors import ModelError, SimulationError
 from momentid.lab import rig
 from momentid.mechanisms import registry
+from momentid.twin.parameters import tendon_layout
 
 __all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE"]
 
@@ -42,6 +44,8 @@ ROLLOUT_THREADS: int | None = None
 _CHUNK_STEPS = 4096
 _PLATEN = (0.3, 0.2, 0.01)     # drawing only (m)
 _SLAB = (0.15, 0.1, 0.01)
+#: Storey height (m) of the drawn floors; what a storey kind's tendon hook is told (joint friction ignores it).
+_STOREY_HEIGHT = 0.15
 
 
 def modal_damping(masses, K, zeta) -> np.ndarray:
@@ -103,23 +107,9 @@ class RigModel:
     def to_dict(self) -> dict:
         return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
                 "damping_ratio": np.asarray(self.damping_ratio).tolist(),
-                "friction": [{"storey": m.location, **dict(m.parameters)} for m in self.friction],
+                "friction": [{**registry.get(m.type).place(m.location).location, **dict(m.parameters)}
+                             for m in self.friction],
                 "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
-
-
-def _tendon_values(A: np.ndarray) -> dict:
-    """Stiffness (or damping) of the ``ground<i>`` and ``pair<i>_<j>`` tendons carrying the symmetric ``A``."""
-    d = A.shape[0]
-    out = {}
-    for i in range(d):
-        out[f"ground{i + 1}"] = float(np.sum(A[i]))          # K_ii + sum_j K_ij  (K_ij = -k_pair)
-        for j in range(i + 1, d):
-            out[f"pair{i + 1}_{j + 1}"] = float(-A[i, j])
-    return out
-
-
-def _storey_tendon(s: int) -> str:
-    return "ground1" if s == 1 else f"pair{s - 1}_{s}"
 
 
 def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujoco.MjSpec:
@@ -139,7 +129,7 @@ def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujo
     base.add_site(name="base_imu")
     floors = []
     for i in range(d):
-        floor = base.add_body(name=f"floor{i + 1}", pos=[0, 0, 0.15 * (i + 1)])
+        floor = base.add_body(name=f"floor{i + 1}", pos=[0, 0, _STOREY_HEIGHT * (i + 1)])
         floor.mass = float(model.masses[i])
         floor.inertia = [float(model.masses[i]) * 1e-3] * 3
         floor.add_joint(name=f"q{i + 1}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
@@ -147,20 +137,24 @@ def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujo
                        contype=0, conaffinity=0)
         floor.add_site(name=f"floor{i + 1}_imu")
         floors.append(floor)
-    k_t, c_t = _tendon_values(K), _tendon_values(C)
-    for mech in model.friction:
+    tendons = tendon_layout(K, C)             # the twin builder's tendons (momentid.twin.parameters)
+    changed = {}
+    for mech in model.friction:               # each storey kind changes its storey's tendon by its hook
         registry.validate(mech, d)
-        k_t[_storey_tendon(mech.location)] -= dict(mech.parameters)["stiffness"]
-    for tname in k_t:
-        tendon = spec.add_tendon(name=tname)
-        if tname.startswith("ground"):
-            tendon.wrap_joint(f"q{tname[6:]}", 1.0)
-        else:
-            i, j = tname[4:].split("_")
-            tendon.wrap_joint(f"q{j}", 1.0)
-            tendon.wrap_joint(f"q{i}", -1.0)
-        tendon.stiffness = [k_t[tname], 0.0, 0.0]
-        tendon.damping = [c_t[tname], 0.0, 0.0]
+        kind = registry.get(mech.type)
+        lower, upper = kind.place(mech.location).nodes
+        t = changed.get((lower, upper)) or next(t for t in tendons if (t.lower, t.upper) == (lower, upper))
+        k, c = kind.storey_tendon(mech, t.stiffness, t.damping, float(np.sum(model.masses[upper - 1:])),
+                                  _STOREY_HEIGHT)
+        changed[(lower, upper)] = replace(t, stiffness=k, damping=c)
+    for t in tendons:
+        t = changed.get((t.lower, t.upper), t)
+        tendon = spec.add_tendon(name=t.name)
+        tendon.wrap_joint(f"q{t.upper}", 1.0)
+        if t.lower > 0:
+            tendon.wrap_joint(f"q{t.lower}", -1.0)
+        tendon.stiffness = [t.stiffness, 0.0, 0.0]
+        tendon.damping = [t.damping, 0.0, 0.0]
         tendon.springlength = [0.0, 0.0]
     rig.add_storey_elements(spec, model.friction, [base] + floors, timestep)
     spec.add_actuator(name="table", target="base_x", trntype=mujoco.mjtTrn.mjTRN_JOINT,

@@ -234,6 +234,9 @@ class MechanismKind:
     truth_only: ClassVar[bool] = False
     #: The open search's law at its target (:mod:`momentid.diagnosis.discovery` builds its records).
     open_search: ClassVar[bool] = False
+    #: Fitted by re-simulation on a real rig's MuJoCo twin (the accelerometer-only diagnosis,
+    #: :mod:`momentid.diagnosis.twin_diagnose`), whatever ``truth_only`` says of the added-mass one.
+    real_rig: ClassVar[bool] = False
     #: A force the MJCF cannot express (a storey force, or a link force between a floor and the table
     #: or two floors), applied by the simulator's control callback.
     callback: ClassVar[bool] = False

@@ -158,8 +158,10 @@ class JointFriction(MechanismKind):
               Param("exponent", "1", "chi of the slip-drift density delta^chi (micro-slip: stiffness loss and "
                     "damping grow as A^(chi+1))", low=-0.95, high=2.0, example=-0.4))
     #: The added-mass diagnosis has no screening signature for it yet (it would call it "unexplained"); the
-    #: real rig's twin (:mod:`momentid.diagnosis.twin_fit`) fits it by re-simulation.
+    #: real rig's twin fits it by re-simulation (:mod:`momentid.diagnosis.twin_fit`, used by
+    #: :mod:`momentid.diagnosis.twin_diagnose`: ``momentid diagnose`` of accelerometer-only recordings).
     truth_only = True
+    real_rig = True
     mjcf_elements = True
     summary = ("Iwan joint across a storey: Jenkins sliders (spring + MuJoCo frictionloss) with slip drifts of "
                "density delta^chi up to delta_max (micro-slip)")

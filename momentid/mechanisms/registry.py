@@ -16,7 +16,8 @@ from momentid.errors import ModelError
 from momentid.mechanisms.base import MechanismKind
 from momentid.mechanisms.place import Target
 
-__all__ = ["REGISTRY", "register", "load", "get", "names", "library", "rig_kinds", "open_search_kind", "validate"]
+__all__ = ["REGISTRY", "register", "load", "get", "names", "library", "real_rig_kinds", "rig_kinds", "open_search_kind",
+           "validate"]
 
 #: name -> kind, in the order the package's modules are imported (alphabetical).
 REGISTRY: dict[str, MechanismKind] = {}
@@ -62,6 +63,11 @@ def names() -> tuple[str, ...]:
 def library() -> tuple[MechanismKind, ...]:
     """The kinds the diagnosis can name (every kind but the truth-only ones)."""
     return tuple(k for k in REGISTRY.values() if not k.truth_only)
+
+
+def real_rig_kinds() -> tuple[MechanismKind, ...]:
+    """The kinds the accelerometer-only diagnosis fits on a real rig's twin (``real_rig``)."""
+    return tuple(k for k in REGISTRY.values() if k.real_rig)
 
 
 def rig_kinds() -> tuple[MechanismKind, ...]:

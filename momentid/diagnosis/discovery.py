@@ -26,6 +26,7 @@ from threadpoolctl import threadpool_limits
 
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
+from momentid.diagnosis.interpret import physics
 from momentid.diagnosis.function_library import (ALWAYS, Place, Selected, columns, hysteretic_columns,
                                                  place_direction, refine, select)
 from momentid.diagnosis.refit import Refitter, measured_groups
@@ -72,6 +73,8 @@ class Discovery:
         The linear model it is added to.
     plot : dict
         ``x`` (m), ``measured`` and ``law`` (N): the residual's force at the place and the discovered law.
+    physics : dict
+        Its class of physics and that class's numbers (:func:`~momentid.diagnosis.interpret.physics`).
     """
 
     location: dict
@@ -82,10 +85,11 @@ class Discovery:
     record: Mechanism = field(repr=False)
     structure: Structure = field(repr=False)
     plot: dict = field(default_factory=dict, repr=False)
+    physics: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
-                "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after}
+                "physics": self.physics, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after}
 
 
 @dataclass(frozen=True)
@@ -204,7 +208,8 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     return Discovery(location=got.place.location, description=describe(got.place.location, terms, structure,
                                                                        float(np.max(np.abs(got.x)))),
                      terms=tuple(terms), nrmse_before=float(before), nrmse_after=float(after), record=record,
-                     structure=structure, plot={"x": got.x[pick], "measured": got.y[pick], "law": fitted[pick]})
+                     structure=structure, plot={"x": got.x[pick], "measured": got.y[pick], "law": fitted[pick]},
+                     physics=physics(got.place.location, terms))
 
 
 def _held_out(model: LinearModel, structure: Structure, record: Mechanism) -> float:

@@ -17,6 +17,7 @@ import momentid as mi
 from momentid.core.structure import Mechanism
 from momentid.diagnosis import discovery
 from momentid.diagnosis.function_library import place_direction
+from momentid.diagnosis.interpret import describe
 from momentid.lab import rig
 from momentid.lab import simulation as sim
 
@@ -136,9 +137,9 @@ def test_a_stop_is_found_where_it_acts(place):
     # 5 % noise on the force; the gap is refined between grid points by least squares: 3 % on the
     # gap and the contact stiffness (observed within 1 %).
     assert abs(col.shape["gap_pos_delta"] - gap) < 0.03 * gap and abs(coef - k) < 0.03 * k
-    words = discovery.describe(place, discovery._terms(found, 1.0), load("hidden/clean").structure,
-                               float(np.max(np.abs(found.x))))
-    assert "stop on the + side" in words and "+1.5 mm" in words
+    words = describe(place, discovery._terms(found, 1.0), load("hidden/clean").structure,
+                     float(np.max(np.abs(found.x))))
+    assert "meets a stop on the + side: gap +1.5 mm" in words and "cubic" not in words
 
 
 def test_a_linear_force_adds_no_nonlinear_term():

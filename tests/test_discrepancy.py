@@ -52,7 +52,7 @@ CASES = sorted(path.stem for path in (SCENARIOS / "hidden").glob("*.toml"))
 SLOW_CASES = {"pounding_floor3", "boucwen_storey1"}
 #: Physics outside the library, and words the open search's description must use for it.
 OPEN_CASES = {"slip_storey2": ("loses", "of its stiffness from t = 5.0 s"),
-              "pounding_floor3": ("stiffening beyond q3 = +4.0 mm", "stop on the + side"),
+              "pounding_floor3": ("floor 3 meets a stop on the + side: gap +4.0 mm", "contact stiffness"),
               "boucwen_storey1": ("hysteretic", "softening with amplitude")}
 
 

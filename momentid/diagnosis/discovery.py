@@ -16,9 +16,8 @@ above the noise.
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.optimize
@@ -26,31 +25,34 @@ from threadpoolctl import threadpool_limits
 
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
-from momentid.diagnosis.interpret import physics
+from momentid.diagnosis.interpret import describe, physics
 from momentid.diagnosis.function_library import (ALWAYS, Place, Selected, columns, hysteretic_columns,
                                                  place_direction, refine, select)
 from momentid.diagnosis.refit import Refitter, measured_groups
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
 from momentid.diagnosis.selection import Finding, Verdict, explained_share
+from momentid.diagnosis.thresholds import EXCESS
 from momentid.errors import ModelError, SimulationError
-from momentid.mechanisms.bouc_wen import bouc_wen_state
-from momentid.mechanisms.data_driven import HYSTERETIC_BETA, TERMS
+from momentid.mechanisms.base import Target
+from momentid.mechanisms.data_driven import TERMS
 
-__all__ = ["Discovery", "discover", "describe", "plot_discovered", "ACCEPTED_SHARE", "SCALE_RANGE",
+__all__ = ["Discovery", "discover", "challenge", "as_unexplained", "BEATS_LIBRARY", "plot_discovered", "ACCEPTED_SHARE", "SCALE_RANGE",
            "SCALE_REPLAYS", "PLOT_POINTS"]
 
 #: A discovered force is reported when its model removes this share of the held-out run's replay
 #: misfit above the noise (0.5: the misfit's excess power at least halves).
 ACCEPTED_SHARE = 0.5
+#: A discovered force replaces the physics the library named when its training replays remove at
+#: least this share of the misfit above noise that the named model leaves (as a further mechanism
+#: earns its place in a compound diagnosis: a data-driven force's extra freedom gains a little on
+#: any fit; half is physics the library lacks).
+BEATS_LIBRARY = 0.5
 #: Re-simulation search of the nonlinear terms' common scale, from half to twice the regression's
 #: (noisy signals pull the regression towards zero), in at most this many replays.
 SCALE_RANGE = (0.5, 2.0)
 SCALE_REPLAYS = 8
 #: Samples drawn in ``discovered.png``.
 PLOT_POINTS = 4000
-#: Cycles of the hysteretic law's loop computed for its area (the first ones settle from z = 0),
-#: and samples per cycle.
-_LOOP_CYCLES, _LOOP_SAMPLES = 3, 2000
 
 
 @dataclass(frozen=True)
@@ -75,6 +77,8 @@ class Discovery:
         ``x`` (m), ``measured`` and ``law`` (N): the residual's force at the place and the discovered law.
     physics : dict
         Its class of physics and that class's numbers (:func:`~momentid.diagnosis.interpret.physics`).
+    replaces : dict
+        When it beat the physics the library named (:func:`challenge`): the training NRMSEs of both.
     """
 
     location: dict
@@ -86,10 +90,12 @@ class Discovery:
     structure: Structure = field(repr=False)
     plot: dict = field(default_factory=dict, repr=False)
     physics: dict = field(default_factory=dict)
+    replaces: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
-                "physics": self.physics, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after}
+                "physics": self.physics, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
+                "replaces": self.replaces or None}
 
 
 @dataclass(frozen=True)
@@ -99,6 +105,7 @@ class _Found:
     place: Place
     selected: Selected
     x: np.ndarray
+    v: np.ndarray
     y: np.ndarray
 
 
@@ -131,7 +138,7 @@ def _search(rows, noise_floor: np.ndarray, d: int) -> _Found | None:
         if best is None or sel.test_rss < best[0].test_rss:
             best = (sel, place, x, vel, y)
     sel, place, x, vel, y = best
-    return _Found(place, refine(sel, y, x, vel, time), x, y)
+    return _Found(place, refine(sel, y, x, vel, time), x, vel, y)
 
 
 def _record(found: _Found, scale: float = 1.0) -> Mechanism:
@@ -184,6 +191,60 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     """
     if found.mechanism != Verdict.UNEXPLAINED.value or not math.isfinite(before):
         return None
+    return _open_search(model, residuals, refitter, before)
+
+
+def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Refitter, named: Finding, entries,
+              before: float) -> Discovery | None:
+    """The open search against the physics the library named: the discovered force when it beats it.
+
+    A library mechanism can take in part of a force outside the library (a cubic stiffness the
+    ramp of a brace engaging beyond a gap, a storey damper a stop's losses) and be accepted.  When
+    the named model's training replays stay above ``EXCESS`` x their noise level, the open search
+    runs on the whole mismatch; its force wins when its training replays leave at most
+    ``1 - BEATS_LIBRARY`` of the named model's misfit above noise.  ``replaces`` then holds both
+    training NRMSEs.  None when the named physics includes a sensor fault, replays at the noise
+    level, or the search finds nothing better.
+
+    Parameters
+    ----------
+    model, residuals, refitter : the diagnosis's stages 1, 2 and 6.
+    named : Finding
+        The named mechanisms' joint model (its ``structure`` and ``records``).
+    entries : sequence
+        (kind, location, parameters) of each named mechanism.
+    before : float
+        The held-out run's replay NRMSE through the linear model.
+    """
+    if not entries or not math.isfinite(before) or any(kind.target is Target.CHANNEL for kind, _, _ in entries):
+        return None
+    noise = refitter.noise_nrmse()
+    score = refitter.score_joint(named.structure, entries, named.records)
+    if score <= EXCESS * noise:
+        return None
+    found = _open_search(model, residuals, refitter, before)
+    if found is None:
+        return None
+    own = refitter.score_joint(found.structure, [], (found.record,))
+    share = explained_share(score, own, noise)
+    if share < BEATS_LIBRARY:
+        return None
+    return replace(found, replaces={"training_nrmse_named": score, "training_nrmse_discovered": own,
+                                    "training_nrmse_noise": noise, "explained": share})
+
+
+def as_unexplained(named: Finding, discovered: Discovery, refitter: Refitter) -> Finding:
+    """The verdict when a discovered force beats the named physics (:func:`challenge`): ``unexplained``
+    at the force's place, on the linear model; ``selection['outside_library']`` says what it replaced."""
+    selection = dict(named.selection, outside_library={"named": [named.mechanism, named.location],
+                                                       **discovered.replaces})
+    return Finding(Verdict.UNEXPLAINED.value, discovered.location, {}, {}, refitter.linear_structure, (), selection)
+
+
+def _open_search(model: LinearModel, residuals: EquationResiduals, refitter: Refitter,
+                 before: float) -> Discovery | None:
+    """The search itself: the best force on the identified (and nominal) model's residual, sized by
+    re-simulation, kept when it removes ``ACCEPTED_SHARE`` of the held-out misfit above noise."""
     bases = [(residuals.rows, refitter.linear_structure)]
     if residuals.nominal_rows is not None and model.nominal is not None:
         bases.append((residuals.nominal_rows, model.nominal))
@@ -205,8 +266,8 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
     fitted = np.column_stack([c.signal for c in got.selected.columns]) @ np.array(
         [t["coefficient"] for t in terms])
     pick = np.linspace(0, len(got.x) - 1, min(PLOT_POINTS, len(got.x))).astype(int)
-    return Discovery(location=got.place.location, description=describe(got.place.location, terms, structure,
-                                                                       float(np.max(np.abs(got.x)))),
+    peaks = (float(np.max(np.abs(got.x))), float(np.max(np.abs(got.v))))
+    return Discovery(location=got.place.location, description=describe(got.place.location, terms, structure, *peaks),
                      terms=tuple(terms), nrmse_before=float(before), nrmse_after=float(after), record=record,
                      structure=structure, plot={"x": got.x[pick], "measured": got.y[pick], "law": fitted[pick]},
                      physics=physics(got.place.location, terms))
@@ -232,59 +293,6 @@ def _terms(found: _Found, scale: float) -> list[dict]:
                     "coefficient": float(c) * (1.0 if term.name in ALWAYS else scale), "unit": term.unit,
                     **col.shape})
     return out
-
-
-def _loop_area(coefficient: float, yield_drift: float, exponent: float, amplitude: float) -> float:
-    """Energy (J) one cycle of amplitude ``amplitude`` (m) dissipates in the hysteretic term."""
-    theta = np.linspace(0, 2 * np.pi * _LOOP_CYCLES, _LOOP_CYCLES * _LOOP_SAMPLES + 1)
-    x = amplitude * np.sin(theta)
-    rate = amplitude * np.cos(theta)
-    z = bouc_wen_state(rate, float(theta[1] - theta[0]), yield_drift, exponent, HYSTERETIC_BETA)[:, 0]
-    last = slice((_LOOP_CYCLES - 1) * _LOOP_SAMPLES, None)
-    return float(coefficient * np.sum(0.5 * (z[last][1:] + z[last][:-1]) * np.diff(x[last])))
-
-
-def describe(location: dict, terms: list[dict], structure: Structure, peak: float) -> str:
-    """The discovered force in words (gaps in mm, stiffness changes in % of the place's stiffness)."""
-    (kind, index), = location.items()
-    name = f"the drift of storey {index}" if kind == "storey" else f"q{index} (floor {index} against the table)"
-    short = "|x|" if kind == "storey" else f"|q{index}|"
-    coef = {t["term"]: t for t in terms}
-    k_lin = (structure.storey_stiffness[index - 1] if kind == "storey" else 0.0) + coef["x"]["coefficient"]
-    words = []
-    for t in terms:
-        c, term = t["coefficient"], t["term"]
-        trend = "stiffening" if c > 0 else "softening"
-        if term == "gap_pos":
-            words.append(f"{trend} beyond {short[1:-1]} = +{1e3 * t['gap_pos_delta']:.1f} mm (a stop on the + side, "
-                         f"{abs(c):.3g} N/m)")
-        elif term == "gap_neg":
-            words.append(f"{trend} beyond {short[1:-1]} = -{1e3 * t['gap_neg_delta']:.1f} mm (a stop on the - side, "
-                         f"{abs(c):.3g} N/m)")
-        elif term == "dead_zone":
-            words.append(f"{trend} beyond {short} = {1e3 * t['dead_zone_delta']:.1f} mm (a two-sided gap, "
-                         f"{abs(c):.3g} N/m)")
-        elif term in ("x3", "x_abs_x"):
-            extra = c * peak ** (2 if term == "x3" else 1)
-            share = f" ({100 * extra / k_lin:+.0f} % of its stiffness at the peak {1e3 * peak:.1f} mm)" if k_lin > 0 else ""
-            words.append(f"{trend} with amplitude, {t['meaning'].split(' (')[0]} x {c:.3g} {t['unit']}{share}")
-        elif term == "v_abs_v":
-            words.append(f"quadratic damping {c:.3g} {t['unit']}")
-        elif term == "sign_v":
-            words.append(f"a friction-like force of {c:.3g} N")
-        elif term == "hysteretic":
-            area = _loop_area(c, t["hysteretic_yield"], t["hysteretic_exponent"], peak)
-            words.append(f"hysteretic: softening with amplitude (yield near {short} = "
-                         f"{1e3 * t['hysteretic_yield']:.2f} mm), loops of area {1e3 * area:.3g} mJ at the peak "
-                         f"{1e3 * peak:.1f} mm")
-        elif term == "switch":
-            change = -c / k_lin if k_lin > 0 else float("nan")
-            verb = "loses" if change > 0 else "gains"
-            words.append(f"{verb} {100 * abs(change):.0f} % of its stiffness from t = {t['switch_time']:.1f} s")
-    if not words:
-        words.append(f"a linear spring {coef['x']['coefficient']:.3g} N/m and dashpot {coef['v']['coefficient']:.3g} "
-                     f"N s/m missing from the model")
-    return f"Discovered at {json.dumps(location)}, against {name}: " + "; ".join(words) + "."
 
 
 def plot_discovered(discovery: Discovery, path) -> None:

@@ -13,11 +13,32 @@ beyond the linear spring and dashpot as one class of physics:
 * ``polynomial``, ``damping``, ``friction``: the smooth terms;
 * ``mixed``: several classes at once (the description lists them);
 * ``linear``: no term beyond the linear spring and dashpot.
+
+:func:`describe` says it in an engineer's words: a stop by its floor, side, gap (mm) and contact
+stiffness; a gap by its storey, slack (mm) and the stiffness beyond it; every other term by its
+size against the linear force at the place, with a WARNING when a term that corrects the linear
+force is larger than that force at the peak (:data:`LOUD`).
 """
 
 from __future__ import annotations
 
-__all__ = ["physics", "LINEAR_TERMS"]
+import json
+
+import numpy as np
+
+from momentid.core.structure import Structure
+from momentid.mechanisms.bouc_wen import bouc_wen_state
+from momentid.mechanisms.data_driven import HYSTERETIC_BETA
+
+__all__ = ["physics", "describe", "LINEAR_TERMS", "LOUD"]
+
+#: A correction term whose force at the peak exceeds this multiple of the linear force at the place
+#: gets a WARNING: it does not read as a correction of the linear model (a cubic term of -683 % of the
+#: storey's stiffness at the peak describes nothing physical).
+LOUD = 1.0
+#: Cycles of the hysteretic law's loop computed for its area (the first ones settle from z = 0),
+#: and samples per cycle.
+_LOOP_CYCLES, _LOOP_SAMPLES = 3, 2000
 
 #: The terms of every discovered force (the linear spring and dashpot at its place).
 LINEAR_TERMS = ("x", "v")
@@ -80,3 +101,122 @@ def physics(location: dict, terms: list[dict]) -> dict:
     if len(classes) == 1 and "other" not in classes:
         return {"class": classes.pop(), "terms": sorted(names)}
     return {"class": "mixed", "terms": sorted(names)}
+
+
+def _loop_area(coefficient: float, yield_drift: float, exponent: float, amplitude: float) -> float:
+    """Energy (J) one cycle of amplitude ``amplitude`` (m) dissipates in the hysteretic term."""
+    theta = np.linspace(0, 2 * np.pi * _LOOP_CYCLES, _LOOP_CYCLES * _LOOP_SAMPLES + 1)
+    x = amplitude * np.sin(theta)
+    rate = amplitude * np.cos(theta)
+    z = bouc_wen_state(rate, float(theta[1] - theta[0]), yield_drift, exponent, HYSTERETIC_BETA)[:, 0]
+    last = slice((_LOOP_CYCLES - 1) * _LOOP_SAMPLES, None)
+    return float(coefficient * np.sum(0.5 * (z[last][1:] + z[last][:-1]) * np.diff(x[last])))
+
+
+def linear_stiffness(location: dict, structure: Structure) -> float:
+    """The model's linear stiffness (N/m) at a place: the storey's own, or for a floor against the
+    table the storeys below it in series."""
+    (kind, index), = location.items()
+    k = np.asarray(structure.storey_stiffness, float)
+    return float(k[index - 1]) if kind == "storey" else float(1.0 / np.sum(1.0 / k[:index]))
+
+
+def _peak_force(t: dict, peak: float, peak_velocity: float) -> float:
+    """|force| (N) of one term at the peak displacement or velocity."""
+    c, term = abs(t["coefficient"]), t["term"]
+    size = {"x3": peak ** 3, "x_abs_x": peak ** 2, "v_abs_v": peak_velocity ** 2, "sign_v": 1.0,
+            "switch": peak, "hysteretic": t.get("hysteretic_yield", 0.0),
+            "dead_zone": max(peak - t.get("dead_zone_delta", 0.0), 0.0),
+            "gap_pos": max(peak - t.get("gap_pos_delta", 0.0), 0.0),
+            "gap_neg": max(peak - t.get("gap_neg_delta", 0.0), 0.0)}
+    return c * size.get(term, 0.0)
+
+
+def _where(location: dict) -> str:
+    (kind, index), = location.items()
+    if kind == "storey":
+        return f"storey {index}" + (" (floor 1 against the table)" if index == 1 else "")
+    return f"floor {index} (against the table)"
+
+
+def _stop_words(location: dict, ph: dict, k_lin: float) -> str:
+    sides = {"+": "on the + side", "-": "on the - side", "both": "on both sides"}[ph["side"]]
+    gaps = " and ".join(f"{sign}{1e3 * ph[key]:.1f} mm" for key, sign in (("gap_pos", "+"), ("gap_neg", "-"))
+                        if key in ph)
+    (kind, index), = location.items()
+    what = f"floor {index}" if kind == "floor" or index == 1 else f"storey {index}'s drift"
+    return (f"{what} meets a stop {sides}: gap {gaps} from its rest position (relative to "
+            f"{'the table' if kind == 'floor' or index == 1 else 'the floor below'}), contact stiffness "
+            f"{ph['stiffness']:.3g} N/m ({ph['stiffness'] / k_lin:.2g} x the frame's {k_lin:.3g} N/m there)")
+
+
+def _term_words(t: dict, k_lin: float, peak: float, short: str) -> str:
+    c, term = t["coefficient"], t["term"]
+    trend = "stiffening" if c > 0 else "softening"
+    if term == "gap_pos":
+        return f"{trend} beyond {short} = +{1e3 * t['gap_pos_delta']:.1f} mm (a stop on the + side, {abs(c):.3g} N/m)"
+    if term == "gap_neg":
+        return f"{trend} beyond {short} = -{1e3 * t['gap_neg_delta']:.1f} mm (a stop on the - side, {abs(c):.3g} N/m)"
+    if term == "dead_zone":
+        return f"{trend} beyond |{short}| = {1e3 * t['dead_zone_delta']:.1f} mm (a two-sided gap, {abs(c):.3g} N/m)"
+    if term in ("x3", "x_abs_x"):
+        extra = c * peak ** (2 if term == "x3" else 1)
+        return (f"{trend} with amplitude, {t['meaning'].split(' (')[0]} x {c:.3g} {t['unit']} "
+                f"({100 * extra / k_lin:+.0f} % of its stiffness at the peak {1e3 * peak:.1f} mm)")
+    if term == "v_abs_v":
+        return f"quadratic damping {c:.3g} {t['unit']}"
+    if term == "sign_v":
+        return f"a friction-like force of {c:.3g} N"
+    if term == "hysteretic":
+        area = _loop_area(c, t["hysteretic_yield"], t["hysteretic_exponent"], peak)
+        return (f"hysteretic: softening with amplitude (yield near |{short}| = {1e3 * t['hysteretic_yield']:.2f} mm),"
+                f" loops of area {1e3 * area:.3g} mJ at the peak {1e3 * peak:.1f} mm")
+    change = -c / k_lin
+    return (f"{'loses' if change > 0 else 'gains'} {100 * abs(change):.0f} % of its stiffness from "
+            f"t = {t['switch_time']:.1f} s")
+
+
+def describe(location: dict, terms: list[dict], structure: Structure, peak: float,
+             peak_velocity: float = 0.0) -> str:
+    """The discovered force in words (see the module docstring).
+
+    Parameters
+    ----------
+    location : dict
+        ``{"storey": i}`` or ``{"floor": j}`` (1-based).
+    terms : list of dict
+        The force's terms, :data:`LINEAR_TERMS` first.
+    structure : Structure
+        The linear model the force is added to (the linear stiffness at the place).
+    peak, peak_velocity : float
+        Peak ``|x|`` (m) and ``|v|`` (m/s) at the place on the training runs.
+    """
+    (kind, index), = location.items()
+    coef = {t["term"]: t for t in terms}
+    k_lin = linear_stiffness(location, structure) + coef["x"]["coefficient"]
+    if k_lin <= 0:   # the fitted spring undoes the model's: compare with the model's alone
+        k_lin = linear_stiffness(location, structure)
+    head = f"Discovered at {json.dumps(location)}, {_where(location)}: "
+    ph = physics(location, terms)
+    nonlinear = [t for t in terms if t["term"] not in LINEAR_TERMS]
+    if not nonlinear:
+        return head + (f"a linear spring {coef['x']['coefficient']:.3g} N/m and dashpot "
+                       f"{coef['v']['coefficient']:.3g} N s/m missing from the model.")
+    if ph["class"] == "stop":
+        words = [_stop_words(location, ph, k_lin)]
+    elif ph["class"] == "gap":
+        words = [f"storey {index} engages a brace beyond a gap of +/-{1e3 * ph['gap']:.1f} mm of drift, stiffness "
+                 f"{ph['stiffness']:.3g} N/m beyond it ({ph['stiffness'] / k_lin:.2g} x the storey's {k_lin:.3g} N/m)"]
+    else:
+        short = "x" if kind == "storey" else f"q{index}"
+        words = [_term_words(t, k_lin, peak, short) for t in nonlinear]
+        if ph["class"] == "mixed":
+            words.append("several kinds of physics at once: no single class reads from it")
+    linear_force = abs(k_lin) * peak
+    for t in nonlinear:
+        force = _peak_force(t, peak, peak_velocity)
+        if t["term"] not in ("gap_pos", "gap_neg", "dead_zone") and force > LOUD * linear_force:
+            words.append(f"WARNING: its {t['meaning'].split(' (')[0]} term reaches {force:.3g} N at the peak, "
+                         f"{force / linear_force:.1f} x the linear force there ({linear_force:.3g} N): not a "
+                         f"correction of the linear model, read it with care")
+    return head + "; ".join(words) + "."

@@ -35,7 +35,7 @@ from threadpoolctl import threadpool_limits
 from momentid import mechanisms
 from momentid.core.series import Experiment
 from momentid.diagnosis.compound import extend
-from momentid.diagnosis.discovery import discover
+from momentid.diagnosis.discovery import as_unexplained, challenge, discover
 from momentid.diagnosis.refit import replay_check
 from momentid.diagnosis.report import Diagnosis, summary, write_report
 from momentid.diagnosis.screening import Candidate
@@ -101,6 +101,12 @@ def _diagnose(experiment: Experiment, replay: bool):
         before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, joint.entries,
                                                   found.records)
     discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
+    if discovered is None and joint.mechanisms:   # ... and against named physics that leaves a misfit
+        discovered = challenge(model, residuals, refitter, found, joint.entries, before)
+        if discovered is not None:   # a force outside the library beats the library's names
+            found = as_unexplained(found, discovered, refitter)
+            joint = replace(joint, finding=found, mechanisms=(), entries=())
+            before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, (), ())
     location = discovered.location if discovered is not None else found.location
     run, held_out = model.evaluation_run.name, model.holdout is not None
     text = summary(found.mechanism, location, found.parameters, found.std, residuals.excess,

@@ -80,6 +80,12 @@ def summary(mech, loc, params, std, excess_eq, excess_rep, before, after, run_na
             f"{k} {v:.2f}x" for k, v in sensor_check["excess"].items()) + f" of noise ({verdict}).")
     if mech == "none":
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
+    elif mech == "unexplained" and "outside_library" in selection:
+        out = selection["outside_library"]
+        lines.append(f"Unexplained by the library at {json.dumps(loc)}: its best model, "
+                     f"{out['named'][0].replace('_', ' ')} at {json.dumps(out['named'][1])}, leaves training NRMSE "
+                     f"{100 * out['training_nrmse_named']:.2f} % (noise alone {100 * out['training_nrmse_noise']:.2f} %);"
+                     f" the force below, outside the library, {100 * out['training_nrmse_discovered']:.2f} %.")
     elif mech == "unexplained" and "partial" in selection:
         part = selection["partial"]
         lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "

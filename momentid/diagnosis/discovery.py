@@ -36,8 +36,8 @@ from momentid.errors import ModelError, SimulationError
 from momentid.mechanisms.base import Target
 from momentid.mechanisms.data_driven import TERMS
 
-__all__ = ["Discovery", "discover", "challenge", "as_unexplained", "BEATS_LIBRARY", "plot_discovered", "ACCEPTED_SHARE", "SCALE_RANGE",
-           "SCALE_REPLAYS", "PLOT_POINTS"]
+__all__ = ["Discovery", "discover", "challenge", "as_unexplained", "plot_discovered", "ACCEPTED_SHARE",
+           "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS", "PLOT_POINTS"]
 
 #: A discovered force is reported when its model removes this share of the held-out run's replay
 #: misfit above the noise (0.5: the misfit's excess power at least halves).
@@ -47,6 +47,10 @@ ACCEPTED_SHARE = 0.5
 #: earns its place in a compound diagnosis: a data-driven force's extra freedom gains a little on
 #: any fit; half is physics the library lacks).
 BEATS_LIBRARY = 0.5
+#: A nonlinear term after the first stays in the discovered force when the force with it removes this
+#: share of the training replays' misfit above noise that the force without it leaves (the rule a
+#: further mechanism of a compound diagnosis meets).
+TERM_EARNS = 0.5
 #: Re-simulation search of the nonlinear terms' common scale, from half to twice the regression's
 #: (noisy signals pull the regression towards zero), in at most this many replays.
 SCALE_RANGE = (0.5, 2.0)
@@ -158,6 +162,38 @@ def _misfit(refitter: Refitter, structure: Structure, record: Mechanism) -> floa
     return refitter.misfit(structure, [(kind, {kind.target.value: record.location}, dict(record.parameters))])
 
 
+def _pruned(refitter: Refitter, structure: Structure, found: _Found) -> _Found:
+    """The fewest of the selected terms that earn their place in the training replays.
+
+    Selection scores terms on the equation residual's held-out blocks, where a term that mimics a
+    detail the library lacks (a hysteretic state or a stiffness switch for a stop's contact dashpot)
+    lowers the residual a little and joins.  Here each nonlinear term after the first, in the order
+    selection took them, stays only when the force with it removes ``TERM_EARNS`` of the training
+    replays' misfit above noise that the force without it leaves (coefficients refitted by least
+    squares on every sample for each set of terms).
+    """
+    always = [c for c in found.selected.columns if c.term in ALWAYS]
+    nonlinear = [c for c in found.selected.columns if c.term not in ALWAYS]
+    if len(nonlinear) < 2:
+        return found
+
+    def with_terms(k: int) -> _Found:
+        cols = tuple(always + nonlinear[:k])
+        coef = np.linalg.lstsq(np.column_stack([c.signal for c in cols]), found.y, rcond=None)[0]
+        return replace(found, selected=replace(found.selected, columns=cols, coefficients=coef))
+
+    noise = refitter.noise_nrmse()
+    kept = with_terms(1)
+    score = refitter.score_joint(structure, [], (_record(kept),))
+    for k in range(2, len(nonlinear) + 1):
+        trial = with_terms(k)
+        after = refitter.score_joint(structure, [], (_record(trial),))
+        if explained_share(score, after, noise) < TERM_EARNS:
+            break
+        kept, score = trial, after
+    return kept
+
+
 def _sized(refitter: Refitter, structure: Structure, found: _Found) -> tuple[float, float]:
     """Common scale of the nonlinear terms by re-simulation of the search run, and its misfit."""
     if all(c.term in ALWAYS for c in found.selected.columns):
@@ -195,7 +231,7 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Refitte
 
 
 def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Refitter, named: Finding, entries,
-              before: float) -> Discovery | None:
+              before: float, confirmed=None) -> Discovery | None:
     """The open search against the physics the library named: the discovered force when it beats it.
 
     A library mechanism can take in part of a force outside the library (a cubic stiffness the
@@ -206,6 +242,11 @@ def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Refitt
     training NRMSEs.  None when the named physics includes a sensor fault, replays at the noise
     level, or the search finds nothing better.
 
+    A sensor fault the channels show against each other (``confirmed``, the kinematic check's) is a
+    fault whatever the models say: it is not challenged.  Any other named fault is (a contact against
+    a stop can replay like a bias of the table accelerometer): it stands only when no physical force
+    replays as well.
+
     Parameters
     ----------
     model, residuals, refitter : the diagnosis's stages 1, 2 and 6.
@@ -215,8 +256,12 @@ def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Refitt
         (kind, location, parameters) of each named mechanism.
     before : float
         The held-out run's replay NRMSE through the linear model.
+    confirmed : Candidate, optional
+        The sensor fault the channels show (:attr:`~momentid.diagnosis.sensor_check.SensorCheck.fault`).
     """
-    if not entries or not math.isfinite(before) or any(kind.target is Target.CHANNEL for kind, _, _ in entries):
+    shown = confirmed is not None and any(kind.target is Target.CHANNEL and (kind.name, loc) == (
+        confirmed.mechanism, confirmed.location) for kind, loc, _ in entries)
+    if not entries or not math.isfinite(before) or shown:
         return None
     noise = refitter.noise_nrmse()
     score = refitter.score_joint(named.structure, entries, named.records)
@@ -257,6 +302,7 @@ def _open_search(model: LinearModel, residuals: EquationResiduals, refitter: Ref
     if not trials:
         return None
     _, structure, got = min(trials, key=lambda t: t[0])
+    got = _pruned(refitter, structure, got)
     scale, _ = _sized(refitter, structure, got)
     record = _record(got, scale)
     after = _held_out(model, structure, record)

@@ -102,7 +102,7 @@ def _diagnose(experiment: Experiment, replay: bool):
                                                   found.records)
     discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
     if discovered is None and joint.mechanisms:   # ... and against named physics that leaves a misfit
-        discovered = challenge(model, residuals, refitter, found, joint.entries, before)
+        discovered = challenge(model, residuals, refitter, found, joint.entries, before, sensors.fault)
         if discovered is not None:   # a force outside the library beats the library's names
             found = as_unexplained(found, discovered, refitter)
             joint = replace(joint, finding=found, mechanisms=(), entries=())

@@ -173,6 +173,15 @@ def refit_eiv(entries, runs, result, band, f_top):
             [{key: float(np.sqrt(fit.covariance[k, k]))} for key, k in zip(keys, i)])
 
 
+def _stable(result) -> bool:
+    """Whether a linear model's free motion decays (every eigenvalue of its state matrix in the left
+    half-plane)."""
+    d = result.M.shape[0]
+    Minv = np.linalg.inv(result.M)
+    A = np.block([[np.zeros((d, d)), np.eye(d)], [-Minv @ result.K, -Minv @ result.C]])
+    return bool(np.all(np.linalg.eigvals(A).real < 0))
+
+
 class Refitter:
     """Builds the augmented model of a candidate and scores it by re-simulating the training runs."""
 
@@ -385,7 +394,10 @@ class Refitter:
         band = self.model.band
         for run in self.model.train.runs:
             fs = run.sample_rate
-            noise = replay_noise(self.result, run, self.d, band)
+            # an identified model that a strong nonlinearity left unstable carries noise without bound:
+            # the lab's nominal model carries it as the rig does
+            carrier = self.model.nominal_result if not _stable(self.result) and self.model.nominal_result else self.result
+            noise = replay_noise(carrier, run, self.d, band)
             for g in ("a", "q"):
                 if not run.has(f"{g}1"):
                     continue

@@ -138,7 +138,7 @@ def _search(rows, noise_floor: np.ndarray, d: int) -> _Found | None:
     for place, (x, vel), h in zip(places, xv, hyst):
         y, w2 = place.force(R), float(place.w @ place.w)
         sel = select(columns(x, vel, time, segments, h), y, w2, total_test - w2 * float(np.sum(y[test] ** 2)),
-                     noise_test, train, test)
+                     noise_test, train, test, (x, vel, time))
         if best is None or sel.test_rss < best[0].test_rss:
             best = (sel, place, x, vel, y)
     sel, place, x, vel, y = best

@@ -383,7 +383,7 @@ def _cpu() -> float:
 def _case(job) -> dict:
     """One case's row; a case that raises is a row saying so (wrong), not the end of the benchmark."""
     try:
-        return _diagnosed(*job)
+        return run_case(*job)
     except Exception as exc:   # noqa: BLE001  (the row names it; the other cases go on)
         return {"category": job[0], "index": job[1], "storeys": 0, "excitation": {"type": "-"}, "noise": 0.0,
                 "truth": [], "faults": {}, "change": 0.0, "expected": {}, "verdict": "error", "location": {},
@@ -392,7 +392,8 @@ def _case(job) -> dict:
                 "code": _code()}
 
 
-def _diagnosed(category: str, index: int) -> dict:
+def run_case(category: str, index: int) -> dict:
+    """Draw, simulate, diagnose and judge case ``index`` of ``category``: its row of the table."""
     case = draw_case(category, index)
     experiment = _simulate(case["rig"], case["truth"], case["faults"], noisy=True)
     start, cpu = time.perf_counter(), _cpu()

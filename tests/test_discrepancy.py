@@ -123,7 +123,9 @@ def test_open_search_models_physics_outside_the_library(diagnoses, name, tmp_pat
     assert all(words in found.description for words in OPEN_CASES[name]), found.description
     assert found.description in diag.summary
     report = diag.to_dict()["discovered"]
-    assert set(report) == {"location", "description", "terms", "nrmse_before", "nrmse_after"}
+    assert set(report) == {"location", "description", "terms", "physics", "nrmse_before", "nrmse_after",
+                           "replaces"}
+    assert report["physics"]["class"] == found.physics["class"]
     assert [t["term"] for t in report["terms"]][:2] == ["x", "v"]
     write_report(diag, tmp_path)
     assert (tmp_path / "discovered.png").stat().st_size > 10_000

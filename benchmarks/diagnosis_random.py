@@ -57,6 +57,7 @@ from benchmarks.diagnosis import BASE, ROOT, run_cases, save
 from benchmarks.diagnosis_compound import FAULT_KINDS
 from momentid.core.analytic import modal_properties
 from momentid.diagnosis.pipeline import diagnose
+from momentid.errors import SimulationError
 from momentid.lab.scenario import parse_scenario
 
 #: The benchmark's seed (the issue's number); a case's own seed is (SEED, category, index).
@@ -287,6 +288,15 @@ def _expected(truth, faults) -> list:
     return out + [(FAULT_KINDS[f], {"channel": c}) for c, fault in faults.items() for f in fault]
 
 
+def _change(base, rig, truth, d: int) -> float:
+    """:func:`response_change` of the rig with ``truth``; infinite when MuJoCo cannot step it (a pair
+    of drawn mechanisms that makes the rig unstable is redrawn, like one that changes it too much)."""
+    try:
+        return response_change(base, _simulate(rig, truth), d)
+    except SimulationError:
+        return math.inf
+
+
 def draw_case(category: str, index: int) -> dict:
     """The case's rig and hidden physics, redrawn until the physics changes the response by ``CHANGE``
     (each mechanism of a pair on its own, the pair together)."""
@@ -302,9 +312,9 @@ def draw_case(category: str, index: int) -> dict:
             draft = json.loads(json.dumps(rig))
             truth, faults, expected = _effect(category, index, rng, draft, resp)
             base = clean if draft["runs"] == rig["runs"] else _simulate(draft)
-            changes = [response_change(base, _simulate(draft, truth), d)]
+            changes = [_change(base, draft, truth, d)]
             if len(truth) > 1:
-                changes += [response_change(base, _simulate(draft, [m]), d) for m in truth]
+                changes += [_change(base, draft, [m], d) for m in truth]
             if all(CHANGE[0] <= c <= CHANGE[1] for c in changes):
                 return {"rig": draft, "truth": truth, "faults": faults, "expected": expected, "change": changes[0]}
 

@@ -16,6 +16,7 @@ import pytest
 import momentid as mi
 from momentid.core.structure import Mechanism
 from momentid.diagnosis import discovery
+from momentid.diagnosis.interpret import describe
 from momentid.lab import rig
 from momentid.lab import simulation as sim
 from momentid.mechanisms.place import Place, Target
@@ -46,6 +47,24 @@ def test_pounding_pushes_its_floor_alone_against_the_table():
     assert np.allclose(got, [0.0, 0.0, -20.15], rtol=1e-12, atol=1e-12)
     away, *_ = _callback_forces(structure, (mech,), qpos * np.array([1, 1, 0.5]), qvel)
     assert np.all(away == 0.0)   # short of the stop: no force
+
+
+def test_contact_stops_push_back_on_either_side():
+    structure = load("hidden/clean").structure
+    mech = Mechanism("contact_stop", 2, (("gap_pos", 0.004), ("gap_neg", 0.002), ("stiffness", 2e4),
+                                         ("damping", 5.0)))
+    qvel = np.array([0.01, -0.02, 0.03])
+    minus, *_ = _callback_forces(structure, (mech,), np.array([0.001, -0.003, 0.005]), qvel)
+    # 1 mm past the - side stop, moving into it at 2 cm/s: it pushes floor 2 up by 2e4 x 1e-3 + 5 x 0.02.
+    assert np.allclose(minus, [0.0, 20.1, 0.0], rtol=1e-12, atol=1e-12)
+    plus, *_ = _callback_forces(structure, (mech,), np.array([0.001, 0.005, 0.005]), -qvel)
+    # 1 mm past the + side stop, moving in at 2 cm/s: the same force, pushing down.
+    assert np.allclose(plus, [0.0, -20.1, 0.0], rtol=1e-12, atol=1e-12)
+    between, *_ = _callback_forces(structure, (mech,), np.array([0.001, 0.0035, 0.005]), qvel)
+    assert np.all(between == 0.0)   # between the stops: no force
+    with pytest.raises(mi.MomentidError, match="at least one side"):
+        rig.build_spec(structure, ADDED, mechanisms=(Mechanism("contact_stop", 2, (
+            ("gap_pos", 0.0), ("gap_neg", 0.0), ("stiffness", 2e4), ("damping", 0.0))),))
 
 
 def test_bouc_wen_reads_its_state_from_the_simulator():
@@ -119,9 +138,9 @@ def test_a_stop_is_found_where_it_acts(place):
     # 5 % noise on the force; the gap is refined between grid points by least squares: 3 % on the
     # gap and the contact stiffness (observed within 1 %).
     assert abs(col.shape["gap_pos_delta"] - gap) < 0.03 * gap and abs(coef - k) < 0.03 * k
-    words = discovery.describe(place, discovery.found_terms(found, 1.0), load("hidden/clean").structure,
-                               float(np.max(np.abs(found.x))))
-    assert "stop on the + side" in words and "+1.5 mm" in words
+    words = describe(place, discovery.found_terms(found, 1.0), load("hidden/clean").structure,
+                     float(np.max(np.abs(found.x))))
+    assert "meets a stop on the + side: gap +1.5 mm" in words and "cubic" not in words
 
 
 def test_a_linear_force_adds_no_nonlinear_term():

@@ -52,7 +52,7 @@ CASES = sorted(path.stem for path in (SCENARIOS / "hidden").glob("*.toml"))
 SLOW_CASES = {"pounding_floor3", "boucwen_storey1"}
 #: Physics outside the library, and words the open search's description must use for it.
 OPEN_CASES = {"slip_storey2": ("loses", "of its stiffness from t = 5.0 s"),
-              "pounding_floor3": ("stiffening beyond q3 = +4.0 mm", "stop on the + side"),
+              "pounding_floor3": ("floor 3 meets a stop on the + side: gap +4.0 mm", "contact stiffness"),
               "boucwen_storey1": ("hysteretic", "softening with amplitude")}
 
 
@@ -123,7 +123,9 @@ def test_open_search_models_physics_outside_the_library(diagnoses, name, tmp_pat
     assert all(words in found.description for words in OPEN_CASES[name]), found.description
     assert found.description in diag.summary
     report = diag.to_dict()["discovered"]
-    assert set(report) == {"location", "description", "terms", "nrmse_before", "nrmse_after"}
+    assert set(report) == {"location", "description", "terms", "physics", "nrmse_before", "nrmse_after",
+                           "replaces"}
+    assert report["physics"]["class"] == found.physics["class"]
     assert [t["term"] for t in report["terms"]][:2] == ["x", "v"]
     write_report(diag, tmp_path)
     assert (tmp_path / "discovered.png").stat().st_size > 10_000

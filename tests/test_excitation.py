@@ -1,4 +1,4 @@
-"""Table motions: harmonics, AT2 records, band-limited noise (momentid.lab.excitation)."""
+"""Table motions: harmonics, AT2 records, band-limited noise, chirps (momentid.lab.excitation)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from scipy.integrate import cumulative_simpson
 
 from momentid.errors import ScenarioError
 from momentid.lab.excitation import STANDARD_GRAVITY, GroundMotion, ground_motion, read_at2
-from momentid.lab.scenario import BandLimitedNoise, Harmonics, RecordedMotion
+from momentid.lab.scenario import BandLimitedNoise, Chirp, Harmonics, RecordedMotion
 
 ELCENTRO = Path(__file__).resolve().parents[1] / "data" / "records" / "elcentro_1940_ns.at2"
 
@@ -326,3 +326,46 @@ def test_noise_is_deterministic(noise):
 def test_noise_invalid(bad, key):
     with pytest.raises(ScenarioError, match=key):
         ground_motion(bad, 20.0)
+
+
+# ---------------------------------------------------------------------------
+# Chirp
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("sweep", ["linear", "log"])
+def test_chirp_sweeps_its_band(sweep):
+    motion = ground_motion(Chirp(amplitude=0.2, f_start=0.5, f_end=10.0, sweep=sweep), 20.0)
+    assert motion.end == 20.0
+    assert_at_rest_outside(motion)
+    t = np.arange(0.0, 20.0, 1e-3)
+    acc = motion.acceleration(t)
+    steady = (t >= 3.0) & (t <= 17.0)
+    # A sine's peak is its amplitude; the 2 s baseline ramps lie outside the window and add a
+    # correction of order 1e-3 m/s^2 at most, so 2 % of the amplitude bounds it.
+    assert np.max(np.abs(acc[steady])) == pytest.approx(0.2, rel=0.02)
+    # The instantaneous frequency, from the zero crossings of the first and last steady seconds,
+    # follows the sweep law (a crossing count over 1 s resolves 0.5 Hz, hence the tolerance).
+    def frequency(t0):
+        window = acc[(t >= t0) & (t < t0 + 1.0)]
+        return 0.5 * np.count_nonzero(np.diff(np.sign(window)))
+    law = (lambda x: 0.5 + 9.5 * x / 20.0) if sweep == "linear" else (lambda x: 0.5 * 20.0 ** (x / 20.0))
+    for t0 in (4.0, 15.0):
+        assert frequency(t0) == pytest.approx(law(t0 + 0.5), abs=0.6)
+
+
+@pytest.mark.parametrize("bad, key", [(Chirp(amplitude=-1.0, f_start=1.0, f_end=5.0), "excitation.amplitude"),
+                                      (Chirp(amplitude=0.2, f_start=0.0, f_end=5.0), "excitation.f_start"),
+                                      (Chirp(amplitude=0.2, f_start=1.0, f_end=5.0, sweep="cubic"),
+                                       "excitation.sweep")])
+def test_chirp_invalid(bad, key):
+    with pytest.raises(ScenarioError, match=key):
+        ground_motion(bad, 20.0)
+
+
+def test_chirp_from_scenario_text():
+    from momentid.lab.scenario import parse_scenario
+    data = {"scenario": {"name": "c", "duration": 5.0, "sample_rate": 200.0},
+            "structure": {"masses": [10.0, 10.0], "storey_stiffness": [2000.0, 2000.0],
+                          "damping": {"damping_ratios": [0.02, 0.02], "modes": [1, 2]}},
+            "excitation": {"type": "chirp", "amplitude": 0.3, "f_start": 1.0, "f_end": 8.0, "sweep": "log"},
+            "runs": [{"added_mass": [0.0, 0.0]}]}
+    assert parse_scenario(data).excitation == Chirp(amplitude=0.3, f_start=1.0, f_end=8.0, sweep="log")

@@ -95,6 +95,7 @@ LAWS = {
     "extra_damper": lambda p, x, v, t, W, h, k: p["c"] * v,
     "p_delta": lambda p, x, v, t, W, h, k: -p["factor"] * GRAVITY * W / h * x,
     "stiffness_loss": lambda p, x, v, t, W, h, k: -p["fraction"] * k * x if t >= p["time"] else 0.0,
+    "gap_brace": lambda p, x, v, t, W, h, k: p["stiffness"] * np.sign(x) * max(abs(x) - p["gap"], 0.0),
 }
 
 

@@ -16,9 +16,8 @@ above the noise.
 
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.optimize
@@ -27,31 +26,38 @@ from threadpoolctl import threadpool_limits
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.function_library import ALWAYS, Selected, columns, hysteretic_columns, refine, select
+from momentid.diagnosis.interpret import describe, physics
 from momentid.diagnosis.refit import Resimulator
 from momentid.diagnosis.replay import Entry, measured_groups
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
-from momentid.diagnosis.selection import Finding, explained_share
+from momentid.diagnosis.selection import Finding, OutsideLibrary, explained_share
+from momentid.diagnosis.thresholds import EXCESS
 from momentid.diagnosis.verdict import Verdict
 from momentid.errors import ModelError, SimulationError
-from momentid.mechanisms.bouc_wen import bouc_wen_state
-from momentid.mechanisms.data_driven import HYSTERETIC_BETA, TERMS
+from momentid.mechanisms.data_driven import TERMS
 from momentid.mechanisms.place import Place, Target
 
-__all__ = ["Discovery", "Found", "discover", "search", "found_terms", "describe", "plot_discovered", "ACCEPTED_SHARE",
-           "SCALE_RANGE", "SCALE_REPLAYS", "PLOT_POINTS"]
+__all__ = ["Discovery", "Found", "discover", "search", "found_terms", "challenge", "as_unexplained", "plot_discovered",
+           "ACCEPTED_SHARE", "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS", "PLOT_POINTS"]
 
 #: A discovered force is reported when its model removes this share of the held-out run's replay
 #: misfit above the noise (0.5: the misfit's excess power at least halves).
 ACCEPTED_SHARE = 0.5
+#: A discovered force replaces the physics the library named when its training replays remove at
+#: least this share of the misfit above noise that the named model leaves (as a further mechanism
+#: earns its place in a compound diagnosis: a data-driven force's extra freedom gains a little on
+#: any fit; half is physics the library lacks).
+BEATS_LIBRARY = 0.5
+#: A nonlinear term after the first stays in the discovered force when the force with it removes this
+#: share of the training replays' misfit above noise that the force without it leaves (the rule a
+#: further mechanism of a compound diagnosis meets).
+TERM_EARNS = 0.5
 #: Re-simulation search of the nonlinear terms' common scale, from half to twice the regression's
 #: (noisy signals pull the regression towards zero), in at most this many replays.
 SCALE_RANGE = (0.5, 2.0)
 SCALE_REPLAYS = 8
 #: Samples drawn in ``discovered.png``.
 PLOT_POINTS = 4000
-#: Cycles of the hysteretic law's loop computed for its area (the first ones settle from z = 0),
-#: and samples per cycle.
-_LOOP_CYCLES, _LOOP_SAMPLES = 3, 2000
 
 
 @dataclass(frozen=True)
@@ -75,6 +81,10 @@ class Discovery:
         The linear model it is added to.
     plot : dict
         ``x`` (m), ``measured`` and ``law`` (N): the residual's force at the place and the discovered law.
+    physics : dict
+        Its class of physics and that class's numbers (:func:`~momentid.diagnosis.interpret.physics`).
+    replaces : OutsideLibrary or None
+        When it beat the physics the library named (:func:`challenge`): what, and the training NRMSEs.
     """
 
     place: Place
@@ -85,6 +95,8 @@ class Discovery:
     record: Mechanism = field(repr=False)
     structure: Structure = field(repr=False)
     plot: dict = field(default_factory=dict, repr=False)
+    physics: dict = field(default_factory=dict)
+    replaces: OutsideLibrary | None = None
 
     @property
     def location(self) -> dict:
@@ -92,17 +104,20 @@ class Discovery:
 
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
-                "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after}
+                "physics": self.physics, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
+                "replaces": self.replaces.to_dict() if self.replaces is not None else None}
 
 
 @dataclass(frozen=True)
 class Found:
-    """The best force on one residual (:func:`search`): its place, the selected terms, and the place's
-    stretch ``x`` (n,) (m) and the residual's force there ``y`` (n,) (N) behind the plot."""
+    """The best force on one residual (:func:`search`): its place, the selected terms, the place's
+    stretch ``x`` (n,) (m) and its rate ``v`` (n,) (m/s), and the residual's force there ``y`` (n,) (N)
+    behind the plot."""
 
     place: Place
     selected: Selected
     x: np.ndarray
+    v: np.ndarray
     y: np.ndarray
 
 
@@ -148,11 +163,11 @@ def search(rows, noise_floor: np.ndarray, d: int) -> Found | None:
         w = place.direction(d)
         y, w2 = place.force(R), float(w @ w)
         sel = select(columns(x, vel, time, segments, h), y, w2, total_test - w2 * float(np.sum(y[test] ** 2)),
-                     noise_test, train, test)
+                     noise_test, train, test, (x, vel, time))
         if best is None or sel.test_rss < best[0].test_rss:
             best = (sel, place, x, vel, y)
     sel, place, x, vel, y = best
-    return Found(place, refine(sel, y, x, vel, time), x, y)
+    return Found(place, refine(sel, y, x, vel, time), x, vel, y)
 
 
 def _record(found: Found, scale: float = 1.0) -> Mechanism:
@@ -170,6 +185,38 @@ def _misfit(refitter: Resimulator, structure: Structure, record: Mechanism) -> f
     """The refitter's replay misfit of its search run through ``structure`` with the force ``record``."""
     kind = mechanisms.get(record.type)
     return refitter.misfit(structure, [Entry(kind, kind.place(record.location), dict(record.parameters))])
+
+
+def _pruned(refitter: Resimulator, structure: Structure, found: Found) -> Found:
+    """The fewest of the selected terms that earn their place in the training replays.
+
+    Selection scores terms on the equation residual's held-out blocks, where a term that mimics a
+    detail the library lacks (a hysteretic state or a stiffness switch for a stop's contact dashpot)
+    lowers the residual a little and joins.  Here each nonlinear term after the first, in the order
+    selection took them, stays only when the force with it removes ``TERM_EARNS`` of the training
+    replays' misfit above noise that the force without it leaves (coefficients refitted by least
+    squares on every sample for each set of terms).
+    """
+    always = [c for c in found.selected.columns if c.term in ALWAYS]
+    nonlinear = [c for c in found.selected.columns if c.term not in ALWAYS]
+    if len(nonlinear) < 2:
+        return found
+
+    def with_terms(k: int) -> Found:
+        cols = tuple(always + nonlinear[:k])
+        coef = np.linalg.lstsq(np.column_stack([c.signal for c in cols]), found.y, rcond=None)[0]
+        return replace(found, selected=replace(found.selected, columns=cols, coefficients=coef))
+
+    noise = refitter.noise_nrmse()
+    kept = with_terms(1)
+    score = refitter.score_joint(structure, [], (_record(kept),))
+    for k in range(2, len(nonlinear) + 1):
+        trial = with_terms(k)
+        after = refitter.score_joint(structure, [], (_record(trial),))
+        if explained_share(score, after, noise) < TERM_EARNS:
+            break
+        kept, score = trial, after
+    return kept
 
 
 def _sized(refitter: Resimulator, structure: Structure, found: Found) -> tuple[float, float]:
@@ -205,6 +252,69 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Resimul
     """
     if found.verdict is not Verdict.UNEXPLAINED or not math.isfinite(before):
         return None
+    return _open_search(model, residuals, refitter, before)
+
+
+def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Resimulator, named: Finding, entries,
+              before: float, confirmed=None) -> Discovery | None:
+    """The open search against the physics the library named: the discovered force when it beats it.
+
+    A library mechanism can take in part of a force outside the library (a cubic stiffness the
+    ramp of a brace engaging beyond a gap, a storey damper a stop's losses) and be accepted.  When
+    the named model's training replays stay above ``EXCESS`` x their noise level, the open search
+    runs on the whole mismatch; its force wins when its training replays leave at most
+    ``1 - BEATS_LIBRARY`` of the named model's misfit above noise.  ``replaces`` then says what it
+    beat (:class:`~momentid.diagnosis.selection.OutsideLibrary`).  None when the named physics
+    includes a sensor fault the channels show, replays at the noise level, or the search finds
+    nothing better.
+
+    A sensor fault the channels show against each other (``confirmed``, the kinematic check's) is a
+    fault whatever the models say: it is not challenged.  Any other named fault is (a contact against
+    a stop can replay like a bias of the table accelerometer): it stands only when no physical force
+    replays as well.
+
+    Parameters
+    ----------
+    model, residuals, refitter : the diagnosis's stages 1, 2 and 6.
+    named : Finding
+        The named mechanisms' joint model (its ``structure`` and ``records``).
+    entries : sequence of Entry
+        Each named mechanism (:class:`~momentid.diagnosis.replay.Entry`).
+    before : float
+        The held-out run's replay NRMSE through the linear model.
+    confirmed : Candidate, optional
+        The sensor fault the channels show (:attr:`~momentid.diagnosis.sensor_check.SensorCheck.fault`).
+    """
+    shown = confirmed is not None and any(e.kind.target is Target.CHANNEL and e.kind is confirmed.kind
+                                          and e.place == confirmed.place for e in entries)
+    if not entries or not math.isfinite(before) or shown:
+        return None
+    noise = refitter.noise_nrmse()
+    score = refitter.score_joint(named.structure, entries, named.records)
+    if score <= EXCESS * noise:
+        return None
+    found = _open_search(model, residuals, refitter, before)
+    if found is None:
+        return None
+    own = refitter.score_joint(found.structure, [], (found.record,))
+    share = explained_share(score, own, noise)
+    if share < BEATS_LIBRARY:
+        return None
+    return replace(found, replaces=OutsideLibrary(named.mechanism, named.location, score, own, noise, share))
+
+
+def as_unexplained(named: Finding, discovered: Discovery, refitter: Resimulator) -> Finding:
+    """The verdict when a discovered force beats the named physics (:func:`challenge`): ``unexplained``
+    at the force's place, on the linear model; its selection's ``outside_library`` says what it replaced."""
+    selection = replace(named.selection, outside_library=discovered.replaces)
+    return Finding(Verdict.UNEXPLAINED, None, None, discovered.location, {}, {}, refitter.linear_structure, (),
+                   selection)
+
+
+def _open_search(model: LinearModel, residuals: EquationResiduals, refitter: Resimulator,
+                 before: float) -> Discovery | None:
+    """The search itself: the best force on the identified (and nominal) model's residual, sized by
+    re-simulation, kept when it removes ``ACCEPTED_SHARE`` of the held-out misfit above noise."""
     bases = [(residuals.rows, refitter.linear_structure)]
     if residuals.nominal_rows is not None and model.nominal is not None:
         bases.append((residuals.nominal_rows, model.nominal))
@@ -217,6 +327,7 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Resimul
     if not trials:
         return None
     _, structure, got = min(trials, key=lambda t: t[0])
+    got = _pruned(refitter, structure, got)
     scale, _ = _sized(refitter, structure, got)
     record = _record(got, scale)
     after = _held_out(model, structure, record)
@@ -226,10 +337,11 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Resimul
     fitted = np.column_stack([c.signal for c in got.selected.columns]) @ np.array(
         [t["coefficient"] for t in terms])
     pick = np.linspace(0, len(got.x) - 1, min(PLOT_POINTS, len(got.x))).astype(int)
-    return Discovery(place=got.place, description=describe(got.place, terms, structure,
-                                                                       float(np.max(np.abs(got.x)))),
+    peaks = (float(np.max(np.abs(got.x))), float(np.max(np.abs(got.v))))
+    return Discovery(place=got.place, description=describe(got.place, terms, structure, *peaks),
                      terms=tuple(terms), nrmse_before=float(before), nrmse_after=float(after), record=record,
-                     structure=structure, plot={"x": got.x[pick], "measured": got.y[pick], "law": fitted[pick]})
+                     structure=structure, plot={"x": got.x[pick], "measured": got.y[pick], "law": fitted[pick]},
+                     physics=physics(got.place, terms))
 
 
 def _held_out(model: LinearModel, structure: Structure, record: Mechanism) -> float:
@@ -254,60 +366,6 @@ def found_terms(found: Found, scale: float) -> list[dict]:
                     "coefficient": float(c) * (1.0 if term.name in ALWAYS else scale), "unit": term.unit,
                     **col.shape})
     return out
-
-
-def _loop_area(coefficient: float, yield_drift: float, exponent: float, amplitude: float) -> float:
-    """Energy (J) one cycle of amplitude ``amplitude`` (m) dissipates in the hysteretic term."""
-    theta = np.linspace(0, 2 * np.pi * _LOOP_CYCLES, _LOOP_CYCLES * _LOOP_SAMPLES + 1)
-    x = amplitude * np.sin(theta)
-    rate = amplitude * np.cos(theta)
-    z = bouc_wen_state(rate, float(theta[1] - theta[0]), yield_drift, exponent, HYSTERETIC_BETA)[:, 0]
-    last = slice((_LOOP_CYCLES - 1) * _LOOP_SAMPLES, None)
-    return float(coefficient * np.sum(0.5 * (z[last][1:] + z[last][:-1]) * np.diff(x[last])))
-
-
-def describe(place: Place, terms: list[dict], structure: Structure, peak: float) -> str:
-    """The discovered force at ``place`` (a storey or a floor against the table) in words (gaps in mm,
-    stiffness changes in % of the place's stiffness)."""
-    storey, index = place.target is Target.STOREY, place.index
-    name = f"the drift of storey {index}" if storey else f"q{index} (floor {index} against the table)"
-    short = "|x|" if storey else f"|q{index}|"
-    coef = {t["term"]: t for t in terms}
-    k_lin = (structure.storey_stiffness[index - 1] if storey else 0.0) + coef["x"]["coefficient"]
-    words = []
-    for t in terms:
-        c, term = t["coefficient"], t["term"]
-        trend = "stiffening" if c > 0 else "softening"
-        if term == "gap_pos":
-            words.append(f"{trend} beyond {short[1:-1]} = +{1e3 * t['gap_pos_delta']:.1f} mm (a stop on the + side, "
-                         f"{abs(c):.3g} N/m)")
-        elif term == "gap_neg":
-            words.append(f"{trend} beyond {short[1:-1]} = -{1e3 * t['gap_neg_delta']:.1f} mm (a stop on the - side, "
-                         f"{abs(c):.3g} N/m)")
-        elif term == "dead_zone":
-            words.append(f"{trend} beyond {short} = {1e3 * t['dead_zone_delta']:.1f} mm (a two-sided gap, "
-                         f"{abs(c):.3g} N/m)")
-        elif term in ("x3", "x_abs_x"):
-            extra = c * peak ** (2 if term == "x3" else 1)
-            share = f" ({100 * extra / k_lin:+.0f} % of its stiffness at the peak {1e3 * peak:.1f} mm)" if k_lin > 0 else ""
-            words.append(f"{trend} with amplitude, {t['meaning'].split(' (')[0]} x {c:.3g} {t['unit']}{share}")
-        elif term == "v_abs_v":
-            words.append(f"quadratic damping {c:.3g} {t['unit']}")
-        elif term == "sign_v":
-            words.append(f"a friction-like force of {c:.3g} N")
-        elif term == "hysteretic":
-            area = _loop_area(c, t["hysteretic_yield"], t["hysteretic_exponent"], peak)
-            words.append(f"hysteretic: softening with amplitude (yield near {short} = "
-                         f"{1e3 * t['hysteretic_yield']:.2f} mm), loops of area {1e3 * area:.3g} mJ at the peak "
-                         f"{1e3 * peak:.1f} mm")
-        elif term == "switch":
-            change = -c / k_lin if k_lin > 0 else float("nan")
-            verb = "loses" if change > 0 else "gains"
-            words.append(f"{verb} {100 * abs(change):.0f} % of its stiffness from t = {t['switch_time']:.1f} s")
-    if not words:
-        words.append(f"a linear spring {coef['x']['coefficient']:.3g} N/m and dashpot {coef['v']['coefficient']:.3g} "
-                     f"N s/m missing from the model")
-    return f"Discovered at {json.dumps(place.location)}, against {name}: " + "; ".join(words) + "."
 
 
 def plot_discovered(discovery: Discovery, path) -> None:

@@ -27,7 +27,8 @@ from momentid.mechanisms.bouc_wen import bouc_wen_state
 from momentid.mechanisms.data_driven import HYSTERETIC_BETA, term_signal
 
 __all__ = ["Column", "Selected", "columns", "hysteretic_columns", "select", "refine",
-           "ALWAYS", "DELTA_FRACTIONS", "YIELD_FRACTIONS", "EXPONENTS", "SWITCH_STEP", "MIN_GAIN", "MAX_TERMS"]
+           "ALWAYS", "GAP_TERMS", "GAP_TOLERANCE", "DELTA_FRACTIONS", "YIELD_FRACTIONS", "EXPONENTS", "SWITCH_STEP",
+           "MIN_GAIN", "MAX_TERMS"]
 
 #: Terms every discovered force carries: the linear spring and dashpot at its place, which the
 #: identified model may have absorbed (or missed) there, as the screening's confounds.
@@ -113,22 +114,87 @@ class Selected:
 
 
 class _Gram:
-    """Scaled normal equations of a scalar regression of ``y`` on ``X`` on train and test rows."""
+    """Scaled normal equations of a scalar regression of ``y`` on ``X`` on train and test rows; columns
+    can be added (:meth:`add`) or tried without adding (:meth:`test_rss_with`)."""
 
     def __init__(self, X: np.ndarray, y: np.ndarray, train: np.ndarray, test: np.ndarray):
         self.scale = np.linalg.norm(X[train], axis=0)
         self.scale[self.scale == 0] = 1.0
         Xs = X / self.scale
-        self.G, self.g = Xs[train].T @ Xs[train], Xs[train].T @ y[train]
-        self.H, self.h, self.zz = Xs[test].T @ Xs[test], Xs[test].T @ y[test], float(y[test] @ y[test])
+        self.train, self.test, self.y = train, test, y
+        self.Xtr, self.Xte = Xs[train], Xs[test]
+        self.G, self.g = self.Xtr.T @ self.Xtr, self.Xtr.T @ y[train]
+        self.H, self.h, self.zz = self.Xte.T @ self.Xte, self.Xte.T @ y[test], float(y[test] @ y[test])
 
     def test_rss(self, idx: list[int]) -> float:
-        c = np.linalg.lstsq(self.G[np.ix_(idx, idx)], self.g[idx], rcond=1e-12)[0]
-        return max(self.zz - 2 * float(c @ self.h[idx]) + float(c @ self.H[np.ix_(idx, idx)] @ c), 0.0)
+        return self._rss(self.G[np.ix_(idx, idx)], self.g[idx], self.H[np.ix_(idx, idx)], self.h[idx])
+
+    def _rss(self, G, g, H, h) -> float:
+        c = np.linalg.lstsq(G, g, rcond=1e-12)[0]
+        return max(self.zz - 2 * float(c @ h) + float(c @ H @ c), 0.0)
+
+    def _blocks(self, idx: list[int], signal: np.ndarray):
+        """The Gram blocks of the columns ``idx`` and one more column ``signal`` (n,)."""
+        s = signal / (np.linalg.norm(signal[self.train]) or 1.0)
+        st, se = s[self.train], s[self.test]
+        gx, hx = self.Xtr[:, idx].T @ st, self.Xte[:, idx].T @ se
+        G = np.block([[self.G[np.ix_(idx, idx)], gx[:, None]], [gx[None, :], np.array([[st @ st]])]])
+        H = np.block([[self.H[np.ix_(idx, idx)], hx[:, None]], [hx[None, :], np.array([[se @ se]])]])
+        return G, np.append(self.g[idx], st @ self.y[self.train]), H, np.append(self.h[idx], se @ self.y[self.test])
+
+    def test_rss_with(self, idx: list[int], signal: np.ndarray) -> float:
+        """:meth:`test_rss` of the columns ``idx`` and the column ``signal`` (n,)."""
+        return self._rss(*self._blocks(idx, signal))
+
+    def add(self, signal: np.ndarray) -> int:
+        """Add the column ``signal`` (n,); returns its index."""
+        k = self.G.shape[0]
+        G, g, H, h = self._blocks(list(range(k)), signal)
+        norm = np.linalg.norm(signal[self.train]) or 1.0
+        self.G, self.g, self.H, self.h = G, g, H, h
+        self.scale = np.append(self.scale, norm)
+        self.Xtr = np.column_stack([self.Xtr, signal[self.train] / norm])
+        self.Xte = np.column_stack([self.Xte, signal[self.test] / norm])
+        return k
+
+
+#: Gap and stop terms: their distance ``delta`` is refined between grid points before they compete
+#: (a stiff stop's force starts sharply at its gap: a grid point 2 % of the peak off fits it 5x worse).
+GAP_TERMS = ("dead_zone", "gap_pos", "gap_neg")
+#: ... to this fraction of the peak ``|x|``.
+GAP_TOLERANCE = 1e-3
+
+
+def _sharpened(trials, cols: list[Column], chosen: list[int], gram: _Gram, signals) -> list:
+    """``trials`` ((held-out RSS, column index) each) with the best grid point of each gap term
+    replaced by its refined delta (bounded search between its grid neighbours on the held-out RSS),
+    the refined column appended to ``cols`` and ``gram``."""
+    x, v, time = signals
+    peak = float(np.max(np.abs(x))) or 1.0
+    step = (DELTA_FRACTIONS[1] - DELTA_FRACTIONS[0]) * peak
+    out = list(trials)
+    for term in GAP_TERMS:
+        mine = [(rss, i) for rss, i in trials if cols[i].term == term]
+        if not mine:
+            continue
+        rss0, i = min(mine)
+        key = f"{term}_delta"
+        value = cols[i].shape[key]
+
+        def cost(p, term=term, key=key):
+            return gram.test_rss_with(chosen, term_signal(term, {key: p}, x, v, time))
+
+        res = scipy.optimize.minimize_scalar(cost, bounds=(max(value - step, 0.0), value + step), method="bounded",
+                                             options={"xatol": GAP_TOLERANCE * peak})
+        if res.fun < rss0:
+            signal = term_signal(term, {key: float(res.x)}, x, v, time)
+            cols.append(Column(term, {key: float(res.x)}, signal))
+            out.append((float(res.fun), gram.add(signal)))
+    return out
 
 
 def select(cols: list[Column], y: np.ndarray, weight: float, other_test: float, noise_test: float,
-           train: np.ndarray, test: np.ndarray) -> Selected:
+           train: np.ndarray, test: np.ndarray, signals=None) -> Selected:
     """Forward selection of terms for the force ``y`` (n,) at one place.
 
     Parameters
@@ -145,7 +211,11 @@ def select(cols: list[Column], y: np.ndarray, weight: float, other_test: float, 
         What sensor noise alone leaves in the held-out floor-force residual (N^2).
     train, test : ndarray of bool, shape (n,)
         Alternate time blocks.
+    signals : (x, v, time), optional
+        The place's displacement, velocity and time (n,) each: with them, a gap term's distance is
+        refined between grid points before the terms compete (:data:`GAP_TERMS`).
     """
+    cols = list(cols)
     X = np.column_stack([c.signal for c in cols])
     gram = _Gram(X, y, train, test)
     chosen = list(range(len(ALWAYS)))
@@ -153,17 +223,19 @@ def select(cols: list[Column], y: np.ndarray, weight: float, other_test: float, 
     linear = total
     for _ in range(MAX_TERMS):
         used = {cols[i].term for i in chosen}
-        trials = [(other_test + weight * gram.test_rss(chosen + [i]), i) for i in range(len(cols))
-                  if cols[i].term not in used]
+        trials = [(gram.test_rss(chosen + [i]), i) for i in range(len(cols)) if cols[i].term not in used]
         if not trials:
             break
+        if signals is not None:
+            trials = _sharpened(trials, cols, chosen, gram, signals)
         best, i = min(trials)
+        best = other_test + weight * best
         if total - best < MIN_GAIN * max(linear - noise_test, 0.0):
             break
         chosen.append(i)
         total = best
     picked = tuple(cols[i] for i in chosen)
-    coef = np.linalg.lstsq(X[:, chosen], y, rcond=None)[0]
+    coef = np.linalg.lstsq(np.column_stack([c.signal for c in picked]), y, rcond=None)[0]
     return Selected(picked, coef, float(linear), float(total))
 
 

@@ -22,9 +22,12 @@
 7. **Report** (:mod:`~momentid.diagnosis.report`): the held-out run replayed through the linear and
    augmented models (NRMSE before/after), the :class:`~momentid.diagnosis.result.Diagnosis` and its
    report folder.
-8. **Open search** (:func:`~momentid.diagnosis.discovery.discover`), on an ``unexplained`` verdict only:
+8. **Open search** (:func:`~momentid.diagnosis.discovery.discover`), on an ``unexplained`` verdict:
    a sparse force from a function library, located, put into the MuJoCo model and replayed on the
-   held-out run (``discovered``; the verdict stays ``unexplained``, at the discovered place).
+   held-out run (``discovered``; the verdict stays ``unexplained``, at the discovered place).  When
+   the named physics' model still replays above the noise, the open search challenges it
+   (:func:`~momentid.diagnosis.discovery.challenge`): a force outside the library that removes most
+   of what it leaves makes the verdict ``unexplained``, at the force's place.
 
 Recordings without added mass (accelerometers only) run on the rig's MuJoCo twin when the lab states
 its floor masses and recorded three trials or more (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`),
@@ -41,8 +44,8 @@ from threadpoolctl import threadpool_limits
 
 from momentid.core.series import Experiment
 from momentid.diagnosis.compound import Compound, Correction, extend
-from momentid.diagnosis.discovery import discover
-from momentid.diagnosis.refit import noise_ratios
+from momentid.diagnosis.discovery import as_unexplained, challenge, discover
+from momentid.diagnosis.refit import noise_carrier, noise_ratios
 from momentid.diagnosis.replay import replay_check
 from momentid.diagnosis.report import write_report
 from momentid.diagnosis.result import AddedMassEvidence, Diagnosis
@@ -117,8 +120,14 @@ def _diagnose(experiment: Experiment, replay: bool) -> Diagnosis:
         before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, joint.entries,
                                                   found.records)
     discovered = discover(model, residuals, refitter, found, before)   # the open search, on "unexplained"
+    if discovered is None and joint.mechanisms:   # ... and against named physics that leaves a misfit
+        discovered = challenge(model, residuals, refitter, found, joint.entries, before, stages.sensors.fault)
+        if discovered is not None:   # a force outside the library beats the library's names
+            found = as_unexplained(found, discovered, refitter)
+            joint = replace(joint, finding=found, mechanisms=(), entries=())
+            before, after, curves, xml = replay_check(model, refitter.linear_structure, found.structure, (), ())
     run = model.evaluation_run
-    noise = float(np.mean(noise_ratios(model.result, run, model.storeys, model.band)))
+    noise = float(np.mean(noise_ratios(noise_carrier(model), run, model.storeys, model.band)))
     evidence = AddedMassEvidence(
         run=run.name, held=model.holdout is not None, excess_equation=residuals.excess,
         excess_replay=screening.replay.excess,

@@ -32,7 +32,8 @@ from momentid.estimation.reconstruct import Prefilter, band_filter
 from momentid.mechanisms.base import MechanismKind, Refit
 from momentid.mechanisms.place import Place
 
-__all__ = ["Augmented", "ForceRefit", "Refitter", "Resimulator", "refit_eiv", "noise_ratios", "SEARCH_RANGE"]
+__all__ = ["Augmented", "ForceRefit", "Refitter", "Resimulator", "refit_eiv", "noise_ratios", "noise_carrier",
+           "SEARCH_RANGE"]
 
 #: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
 _UNSTABLE = 1e200
@@ -160,6 +161,24 @@ class Resimulator(Protocol):
     def identify_corrected(self, kind: MechanismKind, place: Place, params: dict): ...
     def remember(self, augmented: Augmented, score: float) -> None: ...
     def remember_refit(self, entries, refit: ForceRefit | None) -> None: ...
+
+
+def _stable(result) -> bool:
+    """Whether a linear model's free motion decays (every eigenvalue of its state matrix in the left
+    half-plane)."""
+    d = result.M.shape[0]
+    Minv = np.linalg.inv(result.M)
+    A = np.block([[np.zeros((d, d)), np.eye(d)], [-Minv @ result.K, -Minv @ result.C]])
+    return bool(np.all(np.linalg.eigvals(A).real < 0))
+
+
+def noise_carrier(model: LinearModel):
+    """The linear model that carries sensor noise into a replay (:func:`noise_ratios`): the identified
+    one, or the lab's nominal one when a strong nonlinearity left the identified one unstable (it would
+    carry the noise without bound; the nominal model carries it as the rig does)."""
+    if model.nominal_result is not None and not _stable(model.result):
+        return model.nominal_result
+    return model.result
 
 
 class Refitter:
@@ -393,5 +412,6 @@ class Refitter:
 
     def noise_nrmse(self) -> float:
         """The NRMSE sensor noise alone leaves in :meth:`score` (white levels, band-limited)."""
+        carrier = noise_carrier(self.model)
         return float(np.mean([r for run in self.model.train.runs
-                              for r in noise_ratios(self.result, run, self.d, self.model.band)]))
+                              for r in noise_ratios(carrier, run, self.d, self.model.band)]))

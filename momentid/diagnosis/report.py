@@ -48,6 +48,12 @@ def summary(diag: Diagnosis) -> str:
     loc = diag.location
     if diag.verdict is Verdict.NONE:
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
+    elif diag.verdict is Verdict.UNEXPLAINED and selection.outside_library is not None:
+        out = selection.outside_library
+        lines.append(f"Unexplained by the library at {json.dumps(loc)}: its best model, "
+                     f"{out.mechanism.replace('_', ' ')} at {json.dumps(out.location)}, leaves training NRMSE "
+                     f"{100 * out.named:.2f} % (noise alone {100 * out.noise:.2f} %); the force below, outside the "
+                     f"library, {100 * out.discovered:.2f} %.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.partial is not None:
         part = selection.partial
         lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "

@@ -343,8 +343,11 @@ def screen_attachment(result, runs, d: int, band, f_top: float) -> list[Candidat
             found.append((best, place, f_a, base, noise, rss, n_eff))
         if not found:
             continue
-        # The attachment's frequency and damping, refined where the grid fits best.
-        _, place, f_a, base, noise, rss, n_eff = min(found, key=lambda x: x[0])
+        # The attachment's frequency and damping, refined where the grid removes the most misfit: each
+        # floor is fitted on its own loaded runs, so the misfits left are sums over different runs (a
+        # floor loaded in one run leaves less than the true one loaded in three) and only what each
+        # removes compares (a floor's unloaded runs keep the rigid replay's misfit either way).
+        _, place, f_a, base, noise, rss, n_eff = min(found, key=lambda x: x[0] - x[3])
         params, std, best = _refine_oscillator(rss, f_a, ATTACHMENT_DAMPING_RATIO, n_eff)
         out.append(Candidate(kind, place, params, std, float((base - best) / (base - noise)), Domain.REPLAY))
         for b, other, f_k, base_k, noise_k, _, _ in found:

@@ -24,8 +24,8 @@ from momentid.diagnosis.workers import run_forked
 from momentid.mechanisms.base import MechanismKind, Refit
 from momentid.mechanisms.place import Place, Target
 
-__all__ = ["Screening", "Choice", "Tried", "Partial", "Step", "Selection", "Finding", "screen", "choose", "select",
-           "explained_share", "SHORTLIST_SIZE", "SHORTLIST_FLOOR", "EARNS"]
+__all__ = ["Screening", "Choice", "Tried", "Partial", "Step", "OutsideLibrary", "Selection", "Finding", "screen",
+           "choose", "select", "explained_share", "SHORTLIST_SIZE", "SHORTLIST_FLOOR", "EARNS"]
 
 #: Re-simulated at most: the chosen candidate and the best of up to 3 other kinds of physics ...
 SHORTLIST_SIZE = 4
@@ -126,6 +126,26 @@ class Step:
 
 
 @dataclass(frozen=True)
+class OutsideLibrary:
+    """A force outside the library that replays the training runs better than the physics the library
+    named (:func:`~momentid.diagnosis.discovery.challenge`): what was named, and the training runs'
+    NRMSE through the named model, the discovered force's model and noise alone, with the share of
+    the named model's misfit above noise the force removes."""
+
+    mechanism: str
+    location: dict
+    named: float
+    discovered: float
+    noise: float
+    explained: float
+
+    def to_dict(self) -> dict:
+        return {"named": [self.mechanism, self.location], "training_nrmse_named": self.named,
+                "training_nrmse_discovered": self.discovered, "training_nrmse_noise": self.noise,
+                "explained": self.explained}
+
+
+@dataclass(frozen=True)
 class Selection:
     """How a diagnosis chose (``report.json``'s ``selection``; None and empty fields are left out).
 
@@ -147,6 +167,9 @@ class Selection:
         Training NRMSE through the joint model of several mechanisms, and the share it removes.
     after_correction : Selection or None
         The selection on the recordings with a sensor fault undone.
+    outside_library : OutsideLibrary or None
+        The physics named here, beaten by a force outside the library (the verdict is then
+        ``unexplained``).
     """
 
     linear: float | None = None
@@ -159,6 +182,7 @@ class Selection:
     joint: float | None = None
     joint_explained: float | None = None
     after_correction: Selection | None = None
+    outside_library: OutsideLibrary | None = None
 
     def to_dict(self) -> dict:
         out = {"training_nrmse_linear": self.linear,
@@ -168,7 +192,8 @@ class Selection:
                "partial": self.partial.to_dict() if self.partial else None,
                "compound": [s.to_dict() for s in self.steps] if self.steps is not None else None,
                "training_nrmse_joint": self.joint, "joint_explained": self.joint_explained,
-               "after_correction": self.after_correction.to_dict() if self.after_correction else None}
+               "after_correction": self.after_correction.to_dict() if self.after_correction else None,
+               "outside_library": self.outside_library.to_dict() if self.outside_library else None}
         return {k: v for k, v in out.items() if v is not None}
 
 

@@ -8,8 +8,8 @@ into a :class:`GroundMotion` that the simulator evaluates at arbitrary times
   and ``z''``; ``z(0)`` and ``z'(0)`` need not be zero (the simulator starts
   the base with velocity ``z'(0)``).
 * :class:`~momentid.lab.scenario.RecordedMotion` (a PEER AT2 accelerogram, read by
-  :func:`read_at2`) and :class:`~momentid.lab.scenario.BandLimitedNoise` go through
-  one processing chain, the one a real shake table needs: samples of
+  :func:`read_at2`), :class:`~momentid.lab.scenario.BandLimitedNoise` and
+  :class:`~momentid.lab.scenario.Chirp` go through one processing chain, the one a real shake table needs: samples of
   acceleration -> (record only: scale, zero-phase Butterworth high-pass) ->
   cosine tapers at both ends -> baseline correction -> C2 cubic spline.  The
   baseline correction subtracts ``c0 phi0(t) + c1 phi1(t)``, two ``sin^2``
@@ -21,7 +21,9 @@ into a :class:`GroundMotion` that the simulator evaluates at arbitrary times
   ``z = z' = z'' = 0`` exactly.  Noise is a random-phase multisine with flat
   amplitude on the FFT bins ``k / duration`` inside the band, periodic over the
   run, scaled so that this stationary signal has the requested RMS; the tapers
-  and the correction then lower the RMS near the ends only.
+  and the correction then lower the RMS near the ends only.  A chirp is the
+  sine ``A sin(phi(t))`` whose frequency ``phi'(t) / 2 pi`` goes from
+  ``f_start`` to ``f_end`` over the run, linearly or exponentially in time.
 
 The acceleration the table applies is therefore the processed one, not the raw
 record; the simulator's base sensor records what was applied.
@@ -42,7 +44,7 @@ from scipy.interpolate import CubicSpline, PPoly
 from scipy.signal import butter, sosfiltfilt
 
 from momentid.errors import ScenarioError
-from momentid.lab.scenario import BandLimitedNoise, Excitation, Harmonics, RecordedMotion
+from momentid.lab.scenario import BandLimitedNoise, Chirp, Excitation, Harmonics, RecordedMotion
 
 __all__ = ["GroundMotion", "ground_motion", "read_at2", "STANDARD_GRAVITY", "BASELINE_RAMP"]
 
@@ -247,7 +249,7 @@ def ground_motion(excitation: Excitation, duration: float) -> GroundMotion:
 
     Parameters
     ----------
-    excitation : Harmonics, RecordedMotion or BandLimitedNoise
+    excitation : Harmonics, RecordedMotion, BandLimitedNoise or Chirp
         The scenario's excitation.
     duration : float
         Length (s) of a run.  Noise is synthesised for exactly this long; a
@@ -273,8 +275,10 @@ def ground_motion(excitation: Excitation, duration: float) -> GroundMotion:
         return _record_motion(excitation, duration)
     if isinstance(excitation, BandLimitedNoise):
         return _noise_motion(excitation, duration)
+    if isinstance(excitation, Chirp):
+        return _chirp_motion(excitation, duration)
     raise ScenarioError(
-        f"key 'excitation' = {excitation!r}: expected Harmonics, RecordedMotion or BandLimitedNoise"
+        f"key 'excitation' = {excitation!r}: expected Harmonics, RecordedMotion, BandLimitedNoise or Chirp"
     )
 
 
@@ -357,6 +361,29 @@ def _noise_motion(exc: BandLimitedNoise, duration: float) -> GroundMotion:
         f"taper {exc.taper:g} s, {duration:g} s"
     )
     return _table_motion(acc, dt, exc.taper, description, duration, key="key 'excitation.taper'")
+
+
+def _chirp_motion(exc: Chirp, duration: float) -> GroundMotion:
+    if not _finite_positive(exc.amplitude):
+        raise ScenarioError(f"key 'excitation.amplitude' = {exc.amplitude!r}: expected a positive acceleration "
+                            f"amplitude (m/s^2)")
+    for key in ("f_start", "f_end"):
+        if not _finite_positive(getattr(exc, key)):
+            raise ScenarioError(f"key 'excitation.{key}' = {getattr(exc, key)!r}: expected a positive frequency (Hz)")
+    if exc.sweep not in ("linear", "log"):
+        raise ScenarioError(f"key 'excitation.sweep' = {exc.sweep!r}: expected 'linear' or 'log'")
+    f0, f1 = float(exc.f_start), float(exc.f_end)
+    n = 2 * int(math.ceil(0.5 * NOISE_POINTS_PER_PERIOD * max(f0, f1) * duration))
+    t = np.linspace(0.0, duration, n + 1)
+    if exc.sweep == "linear" or f0 == f1:
+        phase = 2 * np.pi * (f0 * t + 0.5 * (f1 - f0) * t ** 2 / duration)
+    else:
+        rate = math.log(f1 / f0) / duration
+        phase = 2 * np.pi * f0 * np.expm1(rate * t) / rate
+    acc = float(exc.amplitude) * np.sin(phase)
+    description = (f"chirp {exc.amplitude:g} m/s^2 from {f0:g} to {f1:g} Hz ({exc.sweep}), taper {exc.taper:g} s, "
+                   f"{duration:g} s")
+    return _table_motion(acc, duration / n, exc.taper, description, duration, key="key 'excitation.taper'")
 
 
 def _highpass(acc: np.ndarray, dt: float, corner: float) -> np.ndarray:

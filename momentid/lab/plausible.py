@@ -89,7 +89,7 @@ def check_structure(tab: Table, structure: Structure) -> None:
 
 def check_excitation(tab: Table, excitation, tracking) -> None:
     """Refuse an ``[excitation]`` whose amplitude, frequencies or scale lie outside the ranges
-    (``excitation``: Harmonics, BandLimitedNoise or RecordedMotion of :mod:`momentid.lab.scenario`)."""
+    (``excitation``: Harmonics, BandLimitedNoise, RecordedMotion or Chirp of :mod:`momentid.lab.scenario`)."""
     band = (0.0, FREQUENCY_RANGE[1])
     if hasattr(excitation, "amplitudes"):   # harmonics, given in rad/s or in Hz
         name = "amplitude" if tab.has("amplitude") else "amplitudes"
@@ -106,6 +106,11 @@ def check_excitation(tab: Table, excitation, tracking) -> None:
         _each(tab, "band", excitation.band, "a band edge", band, "Hz")
     if hasattr(excitation, "scale"):        # a record
         _each(tab, "scale", (excitation.scale,), "a record scale", (0.0, MAX_SCALE), "")
+    if hasattr(excitation, "sweep"):        # a chirp
+        _each(tab, "amplitude", (excitation.amplitude,), "a table acceleration amplitude", (0.0, MAX_ACCELERATION),
+              "m/s^2")
+        for name in ("f_start", "f_end"):
+            _each(tab, name, (getattr(excitation, name),), "a frequency", band, "Hz")
     if tracking is not None:
         _each(tab, "tracking_error", (tracking.error,), "a tracking error (share of the motion)", (0.0, MAX_SCALE), "")
         _each(tab, "tracking_band", tracking.band, "a band edge", band, "Hz")

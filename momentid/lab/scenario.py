@@ -29,6 +29,7 @@ __all__ = [
     "Harmonics",
     "RecordedMotion",
     "BandLimitedNoise",
+    "Chirp",
     "Excitation",
     "Run",
     "Instrument",
@@ -100,7 +101,20 @@ class BandLimitedNoise:
     taper: float = 1.0
 
 
-Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise]
+@dataclass(frozen=True)
+class Chirp:
+    """A swept sine of table acceleration: ``amplitude`` (m/s^2), its frequency swept from ``f_start``
+    to ``f_end`` (Hz) over the run, ``"linear"`` or ``"log"`` in time, with cosine tapers of ``taper``
+    (s) at both ends."""
+
+    amplitude: float
+    f_start: float
+    f_end: float
+    sweep: str = "linear"
+    taper: float = 1.0
+
+
+Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise, Chirp]
 
 
 @dataclass(frozen=True)
@@ -538,7 +552,7 @@ def _parse_structure(tab: Table) -> Structure:
 
 
 def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, Tracking | None]:
-    kind = tab.string("type", choices=("harmonic", "harmonics", "record", "noise"))
+    kind = tab.string("type", choices=("harmonic", "harmonics", "record", "noise", "chirp"))
     tracking = None
     if tab.has("tracking_error"):
         band = tab.numbers("tracking_band", (0.5, 20.0), length=2, positive=True)
@@ -572,6 +586,11 @@ def _parse_excitation(tab: Table, source: Path, seed: int) -> tuple[Excitation, 
             highpass=tab.number("highpass", 0.1, nonnegative=True),
             taper=tab.number("taper", 1.0, nonnegative=True),
         )
+    elif kind == "chirp":
+        exc = Chirp(amplitude=tab.number("amplitude", positive=True),
+                    f_start=tab.number("f_start", positive=True), f_end=tab.number("f_end", positive=True),
+                    sweep=tab.string("sweep", "linear", choices=("linear", "log")),
+                    taper=tab.number("taper", 1.0, nonnegative=True))
     else:
         band = tab.numbers("band", length=2, positive=True)
         if not band[0] < band[1]:

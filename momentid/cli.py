@@ -7,10 +7,7 @@ an interrupted run exits 130.  Run ``momentid COMMAND --help`` for details.
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import json
-import os
 import signal
 import sys
 import warnings
@@ -20,6 +17,7 @@ from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_in
 from momentid.core.series import json_safe
 from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
+from momentid.cli_output import only_json_on_stdout, output_folder, output_path, replaced
 from momentid.cli_values import finite_time, positive_float, positive_int, run_names
 
 __all__ = ["main", "only_json_on_stdout"]
@@ -35,65 +33,6 @@ _EPILOG = """examples:
   momentid diagnose lab.mcap -o report/               # locate a mismatch, name the missing physics
   momentid twin lab.mcap -o twin/                     # the calibrated MuJoCo twin of the rig
 """
-
-
-def _output_path(out: str | None, name: str) -> Path:
-    """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``."""
-    p = Path("out") / f"{name}.mcap" if out is None else Path(out)
-    if p.suffix != ".mcap":
-        p = _output_folder(out) / f"{name}.mcap"
-    if p.is_dir():
-        raise _OutputError(str(p), "a folder of that name exists; expected a .mcap file path")
-    return p
-
-
-def _replaced(out: Path, existed: bool) -> None:
-    """An existing recording at ``-o`` is replaced once written (it can be made again: the same
-    scenario and seed, the same lab folder), and said so."""
-    if existed:
-        print(f"note: {out}: an existing file, replaced by this recording", file=sys.stderr)
-
-
-class _OutputError(MomentidError):
-    def __init__(self, out: str, expected: str):
-        self.out = out
-        super().__init__(f"-o {out}: {expected}")
-
-
-def _output_folder(out: str) -> Path:
-    """``-o`` as a folder to write into: refused when a file stands there."""
-    p = Path(out)
-    if p.exists() and not p.is_dir():
-        raise _OutputError(out, "a file of that name exists; expected a folder (or a new path)")
-    return p
-
-
-@contextlib.contextmanager
-def only_json_on_stdout(active: bool):
-    """Context manager: with ``active`` (``--json``), stdout carries exactly one JSON object: anything
-    native code writes to file descriptor 1 (LAPACK's ``** On entry to ...`` lines, say) goes to
-    stderr instead; Python's ``print`` still reaches stdout.  Inactive, or when stdout is not file
-    descriptor 1 (captured), it changes nothing."""
-    try:
-        fd = sys.stdout.fileno() if active else -1
-    except (AttributeError, OSError, io.UnsupportedOperation):  # captured or replaced stdout
-        fd = -1
-    if fd != 1:
-        yield
-        return
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    old = sys.stdout
-    sys.stdout = io.TextIOWrapper(os.fdopen(os.dup(saved), "wb"), encoding="utf-8", line_buffering=True)
-    try:
-        yield
-    finally:
-        sys.stdout.flush()
-        sys.stdout.close()
-        sys.stdout = old
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
@@ -167,10 +106,10 @@ def _cmd_run(args) -> int:
     if unknown:   # before minutes of simulation, not after
         raise MomentidError(f"--runs {args.runs}: {path} has no run named {unknown[0]!r}; its runs are "
                             f"{', '.join(r.name for r in scenario.runs)}")
-    out = _output_path(args.output, scenario.name)
+    out = output_path(args.output, scenario.name)
     progress, existed = not args.quiet and sys.stderr.isatty(), out.exists()
     experiment = run_experiment(scenario, out, progress=progress, workers=args.workers)
-    _replaced(out, existed)
+    replaced(out, existed)
     if not args.json:
         print(f"scenario {scenario.name}: {len(experiment.runs)} runs x {scenario.duration:g} s at "
               f"{scenario.sample_rate:g} Hz -> {out}\n")
@@ -248,10 +187,10 @@ def _cmd_import(args) -> int:
     from momentid.io.importer import import_folder, report, summary, write_import
 
     experiment = import_folder(args.folder, relabel=not args.refuse_mislabelled)
-    out = _output_path(args.output, Path(args.folder).resolve().name)
+    out = output_path(args.output, Path(args.folder).resolve().name)
     existed = out.exists()
     out = write_import(experiment, out)
-    _replaced(out, existed)
+    replaced(out, existed)
     for line in report(experiment):
         print(line)
     print(summary(experiment, out))
@@ -304,7 +243,7 @@ def _cmd_diagnose(args) -> int:
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
-    out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
+    out = output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
     experiment = read_recording(args.recording)
     with exclusive(out):   # one writer per report folder, refused before minutes of work
         diag = diagnose(experiment, hold_out=args.hold_out)
@@ -322,7 +261,7 @@ def _cmd_twin(args) -> int:
     from momentid.io.recording import read_recording
     from momentid.twin import build_twin, write_twin
 
-    out = _output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
+    out = output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
     experiment = read_recording(args.recording)
     with exclusive(out):   # one writer per twin folder, refused before the twin is built
         twin = build_twin(experiment, args.runs.split(",") if args.runs else None)

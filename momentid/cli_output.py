@@ -1,0 +1,76 @@
+"""Where the ``momentid`` command writes: ``-o`` paths and folders, and a stdout kept to one JSON object.
+
+Used by :mod:`momentid.cli`; every refusal is an :class:`OutputError` (a
+:class:`~momentid.errors.MomentidError`) naming the ``-o`` value and what was expected.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+from pathlib import Path
+
+from momentid.errors import MomentidError
+
+__all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout"]
+
+
+def output_path(out: str | None, name: str) -> Path:
+    """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``."""
+    p = Path("out") / f"{name}.mcap" if out is None else Path(out)
+    if p.suffix != ".mcap":
+        p = output_folder(out) / f"{name}.mcap"
+    if p.is_dir():
+        raise OutputError(str(p), "a folder of that name exists; expected a .mcap file path")
+    return p
+
+
+def replaced(out: Path, existed: bool) -> None:
+    """An existing recording at ``-o`` is replaced once written (it can be made again: the same
+    scenario and seed, the same lab folder), and said so."""
+    if existed:
+        print(f"note: {out}: an existing file, replaced by this recording", file=sys.stderr)
+
+
+class OutputError(MomentidError):
+    def __init__(self, out: str, expected: str):
+        self.out = out
+        super().__init__(f"-o {out}: {expected}")
+
+
+def output_folder(out: str) -> Path:
+    """``-o`` as a folder to write into: refused when a file stands there."""
+    p = Path(out)
+    if p.exists() and not p.is_dir():
+        raise OutputError(out, "a file of that name exists; expected a folder (or a new path)")
+    return p
+
+
+@contextlib.contextmanager
+def only_json_on_stdout(active: bool):
+    """Context manager: with ``active`` (``--json``), stdout carries exactly one JSON object: anything
+    native code writes to file descriptor 1 (LAPACK's ``** On entry to ...`` lines, say) goes to
+    stderr instead; Python's ``print`` still reaches stdout.  Inactive, or when stdout is not file
+    descriptor 1 (captured), it changes nothing."""
+    try:
+        fd = sys.stdout.fileno() if active else -1
+    except (AttributeError, OSError, io.UnsupportedOperation):  # captured or replaced stdout
+        fd = -1
+    if fd != 1:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(1)
+    os.dup2(2, 1)
+    old = sys.stdout
+    sys.stdout = io.TextIOWrapper(os.fdopen(os.dup(saved), "wb"), encoding="utf-8", line_buffering=True)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        sys.stdout.close()
+        sys.stdout = old
+        os.dup2(saved, 1)
+        os.close(saved)

@@ -32,6 +32,7 @@ from momentid.errors import ModelError, SimulationError
 from momentid.lab import rig
 from momentid.mechanisms import registry
 from momentid.twin.parameters import tendon_layout
+from momentid.twin.spec import put_tendon
 
 __all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE"]
 
@@ -148,14 +149,7 @@ def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujo
                                   _STOREY_HEIGHT)
         changed[(lower, upper)] = replace(t, stiffness=k, damping=c)
     for t in tendons:
-        t = changed.get((t.lower, t.upper), t)
-        tendon = spec.add_tendon(name=t.name)
-        tendon.wrap_joint(f"q{t.upper}", 1.0)
-        if t.lower > 0:
-            tendon.wrap_joint(f"q{t.lower}", -1.0)
-        tendon.stiffness = [t.stiffness, 0.0, 0.0]
-        tendon.damping = [t.damping, 0.0, 0.0]
-        tendon.springlength = [0.0, 0.0]
+        put_tendon(spec, changed.get((t.lower, t.upper), t))
     rig.add_storey_elements(spec, model.friction, [base] + floors, timestep)
     spec.add_actuator(name="table", target="base_x", trntype=mujoco.mjtTrn.mjTRN_JOINT,
                       dyntype=mujoco.mjtDyn.mjDYN_INTEGRATOR, gear=[table.armature + base.mass, 0, 0, 0, 0, 0],

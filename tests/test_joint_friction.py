@@ -125,3 +125,33 @@ def test_fit_twin_recovers_a_linear_rig():
     assert fit.nrmse["t"] < 1e-3, fit.nrmse
     assert np.allclose(fit.model.stiffness, K3, rtol=2e-3, atol=0.5)
     assert np.allclose(fit.model.offset, truth.offset, atol=5e-5)
+
+
+def test_sensor_columns_of_the_fit_are_the_residual_derivatives():
+    model = resim.RigModel(MASSES, K3, ZETA, gain=np.array([1.0, 1.02, 0.97]), offset=np.array([0.0, 1e-3, -2e-3]))
+    zdd = _table(4.0, 1.0, seed=5)
+    a = resim.simulate(resim.compile_models([model], 0.5 / FS), zdd, 1.0 / FS)[0]
+    tr = twin_fit.Trial("t", zdd, mc.sensors(a, np.ones(3), np.zeros(3), 1.0 / FS), 1.0 / FS, 40, zdd.size, 3.0)
+    J = twin_fit.sensor_jacobian(model, a, tr)
+
+    def residual(gain, offset):
+        read = mc.sensors(a, gain, offset, tr.dt)
+        return ((tr.a[tr.start:] - read[tr.start:]) / tr.norm).ravel()
+
+    base = residual(model.gain, model.offset)
+    for j in range(3):
+        h = 1e-6                      # central differences: their error (h^2 x third derivative) is ~1e-12
+        g = np.log(model.gain)
+        gp, gm = g.copy(), g.copy()
+        gp[j] += h
+        gm[j] -= h
+        fd = (residual(np.exp(gp), model.offset) - residual(np.exp(gm), model.offset)) / (2 * h)
+        # exact against central differences: agreement to 1e-6 of the column's size (round-off of the FFTs)
+        assert np.allclose(J[:, j], fd, atol=1e-6 * np.max(np.abs(fd))), j
+        h = 1e-7                      # s: a tenth of a microsecond, 1e-5 of a sample
+        op, om = model.offset.copy(), model.offset.copy()
+        op[j] += h
+        om[j] -= h
+        fd = (residual(model.gain, op) - residual(model.gain, om)) / (2 * h)
+        assert np.allclose(J[:, 3 + j], fd, atol=1e-5 * np.max(np.abs(fd))), j
+    assert base.size == J.shape[0]

@@ -6,8 +6,8 @@ output error: every training trial is re-simulated through MuJoCo under its reco
 acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
 that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
 parameter set explains them all).  The optimiser is scipy's trust-region least squares; the Jacobian's
-physical columns are forward differences, all re-simulated in one batched rollout per trial
-(:func:`~momentid.lab.resim.simulate`); the sensors' columns need no re-simulation.
+physical columns are forward differences, all compiled once and re-simulated in one batched rollout per
+trial (:func:`~momentid.lab.resim.simulate`); the sensors' columns are exact (no re-simulation).
 
 Every NRMSE is :func:`~momentid.diagnosis.modal_check.nrmse` over the floor channels after the trial's
 quiet lead-in.  A trial's low-energy tail (after :data:`FIT_ENERGY` of its floor signal's energy) is not
@@ -26,9 +26,11 @@ from momentid.diagnosis import modal_check as mc
 from momentid.errors import IdentificationError, MomentidError
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
+from momentid.mechanisms import registry
+from momentid.twin.parameters import pair_coefficient
 
-__all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "FIT_ENERGY", "friction_start",
-           "twin_modes"]
+__all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "sensor_jacobian", "FIT_ENERGY", "friction_start",
+           "twin_modes", "joint_tendon_stiffness"]
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
@@ -178,31 +180,73 @@ def _valid(model: resim.RigModel) -> bool:
     K = np.asarray(model.stiffness)
     if np.any(np.linalg.eigvalsh(K) <= 0):
         return False
-    return all(dict(m.parameters)["stiffness"] < _storey_stiffness(K, m.location) for m in model.friction)
+    return all(dict(m.parameters)["stiffness"] < joint_tendon_stiffness(K, m) for m in model.friction)
 
 
-def _storey_stiffness(K: np.ndarray, s: int) -> float:
-    """The stiffness of storey ``s``'s tendon in K (``storey<s>`` of :func:`momentid.twin.parameters.tendon_layout`)."""
-    return float(np.sum(K[0])) if s == 1 else float(-K[s - 2, s - 1])
+def joint_tendon_stiffness(K: np.ndarray, mech) -> float:
+    """The stiffness (N/m) of the tendon in K between the two levels a joint mechanism ``mech`` acts across
+    (its kind's :class:`~momentid.mechanisms.place.Place` ``nodes``; the tendons of
+    :func:`momentid.twin.parameters.tendon_layout`)."""
+    nodes = registry.get(mech.type).place(mech.location).nodes
+    return pair_coefficient(K, *nodes)
 
 
-def _simulate(models, tr: Trial, whole: bool, substeps: int) -> np.ndarray:
+def _simulate(models, tr: Trial, whole: bool, substeps: int, compiled=None) -> np.ndarray:
     """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
     floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
-    its last :data:`LEAD_IN_MARGIN` seconds."""
+    its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step."""
     stop = len(tr.zdd) if whole else tr.fit_stop
     first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
-    compiled = resim.compile_models(models, tr.dt / substeps)
+    compiled = resim.compile_models(models, tr.dt / substeps) if compiled is None else compiled
     out = np.empty((len(compiled), stop, tr.a.shape[1]))
     out[:, :first] = tr.zdd[None, :first, None]
     out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps)
     return out
 
 
+def _compiled_by_step(models, trials, substeps: int) -> dict:
+    """``models`` compiled once per distinct sample interval of ``trials`` (the trials of one recording
+    share it): ``{dt: [MjModel]}``."""
+    return {dt: resim.compile_models(models, dt / substeps) for dt in {t.dt for t in trials}}
+
+
 def _residual(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
     read = mc.sensors(a, model.gain, model.offset, tr.dt)
     stop = a.shape[0]
     return ((tr.a[tr.start:stop] - read[tr.start:stop]) / tr.norm).ravel()
+
+
+def sensor_jacobian(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
+    """Exact derivatives of the fit's residual on ``tr`` with respect to the sensors' log-gains and clock
+    offsets: a reading ``g_j a_j(t - tau_j)`` changes by itself per unit of ``log g_j`` and by minus its
+    time derivative (taken in the frequency domain, as the delay is) per second of ``tau_j``.
+
+    Parameters
+    ----------
+    model : RigModel
+        Its ``gain`` and ``offset`` (s) are the sensors'.
+    a : ndarray, shape (stop, d)
+        The model's floor accelerations (m/s^2) on ``tr`` as ideal sensors read them.
+    tr : Trial
+
+    Returns
+    -------
+    ndarray, shape ((stop - tr.start) * d, 2 d)
+        Rows as the residual's (time-major, then channel); columns: the d log-gains, then the d offsets
+        (residual per second).
+    """
+    d, stop = a.shape[1], a.shape[0]
+    n = a.shape[0]
+    w = 2 * np.pi * np.fft.rfftfreq(2 * n, tr.dt)[:, None]
+    spectrum = np.fft.rfft(a, 2 * n, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
+    read = np.fft.irfft(spectrum, 2 * n, axis=0)[:n]                 # mc.sensors(a, gain, offset, dt)
+    rate = np.fft.irfft(1j * w * spectrum, 2 * n, axis=0)[:n]        # its time derivative
+    rows = stop - tr.start
+    J = np.zeros((rows, d, 2 * d))
+    for j in range(d):
+        J[:, j, j] = -read[tr.start:stop, j] / tr.norm
+        J[:, j, d + j] = rate[tr.start:stop, j] / tr.norm
+    return J.reshape(rows * d, 2 * d)
 
 
 class _Problem:
@@ -218,8 +262,11 @@ class _Problem:
         key = theta.tobytes()
         if key != self.cache_key:
             model = self.layout.unpack(theta)
-            self.cache = None if not _valid(model) else [_simulate([model], t, False, self.substeps)[0]
-                                                         for t in self.trials]
+            if _valid(model):
+                compiled = _compiled_by_step([model], self.trials, self.substeps)
+                self.cache = [_simulate([model], t, False, self.substeps, compiled[t.dt])[0] for t in self.trials]
+            else:
+                self.cache = None
             self.cache_key = key
             self.nsim += 1
         return self.cache
@@ -241,7 +288,7 @@ class _Problem:
         lo, hi = self.layout.bounds()
         steps = np.empty(n)
         perturbed = []
-        for i in range(n):
+        for i in range(self.layout.n_phys):
             h = DIFF_STEP * self.layout.scale[i]
             if theta[i] + h > hi[i]:
                 h = -h
@@ -251,21 +298,20 @@ class _Problem:
             perturbed.append(t)
         phys = [self.layout.unpack(perturbed[i]) for i in range(self.layout.n_phys)]
         ok = [_valid(m) for m in phys]
-        runs = [_simulate([m for m, v in zip(phys, ok) if v], t, False, self.substeps) if any(ok) else None
-                for t in self.trials]
+        valid = [m for m, v in zip(phys, ok) if v]
+        compiled = _compiled_by_step(valid, self.trials, self.substeps) if valid else {}
+        runs = [_simulate(valid, t, False, self.substeps, compiled[t.dt]) if valid else None for t in self.trials]
+        model = self.layout.unpack(theta)
         row = 0
         for k, t in enumerate(self.trials):
             size = self.sizes[k]
             column = 0
-            for i in range(n):
-                if i < self.layout.n_phys:
-                    if not ok[i]:
-                        continue
-                    model, a = phys[i], runs[k][column]
-                    column += 1
-                else:
-                    model, a = self.layout.unpack(perturbed[i]), sims[k]
-                J[row:row + size, i] = (_residual(model, a, t) - base[row:row + size]) / steps[i]
+            for i in range(self.layout.n_phys):
+                if not ok[i]:
+                    continue
+                J[row:row + size, i] = (_residual(phys[i], runs[k][column], t) - base[row:row + size]) / steps[i]
+                column += 1
+            J[row:row + size, self.layout.n_phys:] = sensor_jacobian(model, sims[k], t)
             row += size
         self.nsim += 1
         return J
@@ -332,8 +378,10 @@ def friction_start(linear: resim.RigModel, storeys, loss: float, slip_drift: flo
     lowered by :data:`START_DAMPING_SHARE` (the friction dissipates the rest)."""
     K = np.asarray(linear.stiffness)
     share = jf.lost_fraction(REFERENCE_DRIFT, slip_drift, exponent)
-    params = [{"stiffness": loss * _storey_stiffness(K, s) / share, "slip_drift": slip_drift, "exponent": exponent}
-              for s in storeys]
+    unit = resim.friction_records(storeys, [{"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}]
+                                  * len(storeys))
+    params = [{"stiffness": loss * joint_tendon_stiffness(K, m) / share, "slip_drift": slip_drift, "exponent": exponent}
+              for m in unit]
     if any(p["stiffness"] <= 0 for p in params):
         raise MomentidError(f"storeys {list(storeys)} of stiffness {K.tolist()}: a storey with no positive stiffness "
                             f"cannot carry joint friction")

@@ -23,7 +23,7 @@ import numpy as np
 from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
 
-__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "from_identification",
+__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient", "from_identification",
            "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
 
 #: Storey height (m) drawn when neither the recording's model nor the lab states one (drawing only).
@@ -168,7 +168,7 @@ class Tendon:
     damping: float
 
 
-def _pair_coefficient(X: np.ndarray, lower: int, upper: int) -> float:
+def pair_coefficient(X: np.ndarray, lower: int, upper: int) -> float:
     """The tendon coefficient between levels ``lower < upper`` that puts ``X`` together exactly."""
     if lower == 0:
         return float(np.sum(X[upper - 1]))
@@ -192,11 +192,11 @@ def tendon_layout(K: np.ndarray, C: np.ndarray) -> tuple:
         Storeys first (1..d), then links by lower level, upper level.
     """
     d = K.shape[0]
-    out = [Tendon(f"storey{j}", j - 1, j, _pair_coefficient(K, j - 1, j), _pair_coefficient(C, j - 1, j))
+    out = [Tendon(f"storey{j}", j - 1, j, pair_coefficient(K, j - 1, j), pair_coefficient(C, j - 1, j))
            for j in range(1, d + 1)]
     for i in range(d + 1):
         for j in range(i + 2, d + 1):
-            k, c = _pair_coefficient(K, i, j), _pair_coefficient(C, i, j)
+            k, c = pair_coefficient(K, i, j), pair_coefficient(C, i, j)
             if k != 0.0 or c != 0.0:
                 out.append(Tendon(f"link{i}_{j}", i, j, k, c))
     return tuple(out)

@@ -16,6 +16,8 @@ re-simulated while fitting; held-out trials are always simulated whole.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -30,7 +32,7 @@ from momentid.mechanisms import registry
 from momentid.twin.parameters import pair_coefficient
 
 __all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "sensor_jacobian", "FIT_ENERGY", "friction_start",
-           "twin_modes", "joint_tendon_stiffness"]
+           "twin_modes", "joint_tendon_stiffness", "workers", "each"]
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
@@ -191,7 +193,22 @@ def joint_tendon_stiffness(K: np.ndarray, mech) -> float:
     return pair_coefficient(K, *nodes)
 
 
-def _simulate(models, tr: Trial, whole: bool, substeps: int, compiled=None) -> np.ndarray:
+def workers() -> int:
+    """Threads the fits run side by side (:data:`~momentid.lab.resim.ROLLOUT_THREADS`, else one per core):
+    MuJoCo's rollout releases the GIL, so trials and fits simulated on threads share the cores."""
+    return max(1, resim.ROLLOUT_THREADS or os.cpu_count() or 1)
+
+
+def each(fn, items) -> list:
+    """``[fn(x) for x in items]``, on up to :func:`workers` threads (results in ``items``' order)."""
+    items = list(items)
+    if len(items) < 2 or workers() < 2:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(min(workers(), len(items))) as pool:
+        return list(pool.map(fn, items))
+
+
+def _simulate(models, tr: Trial, whole: bool, substeps: int, compiled=None, threads: int | None = None) -> np.ndarray:
     """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
     floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
     its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step."""
@@ -200,7 +217,7 @@ def _simulate(models, tr: Trial, whole: bool, substeps: int, compiled=None) -> n
     compiled = resim.compile_models(models, tr.dt / substeps) if compiled is None else compiled
     out = np.empty((len(compiled), stop, tr.a.shape[1]))
     out[:, :first] = tr.zdd[None, :first, None]
-    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps)
+    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps, threads=threads)
     return out
 
 
@@ -252,11 +269,17 @@ def sensor_jacobian(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarr
 class _Problem:
     """Residual and Jacobian of the output-error fit, sharing the simulations of the current point."""
 
-    def __init__(self, layout: _Layout, trials, substeps: int):
+    def __init__(self, layout: _Layout, trials, substeps: int, max_nfev: int):
         self.layout, self.trials, self.substeps = layout, tuple(trials), substeps
         self.sizes = [(t.fit_stop - t.start) * layout.d for t in self.trials]
         self.cache_key, self.cache = None, None
         self.nsim = 0
+        self.max_nfev, self.nfev, self.last_jacobian = max_nfev, 0, None
+
+    def evaluate(self, theta):
+        """The residual as the optimiser asks for it (counted against ``max_nfev``)."""
+        self.nfev += 1
+        return self.residual(theta)
 
     def sims(self, theta):
         key = theta.tobytes()
@@ -264,7 +287,8 @@ class _Problem:
             model = self.layout.unpack(theta)
             if _valid(model):
                 compiled = _compiled_by_step([model], self.trials, self.substeps)
-                self.cache = [_simulate([model], t, False, self.substeps, compiled[t.dt])[0] for t in self.trials]
+                self.cache = each(lambda t: _simulate([model], t, False, self.substeps, compiled[t.dt], threads=1)[0],
+                                  self.trials)
             else:
                 self.cache = None
             self.cache_key = key
@@ -279,6 +303,14 @@ class _Problem:
         return np.concatenate([_residual(model, a, t) for a, t in zip(sims, self.trials)])
 
     def jacobian(self, theta):
+        if self.nfev >= self.max_nfev and self.last_jacobian is not None:
+            # scipy's trust-region loop takes the Jacobian of its last accepted point even when its
+            # evaluations are spent and it stops without using it: re-simulating it would be wasted
+            return self.last_jacobian
+        self.last_jacobian = self._jacobian(theta)
+        return self.last_jacobian
+
+    def _jacobian(self, theta):
         base = self.residual(theta)
         sims = self.sims(theta)
         n = theta.size
@@ -337,14 +369,14 @@ def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PE
         raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
                                   f"or a joint stiffer than its storey: {start.to_dict()}")
     layout = _Layout(start, tuple(m.location for m in start.friction))
-    problem = _Problem(layout, trials, substeps)
+    problem = _Problem(layout, trials, substeps, max_nfev)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
-    result = scipy.optimize.least_squares(problem.residual, theta0, jac=problem.jacobian, bounds=(lo, hi),
+    result = scipy.optimize.least_squares(problem.evaluate, theta0, jac=problem.jacobian, bounds=(lo, hi),
                                           method="trf", x_scale="jac", max_nfev=max_nfev, ftol=1e-6, xtol=1e-8)
     model = layout.unpack(result.x)
     return FitResult(model=model, trials=tuple(t.name for t in trials),
-                     nrmse={t.name: nrmse(model, t, substeps) for t in trials},
+                     nrmse=dict(zip([t.name for t in trials], each(lambda t: nrmse(model, t, substeps), trials))),
                      cost=float(2 * result.cost), nfev=int(problem.nsim))
 
 

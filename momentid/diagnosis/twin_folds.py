@@ -113,13 +113,19 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int = res
     quietest = min(training, key=lambda n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))))
     start = linear_start(experiment, quietest) if start is None else start
     linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
-    augmented = None
-    for loss, slip, chi in starts:
-        guess = twin_fit.friction_start(linear.model, tuple(range(1, d + 1)), loss, slip, chi)
-        fit = twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev)
-        if augmented is None or fit.cost < augmented.cost:
-            augmented = fit
-    own = twin_fit.fit_twin([trials[held]], linear.model, substeps=substeps, max_nfev=max_nfev)
+
+    def augmented_fit(guess):
+        return twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev)
+
+    def own_fit(model):
+        return twin_fit.fit_twin([trials[held]], model, substeps=substeps, max_nfev=max_nfev)
+
+    # the held-out trial's own fit runs beside the augmented fits (threads: MuJoCo releases the GIL), filling
+    # the cores while the augmented fit's single rollouts and Python run; each fit is the same on its own
+    guesses = [twin_fit.friction_start(linear.model, tuple(range(1, d + 1)), loss, slip, chi)
+               for loss, slip, chi in starts]
+    fits = twin_fit.each(lambda job: job[0](job[1]), [(own_fit, linear.model)] + [(augmented_fit, g) for g in guesses])
+    own, augmented = fits[0], min(fits[1:], key=lambda fit: fit.cost)
     tr = trials[held]
     omega, zeta, residues = twin_fit.twin_modes(own.model)
     noise = mc.noise_nrmse(omega, zeta, residues, own.model.gain, experiment.run(held), experiment)

@@ -155,3 +155,10 @@ def test_sensor_columns_of_the_fit_are_the_residual_derivatives():
         fd = (residual(model.gain, op) - residual(model.gain, om)) / (2 * h)
         assert np.allclose(J[:, 3 + j], fd, atol=1e-5 * np.max(np.abs(fd))), j
     assert base.size == J.shape[0]
+
+
+@pytest.mark.parametrize("rate, steps", [(60.0, 4), (100.0, 3), (120.0, 2), (200.0, 2), (240.0, 1), (1000.0, 1)])
+def test_the_twin_fit_steps_within_the_sliders_tested_step_at_any_rate(rate, steps):
+    # the fewest steps per sample that keep the step within MAX_TIMESTEP (1/240 s)
+    assert resim.substeps_for(1.0 / rate) == steps
+    assert 1.0 / rate / steps <= jf.MAX_TIMESTEP * (1 + 1e-12)

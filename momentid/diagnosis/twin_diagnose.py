@@ -159,7 +159,7 @@ def _linear_twin(experiment: Experiment, training):
 
 def _xml(model: resim.RigModel, dt: float) -> str:
     """The MJCF of a re-simulated twin at the fits' step (loads in stock MuJoCo)."""
-    return resim.build_spec(model, dt / resim.TIMESTEP_PER_SAMPLE).to_xml()
+    return resim.build_spec(model, dt / resim.substeps_for(dt)).to_xml()
 
 
 def _verdict(before: float, fold) -> Verdict:

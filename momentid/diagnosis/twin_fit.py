@@ -208,10 +208,17 @@ def each(fn, items) -> list:
         return list(pool.map(fn, items))
 
 
-def _simulate(models, tr: Trial, whole: bool, substeps: int, compiled=None, threads: int | None = None) -> np.ndarray:
+def _steps(substeps: int | None, dt: float) -> int:
+    """Integrator steps per sample: ``substeps``, else :func:`~momentid.lab.resim.substeps_for` of ``dt``."""
+    return resim.substeps_for(dt) if substeps is None else int(substeps)
+
+
+def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=None,
+              threads: int | None = None) -> np.ndarray:
     """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
     floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
     its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step."""
+    substeps = _steps(substeps, tr.dt)
     stop = len(tr.zdd) if whole else tr.fit_stop
     first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
     compiled = resim.compile_models(models, tr.dt / substeps) if compiled is None else compiled
@@ -221,10 +228,10 @@ def _simulate(models, tr: Trial, whole: bool, substeps: int, compiled=None, thre
     return out
 
 
-def _compiled_by_step(models, trials, substeps: int) -> dict:
+def _compiled_by_step(models, trials, substeps: int | None) -> dict:
     """``models`` compiled once per distinct sample interval of ``trials`` (the trials of one recording
     share it): ``{dt: [MjModel]}``."""
-    return {dt: resim.compile_models(models, dt / substeps) for dt in {t.dt for t in trials}}
+    return {dt: resim.compile_models(models, dt / _steps(substeps, dt)) for dt in {t.dt for t in trials}}
 
 
 def _residual(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
@@ -269,7 +276,7 @@ def sensor_jacobian(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarr
 class _Problem:
     """Residual and Jacobian of the output-error fit, sharing the simulations of the current point."""
 
-    def __init__(self, layout: _Layout, trials, substeps: int, max_nfev: int):
+    def __init__(self, layout: _Layout, trials, substeps: int | None, max_nfev: int):
         self.layout, self.trials, self.substeps = layout, tuple(trials), substeps
         self.sizes = [(t.fit_stop - t.start) * layout.d for t in self.trials]
         self.cache_key, self.cache = None, None
@@ -349,7 +356,7 @@ class _Problem:
         return J
 
 
-def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PER_SAMPLE,
+def fit_twin(trials, start: resim.RigModel, *, substeps: int | None = None,
              max_nfev: int = MAX_NFEV) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
@@ -380,13 +387,13 @@ def fit_twin(trials, start: resim.RigModel, *, substeps: int = resim.TIMESTEP_PE
                      cost=float(2 * result.cost), nfev=int(problem.nsim))
 
 
-def predict(model: resim.RigModel, tr: Trial, substeps: int = resim.TIMESTEP_PER_SAMPLE) -> np.ndarray:
+def predict(model: resim.RigModel, tr: Trial, substeps: int | None = None) -> np.ndarray:
     """``model``'s floor accelerations (n, d) on the whole of ``tr``, as its sensors read them."""
     a = _simulate([model], tr, True, substeps)[0]
     return mc.sensors(a, model.gain, model.offset, tr.dt)
 
 
-def nrmse(model: resim.RigModel, tr: Trial, substeps: int = resim.TIMESTEP_PER_SAMPLE) -> float:
+def nrmse(model: resim.RigModel, tr: Trial, substeps: int | None = None) -> float:
     """Held-out NRMSE of ``model`` on the whole of ``tr`` (floor channels, after the lead-in)."""
     return mc.nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:])
 

@@ -90,7 +90,7 @@ def linear_start(experiment: Experiment, names) -> resim.RigModel:
     return resim.RigModel(np.asarray(ident.masses, float), ident.K, np.clip(ident.damping_ratio, 1e-4, None))
 
 
-def hold_out(experiment: Experiment, held: str, training, *, substeps: int = resim.TIMESTEP_PER_SAMPLE,
+def hold_out(experiment: Experiment, held: str, training, *, substeps: int | None = None,
              max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
              starts=FRICTION_STARTS, start: resim.RigModel | None = None) -> Fold:
     """Fit the linear and the augmented twin on ``training`` and check them on ``held`` (module docstring).
@@ -138,7 +138,7 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int = res
                 seconds=time.perf_counter() - began, cpu_seconds=time.process_time() - cpu)
 
 
-def _simulated_experiment(experiment: Experiment, model: resim.RigModel, names, substeps: int) -> Experiment:
+def _simulated_experiment(experiment: Experiment, model: resim.RigModel, names, substeps: int | None) -> Experiment:
     """``experiment``'s runs ``names`` with their floor channels replaced by ``model``'s simulation, read by its
     sensors, plus white noise at each channel's measured level (the identification needs a noise floor)."""
     rng = np.random.default_rng(NOISE_SEED)
@@ -157,7 +157,7 @@ def _simulated_experiment(experiment: Experiment, model: resim.RigModel, names, 
 
 
 def amplitude_trend(experiment: Experiment, model: resim.RigModel, names,
-                    substeps: int = resim.TIMESTEP_PER_SAMPLE):
+                    substeps: int | None = None):
     """Mode 1 against the response amplitude, as the twin ``model`` predicts it on the runs ``names``.
 
     Returns

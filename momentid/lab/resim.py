@@ -20,6 +20,7 @@ samples, as ideal sensors read them (the sensors' gains and clock offsets are ap
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field, replace
 
@@ -34,9 +35,11 @@ from momentid.mechanisms import registry
 from momentid.twin.parameters import tendon_layout
 from momentid.twin.spec import put_tendon
 
-__all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE"]
+__all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE",
+           "substeps_for"]
 
-#: Integrator steps per recorded sample (a 120 Hz recording: 4.2 ms steps, within joint_friction.MAX_TIMESTEP).
+#: Integrator steps per recorded sample of a 120 Hz recording (4.2 ms steps, within
+#: joint_friction.MAX_TIMESTEP); :func:`substeps_for` gives any rate's.
 TIMESTEP_PER_SAMPLE = 2
 #: Rollout threads when a call does not say (None: one per core); a caller running several fits side by
 #: side on forked processes sets it to 1.
@@ -166,6 +169,15 @@ def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujo
 def compile_models(models, timestep: float) -> list:
     """Compiled ``mujoco.MjModel`` of each :class:`RigModel` (all of one layout: same friction storeys)."""
     return [rig.compile_model(build_spec(m, timestep)) for m in models]
+
+
+def substeps_for(dt: float) -> int:
+    """Integrator steps per sample interval ``dt`` (s): the fewest that keep the step within
+    :data:`momentid.mechanisms.joint_friction.MAX_TIMESTEP` (the step the joints' sliders are tested at):
+    2 at 120 and 200 Hz, 3 at 100 Hz, 4 at 60 Hz, 1 from 240 Hz."""
+    from momentid.mechanisms.joint_friction import MAX_TIMESTEP
+
+    return max(1, math.ceil(dt / MAX_TIMESTEP - 1e-9))
 
 
 def simulate(models, zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SAMPLE,

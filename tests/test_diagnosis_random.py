@@ -53,8 +53,9 @@ def test_other_classes_are_judged_by_their_numbers():
 
 
 #: Cases of the committed table diagnosed blind again (about a minute each on 2 cores): a gap brace the
-#: library took for cubic stiffness, a one-sided stop once taken for a two-sided gap.
-SLOW_CASES = [("gap_brace", 0), ("stop", 9)]
+#: library took for cubic stiffness, a one-sided stop once taken for a two-sided gap, a stiffness loss
+#: whose linear refit diverged on the held-out run (the diagnosis stopped with an error).
+SLOW_CASES = [("gap_brace", 0), ("stop", 9), ("stiffness_change", 7)]
 
 
 @pytest.mark.slow

@@ -283,18 +283,24 @@ def _quadrature(sim_std: dict, std: dict) -> dict:
     return {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
 
 
-def _joint(stages: Stages, entries, stds, *, newcomer: bool):
+def _joint(stages: Stages, entries, stds, *, newcomer: bool, every: bool = False):
     """The joint model of ``entries`` (:class:`Entry` each): the linear part refitted with every
     force, and sizes searched by re-simulation with the others in the model.
 
     With ``newcomer``, the last entry is new: it starts from the joint regression and only its size
-    is searched (over the full range); without, every size but the last is searched again around its
-    value (``JOINT_SPAN``: one pass of coordinate descent after a newcomer joined).
+    is searched (over the full range); without, every size but the last (with ``every``, every size)
+    is searched again around its value (``JOINT_SPAN``: one pass of coordinate descent after a
+    newcomer joined, or after a mechanism left).  A newcomer whose size is not searched (a dashpot
+    read from the damping pattern) has the others' sizes searched again beside it instead: they were
+    sized without it and took in what it does (a friction grown by the damper's dissipation).
     Returns (structure, entries, stds), or None when a size comes out unphysical.
     """
     refitter, model = stages.refitter, stages.model
     entries, stds = list(entries), [dict(s) for s in stds]
     last = len(entries) - 1
+    searched = set(range(len(entries) if every else last))
+    if newcomer and entries[last].kind.refit is Refit.RESIMULATE:
+        searched = {last}
     forces = [i for i, e in enumerate(entries) if e.kind.refit is Refit.RESIMULATE]
     result, structure = model.result, refitter.linear_structure
     refit = _refitted(stages, entries)
@@ -302,7 +308,7 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
         result = refit.result
         structure = identified_structure(result, model.nominal)
         for i, p, s in zip(forces, refit.parameters, refit.std):
-            if (i == last) == newcomer:   # to be searched: the refit's std, in quadrature below
+            if i in searched:             # to be searched: the refit's std, in quadrature below
                 stds[i] = dict(s)
             if newcomer and i == last:    # the newcomer starts from the joint regression
                 entries[i] = entries[i]._replace(parameters=p)
@@ -316,10 +322,10 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
     if model.nominal is not None:
         structure = min((structure, model.nominal), key=lambda b: refitter.misfit(b, entries))
     for i in forces:
-        if (i == last) != newcomer:
+        if i not in searched:
             continue
         params, sim_std = refitter.resimulate(structure, entries[i], entries[:i] + entries[i + 1:],
-                                              SEARCH_RANGE if newcomer else JOINT_SPAN)
+                                              SEARCH_RANGE if i == last and newcomer else JOINT_SPAN)
         entries[i] = entries[i]._replace(parameters=params)
         stds[i] = _quadrature(sim_std, stds[i])
     return structure, entries, stds
@@ -353,17 +359,20 @@ def _descend(stages: Stages, entries, stds):
 
 
 class _How(enum.Enum):
-    """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`)."""
+    """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`);
+    or a mechanism re-tested: the joint model of the others, every size searched again (``WITHOUT``)."""
 
     JOINT = "joint"
     DESCENT = "descent"
+    WITHOUT = "without"
 
 
 @dataclass(frozen=True)
 class _Task:
-    """One trial of a step: a newcomer ``candidate`` beside the mechanisms found, and how it is sized."""
+    """One trial of a step: a newcomer ``candidate`` beside the mechanisms found, and how it is sized
+    (``WITHOUT``: ``entries`` are the mechanisms found but one, and ``candidate`` is None)."""
 
-    candidate: Candidate
+    candidate: Candidate | None
     how: _How
     entries: tuple[Entry, ...]
     stds: tuple[dict, ...]
@@ -385,8 +394,11 @@ class _Trial:
 
 def _trial(stages: Stages, task: _Task) -> _Trial:
     """One trial (runs in a worker process: its results come back as this value)."""
-    sized = (_joint(stages, task.entries, task.stds, newcomer=True) if task.how is _How.JOINT
-             else _descend(stages, task.entries, task.stds))
+    if task.how is _How.DESCENT:
+        sized = _descend(stages, task.entries, task.stds)
+    else:
+        sized = _joint(stages, task.entries, task.stds, newcomer=task.how is _How.JOINT,
+                       every=task.how is _How.WITHOUT)
     forces = tuple(_forces(stages, task.entries))
     refit = stages.refitter.refit_forces(forces) if forces else None
     if sized is None:
@@ -411,11 +423,7 @@ def _physics(stages: Stages, start: _Start) -> Compound:
             tasks.append(_Task(c, _How.JOINT, *trial))
             if partial and len(entries) == 1 and c.kind.refit is Refit.RESIMULATE:
                 tasks.append(_Task(c, _How.DESCENT, *trial))
-        trials = run_forked(lambda task: _trial(stages, task), tasks)
-        for t in trials:
-            if t.forces:
-                refitter.remember_refit(t.forces, t.refit)
-        trials = [t for t in trials if t.score is not None]
+        trials = [t for t in _run(stages, tasks) if t.score is not None]
         if not trials:
             break
         best = min(trials, key=lambda t: t.score)
@@ -429,12 +437,15 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     if len(entries) == 1:   # stage 6's answer stands
         return replace(_single(replace(found, selection=replace(found.selection, steps=steps))), steps=steps,
                        score=score)
-    if any(e.kind.refit is Refit.RESIMULATE for e in entries[:-1]):
-        # the earlier sizes were searched before the last mechanism came in: refine them with it
+    if any(e.kind.refit is Refit.RESIMULATE for e in entries[:-1]) and entries[-1].kind.refit is Refit.RESIMULATE:
+        # the earlier sizes were searched before the last mechanism came in: refine them with it (a
+        # dashpot's trial did, :func:`_joint`)
         joint = _joint(stages, entries, stds, newcomer=False)
         if joint is not None:
             structure, entries, stds = joint
             score = refitter.score_joint(structure, entries, records(entries))
+    structure, entries, stds, score, retests = _retest(stages, structure, entries, stds, score)
+    steps += retests
     overall = explained_share(linear, score, noise)
     selection = replace(found.selection, steps=steps, joint=score, joint_explained=overall)
     if found.verdict is Verdict.UNEXPLAINED and overall < ACCEPTED:   # together still too little: unexplained
@@ -444,6 +455,45 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     finding = Finding(Verdict.MECHANISM, first.kind, first.place, named[0].location, named[0].parameters,
                       named[0].std, structure, records(entries), selection)
     return Compound(finding, named, tuple(entries), steps, score)
+
+
+def _run(stages: Stages, tasks) -> list[_Trial]:
+    """The trials of ``tasks``, on the worker processes; their refits recorded by the refitter."""
+    trials = run_forked(lambda task: _trial(stages, task), tasks)
+    for t in trials:
+        if t.forces:
+            stages.refitter.remember_refit(t.forces, t.refit)
+    return trials
+
+
+def _retest(stages: Stages, structure, entries, stds, score):
+    """Every mechanism named is tested again by the rule it joined by, now that the others are in the
+    model: the model without it (the linear part refitted with the other forces, their sizes searched
+    again) must leave at least ``EARNS`` more misfit above noise than the model with it.  The one that
+    earns least is dropped.  The others are tested again only when more than one did not earn (each
+    was tested beside the other); one that did earn beside a mechanism that adds less than ``EARNS``
+    keeps its verdict.
+
+    (A mechanism found first may hold what a later one does: a friction's dissipation taken in by a
+    storey damper before the friction joined.)  The last to join earned its place beside all the
+    others and is not tested again until one leaves.  Returns (structure, entries, stds, score, steps).
+    """
+    noise, steps = stages.refitter.noise_nrmse(), []
+    tested = list(range(len(entries) - 1))
+    while tested:
+        tasks = [_Task(None, _How.WITHOUT, tuple(entries[:i] + entries[i + 1:]), tuple(stds[:i] + stds[i + 1:]))
+                 for i in tested]
+        trials = [(i, t) for i, t in zip(tested, _run(stages, tasks)) if t.score is not None]
+        retests = [(Step(entries[i].kind.name, entries[i].place.location, None, t.score, score, noise,
+                         explained_share(t.score, score, noise), retest=True), t) for i, t in trials]
+        steps += [s for s, _ in retests]
+        failed = [st for st in retests if not st[0].earned]
+        if not failed:
+            break
+        t = min(failed, key=lambda st: st[0].explained)[1]
+        structure, entries, stds, score = t.structure, list(t.entries), list(t.stds), t.score
+        tested = list(range(len(entries))) if len(failed) > 1 and len(entries) > 1 else []
+    return structure, entries, stds, score, tuple(steps)
 
 
 def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compound | Correction:
@@ -464,7 +514,7 @@ def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compou
     faults = [c for c in sorted(stages.screening.candidates, key=lambda c: -c.explained)
               if c.kind.refit is Refit.CORRECT_DATA and c.explained >= EXPLAINED and _contender(stages, physics, c)]
     if not faults:
-        return physics
+        return _table_fault(stages, physics)
     c = faults[0]
     fault = Entry(c.kind, c.place, dict(c.parameters))
 
@@ -484,6 +534,42 @@ def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compou
         return Compound(replace(again.finding, selection=selection), named, entries, steps, after)
     return Correction(_corrected(stages.model.experiment, fault), refitter.identify_corrected(*fault),
                       corrections - 1, then)
+
+
+def _table_fault(stages: Stages, physics: Compound) -> Compound:
+    """A fault of the table channel beside the physics found, by re-simulation: each the replay
+    screening fitted (:func:`~momentid.diagnosis.screening.screen_replay`) is sized with the physics
+    in the model, and the one that replays best joins when it removes at least ``EARNS`` of the
+    training replays' misfit above noise that the physics alone leaves.
+
+    Screening fits a table channel's faults on the linear model's replay, where a bias of the table
+    accelerometer is a step response that the band removes almost entirely; a storey that slips by
+    friction turns the same bias into a steady shear (the floors' weight times it) that makes its
+    slips one-sided: the fault shows only with the physics in the model.  (The floor equations, which
+    named the physics, do not read the table channel: the physics stands as found.)
+    """
+    refitter, found = stages.refitter, physics.finding
+    noise, score = refitter.noise_nrmse(), physics.score
+    faults = [c for c in stages.screening.replay.candidates
+              if c.kind.refit is Refit.CORRECT_DATA and c.kind.physical(c.parameters)]
+    if score is None or score <= EXCESS * noise or not faults:
+        return physics
+
+    def sized(c: Candidate) -> tuple[dict, dict, float]:
+        params, std = refitter.resimulate(found.structure, Entry(c.kind, c.place, dict(c.parameters)),
+                                          physics.entries)
+        return params, std, refitter.score_joint(found.structure, (Entry(c.kind, c.place, params),)
+                                                 + physics.entries, found.records)
+    trials = run_forked(sized, faults)
+    (params, std, after), c = min(zip(trials, faults), key=lambda tc: tc[0][2])
+    step = Step(c.mechanism, c.location, c.explained, score, after, noise, explained_share(score, after, noise))
+    steps = physics.steps + (step,)
+    if not step.earned:
+        return replace(physics, finding=replace(found, selection=replace(found.selection, steps=steps)), steps=steps)
+    fault = Entry(c.kind, c.place, params)
+    finding = replace(found, selection=replace(found.selection, steps=steps, joint=after))
+    return Compound(finding, physics.mechanisms + (Named(c.mechanism, c.location, params, std),),
+                    (fault,) + physics.entries, steps, after)
 
 
 def _contender(stages: Stages, physics: Compound, fault: Candidate) -> bool:

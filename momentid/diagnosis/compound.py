@@ -44,7 +44,8 @@ from momentid.core.series import Experiment
 from momentid.core.structure import Structure
 from momentid.diagnosis.refit import SEARCH_RANGE, ForceRefit
 from momentid.diagnosis.replay import Entry, identified_structure, records
-from momentid.diagnosis.screening import Candidate, Domain, damping_pattern, pattern_fit, remaining_excess, screen_equation
+from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, linear_springs_left, pattern_fit,
+                                          remaining_excess, screen_equation)
 from momentid.diagnosis.selection import SHORTLIST_FLOOR, Finding, Step, explained_share
 from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
@@ -213,8 +214,11 @@ def _candidates(stages: Stages, entries) -> list[Candidate]:
     out = []
     for result, rows, domain in domains:
         if remaining_excess(result, rows, residuals.noise_floor, model.f_top, found).max() > EXCESS:
-            out += screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found,
-                                   kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
+            cands = screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found,
+                                    kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
+            if domain is Domain.NOMINAL and found:   # P-Delta scored by what the lab's model leaves there
+                cands += linear_springs_left(result, rows, residuals.noise_floor, model.f_top, found, cands)
+            out += cands
     # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the forces
     # found (unmodelled, they distort the identified C).
     refit = _refitted(stages, entries)
@@ -470,13 +474,11 @@ def _retest(stages: Stages, structure, entries, stds, score):
     """Every mechanism named is tested again by the rule it joined by, now that the others are in the
     model: the model without it (the linear part refitted with the other forces, their sizes searched
     again) must leave at least ``EARNS`` more misfit above noise than the model with it.  The one that
-    earns least is dropped.  The others are tested again only when more than one did not earn (each
-    was tested beside the other); one that did earn beside a mechanism that adds less than ``EARNS``
-    keeps its verdict.
-
-    (A mechanism found first may hold what a later one does: a friction's dissipation taken in by a
-    storey damper before the friction joined.)  The last to join earned its place beside all the
-    others and is not tested again until one leaves.  Returns (structure, entries, stds, score, steps).
+    earns least is dropped; the others are tested again only when more than one did not earn (one that
+    earned beside a mechanism adding less than ``EARNS`` keeps its verdict).  (A mechanism found first
+    may hold what a later one does: a friction's dissipation taken in by a storey damper before the
+    friction joined.)  The last to join earned its place beside all the others and is not tested
+    again until one leaves.  Returns (structure, entries, stds, score, steps).
     """
     noise, steps = stages.refitter.noise_nrmse(), []
     tested = list(range(len(entries) - 1))
@@ -537,10 +539,11 @@ def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compou
 
 
 def _table_fault(stages: Stages, physics: Compound) -> Compound:
-    """A fault of the table channel beside the physics found, by re-simulation: each the replay
-    screening fitted (:func:`~momentid.diagnosis.screening.screen_replay`) is sized with the physics
-    in the model, and the one that replays best joins when it removes at least ``EARNS`` of the
-    training replays' misfit above noise that the physics alone leaves.
+    """A fault of the table channel beside the physics found, by re-simulation: of those the replay
+    screening fitted (:func:`~momentid.diagnosis.screening.screen_replay`) and the kinematic check
+    does not rule out, the one that replays best with the physics at its screened size is sized with
+    the physics in the model, and joins when it removes at least ``EARNS`` of the training replays'
+    misfit above noise that the physics alone leaves.
 
     Screening fits a table channel's faults on the linear model's replay, where a bias of the table
     accelerometer is a step response that the band removes almost entirely; a storey that slips by
@@ -550,18 +553,17 @@ def _table_fault(stages: Stages, physics: Compound) -> Compound:
     """
     refitter, found = stages.refitter, physics.finding
     noise, score = refitter.noise_nrmse(), physics.score
-    faults = [c for c in stages.screening.replay.candidates
-              if c.kind.refit is Refit.CORRECT_DATA and c.kind.physical(c.parameters)]
+    faults = [c for c in stages.screening.candidates if c.domain is Domain.REPLAY
+              and c.kind.refit is Refit.CORRECT_DATA and c.kind.physical(c.parameters)]
     if score is None or score <= EXCESS * noise or not faults:
         return physics
 
-    def sized(c: Candidate) -> tuple[dict, dict, float]:
-        params, std = refitter.resimulate(found.structure, Entry(c.kind, c.place, dict(c.parameters)),
-                                          physics.entries)
-        return params, std, refitter.score_joint(found.structure, (Entry(c.kind, c.place, params),)
-                                                 + physics.entries, found.records)
-    trials = run_forked(sized, faults)
-    (params, std, after), c = min(zip(trials, faults), key=lambda tc: tc[0][2])
+    def replayed(c: Candidate, params: dict) -> float:
+        entries = (Entry(c.kind, c.place, params),) + physics.entries
+        return refitter.score_joint(found.structure, entries, found.records)
+    c = min(faults, key=lambda c: replayed(c, c.parameters))
+    params, std = refitter.resimulate(found.structure, Entry(c.kind, c.place, dict(c.parameters)), physics.entries)
+    after = replayed(c, params)
     step = Step(c.mechanism, c.location, c.explained, score, after, noise, explained_share(score, after, noise))
     steps = physics.steps + (step,)
     if not step.earned:

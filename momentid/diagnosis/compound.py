@@ -15,9 +15,13 @@ earns its place:
   and the model with it must remove at least ``EARNS`` of the training replays' misfit above noise
   that the model without it leaves.  The loop stops when none does, when the replays are at the
   noise level, or at ``MAX_MECHANISMS``.  The trials of a step run on two processes
-  (:mod:`~momentid.diagnosis.workers`) and return their results as values;
+  (:mod:`~momentid.diagnosis.workers`) and return their results as values.  (What a step screens:
+  :mod:`~momentid.diagnosis.compound_screening`.)  Then every mechanism named is **re-tested** by
+  the same rule with the others in the model: the model without it, its other sizes searched again,
+  must leave ``EARNS`` more of the misfit; the weakest that does not is dropped (:func:`_retest`);
 * beside the physics, a **sensor fault** that contended with it in screening is undone and the
-  corrected experiment diagnosed again (:func:`_fault_beside`).
+  corrected experiment diagnosed again (:func:`_fault_beside`); else a fault of the table channel
+  that only the physics makes visible is sized by re-simulation with it (:func:`_table_fault`).
 
 Every size is then refitted jointly (errors-in-variables with every force as an input, the damping
 pattern on the refitted C, then each force's size searched by re-simulation with the others in the
@@ -42,26 +46,23 @@ from typing import Callable
 from momentid import mechanisms
 from momentid.core.series import Experiment
 from momentid.core.structure import Structure
+from momentid.diagnosis.compound_screening import (STEP_SHORTLIST, candidates, elastic, force_entries,
+                                                   refitted, shortlist)
 from momentid.diagnosis.refit import SEARCH_RANGE, ForceRefit
 from momentid.diagnosis.replay import Entry, identified_structure, records
-from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, linear_springs_left, pattern_fit,
-                                          remaining_excess, screen_equation)
-from momentid.diagnosis.selection import SHORTLIST_FLOOR, Finding, Step, explained_share
+from momentid.diagnosis.screening import Candidate, Domain, pattern_fit
+from momentid.diagnosis.selection import Finding, Step, explained_share
 from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.diagnosis.workers import run_forked
 from momentid.mechanisms.base import Refit
-from momentid.mechanisms.place import Target
 
 __all__ = ["Compound", "Correction", "extend", "MAX_MECHANISMS", "STEP_SHORTLIST", "MAX_CORRECTIONS", "shortlist"]
 
 #: At most this many mechanisms in one diagnosis: a guard on the loop, not the rule that stops it
 #: (a further mechanism must earn its place, ``EARNS``).
 MAX_MECHANISMS = 3
-#: Candidates re-simulated per step: the best of each kind, by the share of the remaining excess they
-#: explain, up to this many (the replay test, ``EARNS``, decides among them).
-STEP_SHORTLIST = 3
 #: The joint refinement of a size found alone searches this range around it (the other mechanism
 #: shifts it by tens of percent at most; a newcomer's regression may be 3x low: see refit.SEARCH_RANGE).
 JOINT_SPAN = (0.7, 1.4)
@@ -199,89 +200,6 @@ def _after_correction(stages: Stages, start: _Start, corrections: int) -> Compou
     return Correction(_corrected(stages.model.experiment, entry), known, corrections - 1, then)
 
 
-def _candidates(stages: Stages, entries) -> list[Candidate]:
-    """The library screened on what the mechanisms of ``entries`` leave in the equation residual,
-    in the domains (identified, nominal model) where an excess is left; best first."""
-    model, residuals = stages.model, stages.residuals
-    # A sensor fault is undone on the data, not fitted; an attachment's equation signature is a grid
-    # over frequencies, not a few columns: neither is carried as columns, and an attachment is not
-    # screened again (its replay screening, stage 4, is its test; the grid would cost most of the time).
-    found = [(e.kind, e.place) for e in entries
-             if e.kind.target is not Target.CHANNEL and e.kind.refit is not Refit.ATTACHMENT]
-    domains = [(model.result, residuals.rows, Domain.EQUATION)]
-    if residuals.nominal_rows is not None:
-        domains.append((model.nominal_result, residuals.nominal_rows, Domain.NOMINAL))
-    out = []
-    for result, rows, domain in domains:
-        if remaining_excess(result, rows, residuals.noise_floor, model.f_top, found).max() > EXCESS:
-            cands = screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found,
-                                    kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
-            if domain is Domain.NOMINAL and found:   # P-Delta scored by what the lab's model leaves there
-                cands += linear_springs_left(result, rows, residuals.noise_floor, model.f_top, found, cands)
-            out += cands
-    # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the forces
-    # found (unmodelled, they distort the identified C).
-    refit = _refitted(stages, entries)
-    pattern = damping_pattern(_elastic(stages, entries, refit.result if refit else model.result), model.storeys)
-    if pattern is not None:
-        out.append(pattern.candidate)
-    done = {(e.kind, e.place) for e in entries}
-    out = [c for c in out if (c.kind, c.place) not in done and c.kind.physical(c.parameters)
-           and c.kind.refit is not Refit.CORRECT_DATA]
-    return sorted(out, key=lambda c: -c.explained)
-
-
-def shortlist(candidates: list[Candidate]) -> list[Candidate]:
-    """The best candidate of each kind that explains at least ``SHORTLIST_FLOOR`` of what is left (and
-    the damping pattern), up to ``STEP_SHORTLIST``, and beside a dashpot of the damping pattern the
-    best dissipative force at its link: the replay decides among them.
-
-    Not ``EXPLAINED``: with a mechanism in the model, what is left is partly that mechanism's own
-    misfit (friction's signature, a smoothed sign of noisy drift velocities, leaves part of a
-    friction force in the residual), so a second mechanism that is really there may explain well
-    under half of it in screening and still halve the replays' misfit.  And a friction the identified
-    C has taken in as an equivalent viscous damping leaves little in the residual at all: the
-    pattern shows a damper where it is.
-    """
-    out, kinds = [], set()
-    for c in candidates:
-        if c.kind in kinds or (c.domain is not Domain.PARAMETERS and c.explained < SHORTLIST_FLOOR):
-            continue
-        kinds.add(c.kind)
-        out.append(c)
-    out = out[:STEP_SHORTLIST]
-    for damper in [c for c in out if c.domain is Domain.PARAMETERS]:
-        rivals = [c for c in candidates if c.place.target.link and c.place.nodes == damper.place.nodes
-                  and c.kind not in kinds and c.kind.dissipative and c.kind.refit is Refit.RESIMULATE]
-        if rivals:
-            kinds.add(rivals[0].kind)
-            out.append(rivals[0])
-    return out
-
-
-def _forces(stages: Stages, entries) -> list[Entry]:
-    """The forces (``RESIMULATE`` kinds) of ``entries`` the errors-in-variables refit takes as inputs
-    (none for noise-free data, identified by the plain equation error)."""
-    return [] if stages.model.ideal else [e for e in entries if e.kind.refit is Refit.RESIMULATE]
-
-
-def _refitted(stages: Stages, entries) -> ForceRefit | None:
-    """The linear model refitted by errors-in-variables with the forces of ``entries`` as inputs; None
-    when there are none (or noise-free data, or runs the refit cannot use)."""
-    forces = _forces(stages, entries)
-    return stages.refitter.refit_forces(forces) if forces else None
-
-
-def _elastic(stages: Stages, entries, result):
-    """``result`` with its stiffness matrix as the storeys' elastic one, the one Rayleigh damping is
-    proportional to: without what the mechanisms of ``entries`` take from it in the model (P-Delta's
-    loss to the floors' own weight, which an identified K holds)."""
-    structure = identified_structure(result, stages.model.nominal)
-    for kind, place, params in entries:
-        structure = kind.replay_structure(structure, place, params, True)
-    return replace(result, K=structure.stiffness_matrix())
-
-
 def _quadrature(sim_std: dict, std: dict) -> dict:
     """A search's standard errors (conditional on the linear model) with a refit's (marginal), in quadrature."""
     return {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
@@ -307,7 +225,7 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool, every: bool = False
         searched = {last}
     forces = [i for i, e in enumerate(entries) if e.kind.refit is Refit.RESIMULATE]
     result, structure = model.result, refitter.linear_structure
-    refit = _refitted(stages, entries)
+    refit = refitted(stages, entries)
     if refit is not None:
         result = refit.result
         structure = identified_structure(result, model.nominal)
@@ -318,7 +236,7 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool, every: bool = False
                 entries[i] = entries[i]._replace(parameters=p)
     for i, (kind, place, params) in enumerate(entries):
         if kind.refit is Refit.DAMPING_PATTERN:
-            _, (a, b, c) = pattern_fit(_elastic(stages, entries, result), kind.damping_pattern(place, model.storeys))
+            _, (a, b, c) = pattern_fit(elastic(stages, entries, result), kind.damping_pattern(place, model.storeys))
             structure = replace(structure, rayleigh_mu=max(a, 0.0), rayleigh_kappa=max(b, 0.0))
             entries[i] = Entry(kind, place, dict(params, **{kind.fitted.name: float(c)}))
     if not all(e.kind.physical(e.parameters) for e in entries):
@@ -346,7 +264,7 @@ def _descend(stages: Stages, entries, stds):
     regression, or a size it makes unphysical).
     """
     refitter, nominal = stages.refitter, stages.model.nominal
-    refit = _refitted(stages, entries)
+    refit = refitted(stages, entries)
     if nominal is None or refit is None:
         return None
     entries, stds = list(entries), [dict(s) for s in stds]
@@ -403,7 +321,7 @@ def _trial(stages: Stages, task: _Task) -> _Trial:
     else:
         sized = _joint(stages, task.entries, task.stds, newcomer=task.how is _How.JOINT,
                        every=task.how is _How.WITHOUT)
-    forces = tuple(_forces(stages, task.entries))
+    forces = tuple(force_entries(stages, task.entries))
     refit = stages.refitter.refit_forces(forces) if forces else None
     if sized is None:
         return _Trial(task, None, None, task.entries, task.stds, forces, refit)
@@ -422,7 +340,7 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     steps = []
     while len(entries) < MAX_MECHANISMS and score > EXCESS * noise:
         tasks = []
-        for c in shortlist(_candidates(stages, entries)):
+        for c in shortlist(candidates(stages, entries)):
             trial = (tuple(entries) + (Entry(c.kind, c.place, dict(c.parameters)),), tuple(stds) + (dict(c.std),))
             tasks.append(_Task(c, _How.JOINT, *trial))
             if partial and len(entries) == 1 and c.kind.refit is Refit.RESIMULATE:

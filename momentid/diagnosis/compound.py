@@ -57,6 +57,7 @@ from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.diagnosis.workers import run_forked
 from momentid.mechanisms.base import Refit
+from momentid.mechanisms.place import Place
 
 __all__ = ["Compound", "Correction", "extend", "MAX_MECHANISMS", "STEP_SHORTLIST", "MAX_CORRECTIONS", "shortlist"]
 
@@ -205,14 +206,15 @@ def _quadrature(sim_std: dict, std: dict) -> dict:
     return {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
 
 
-def _joint(stages: Stages, entries, stds, *, newcomer: bool, every: bool = False):
+def _joint(stages: Stages, entries, stds, *, newcomer: bool, at: Place | None = None):
     """The joint model of ``entries`` (:class:`Entry` each): the linear part refitted with every
     force, and sizes searched by re-simulation with the others in the model.
 
     With ``newcomer``, the last entry is new: it starts from the joint regression and only its size
-    is searched (over the full range); without, every size but the last (with ``every``, every size)
-    is searched again around its value (``JOINT_SPAN``: one pass of coordinate descent after a
-    newcomer joined, or after a mechanism left).  A newcomer whose size is not searched (a dashpot
+    is searched (over the full range); without, every size but the last is searched again around its
+    value (``JOINT_SPAN``: one pass of coordinate descent after a newcomer joined); with ``at``, the
+    place of a mechanism that left, the sizes of the forces at its link (those that can take in what it
+    did, as a storey's friction does its damper's dissipation).  A newcomer whose size is not searched (a dashpot
     read from the damping pattern) has the others' sizes searched again beside it instead: they were
     sized without it and took in what it does (a friction grown by the damper's dissipation).
     Returns (structure, entries, stds), or None when a size comes out unphysical.
@@ -220,7 +222,7 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool, every: bool = False
     refitter, model = stages.refitter, stages.model
     entries, stds = list(entries), [dict(s) for s in stds]
     last = len(entries) - 1
-    searched = set(range(len(entries) if every else last))
+    searched = set(range(last)) if at is None else {i for i, e in enumerate(entries) if _same_link(e.place, at)}
     if newcomer and entries[last].kind.refit is Refit.RESIMULATE:
         searched = {last}
     forces = [i for i, e in enumerate(entries) if e.kind.refit is Refit.RESIMULATE]
@@ -282,7 +284,7 @@ def _descend(stages: Stages, entries, stds):
 
 class _How(enum.Enum):
     """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`);
-    or a mechanism re-tested: the joint model of the others, every size searched again (``WITHOUT``)."""
+    or a mechanism re-tested: the joint model of the others, those at its link re-sized (``WITHOUT``)."""
 
     JOINT = "joint"
     DESCENT = "descent"
@@ -292,12 +294,13 @@ class _How(enum.Enum):
 @dataclass(frozen=True)
 class _Task:
     """One trial of a step: a newcomer ``candidate`` beside the mechanisms found, and how it is sized
-    (``WITHOUT``: ``entries`` are the mechanisms found but one, and ``candidate`` is None)."""
+    (``WITHOUT``: ``entries`` are the mechanisms found but the one at ``at``; ``candidate`` is None)."""
 
     candidate: Candidate | None
     how: _How
     entries: tuple[Entry, ...]
     stds: tuple[dict, ...]
+    at: Place | None = None
 
 
 @dataclass(frozen=True)
@@ -319,8 +322,7 @@ def _trial(stages: Stages, task: _Task) -> _Trial:
     if task.how is _How.DESCENT:
         sized = _descend(stages, task.entries, task.stds)
     else:
-        sized = _joint(stages, task.entries, task.stds, newcomer=task.how is _How.JOINT,
-                       every=task.how is _How.WITHOUT)
+        sized = _joint(stages, task.entries, task.stds, newcomer=task.how is _How.JOINT, at=task.at)
     forces = tuple(force_entries(stages, task.entries))
     refit = stages.refitter.refit_forces(forces) if forces else None
     if sized is None:
@@ -379,6 +381,11 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     return Compound(finding, named, tuple(entries), steps, score)
 
 
+def _same_link(place: Place, other: Place) -> bool:
+    """Whether two places are the same link between two nodes of the rig."""
+    return place.target.link and other.target.link and place.nodes == other.nodes
+
+
 def _run(stages: Stages, tasks) -> list[_Trial]:
     """The trials of ``tasks``, on the worker processes; their refits recorded by the refitter."""
     trials = run_forked(lambda task: _trial(stages, task), tasks)
@@ -390,8 +397,8 @@ def _run(stages: Stages, tasks) -> list[_Trial]:
 
 def _retest(stages: Stages, structure, entries, stds, score):
     """Every mechanism named is tested again by the rule it joined by, now that the others are in the
-    model: the model without it (the linear part refitted with the other forces, their sizes searched
-    again) must leave at least ``EARNS`` more misfit above noise than the model with it.  The one that
+    model: the model without it (the linear part refitted with the other forces, the sizes of those at
+    its link searched again) must leave at least ``EARNS`` more misfit above noise than the model with it.  The one that
     earns least is dropped; the others are tested again only when more than one did not earn (one that
     earned beside a mechanism adding less than ``EARNS`` keeps its verdict).  (A mechanism found first
     may hold what a later one does: a friction's dissipation taken in by a storey damper before the
@@ -401,11 +408,13 @@ def _retest(stages: Stages, structure, entries, stds, score):
     noise, steps = stages.refitter.noise_nrmse(), []
     tested = list(range(len(entries) - 1))
     while tested:
-        tasks = [_Task(None, _How.WITHOUT, tuple(entries[:i] + entries[i + 1:]), tuple(stds[:i] + stds[i + 1:]))
-                 for i in tested]
+        tasks = [_Task(None, _How.WITHOUT, tuple(entries[:i] + entries[i + 1:]), tuple(stds[:i] + stds[i + 1:]),
+                       entries[i].place) for i in tested]
         trials = [(i, t) for i, t in zip(tested, _run(stages, tasks)) if t.score is not None]
+        # (a model without it that replays within the noise, or better than with it: it removes nothing)
         retests = [(Step(entries[i].kind.name, entries[i].place.location, None, t.score, score, noise,
-                         explained_share(t.score, score, noise), retest=True), t) for i, t in trials]
+                         explained_share(t.score, score, noise) if t.score > max(score, noise) else 0.0,
+                         retest=True), t) for i, t in trials]
         steps += [s for s, _ in retests]
         failed = [st for st in retests if not st[0].earned]
         if not failed:

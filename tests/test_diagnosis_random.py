@@ -53,9 +53,14 @@ def test_other_classes_are_judged_by_their_numbers():
 
 
 #: Cases of the committed table diagnosed blind again (about a minute each on 2 cores): a gap brace the
-#: library took for cubic stiffness, a one-sided stop once taken for a two-sided gap, a stiffness loss
-#: whose linear refit diverged on the held-out run (the diagnosis stopped with an error).
-SLOW_CASES = [("gap_brace", 0), ("stop", 9), ("stiffness_change", 7)]
+#: library took for cubic stiffness, a one-sided stop once taken for a two-sided gap; a storey damper
+#: named first whose dissipation the friction found later does (the re-test drops it), a damper beside
+#: a friction sized without it (re-sized beside the damper), a biased table accelerometer that only a
+#: friction in the model shows (sized by re-simulation with it), a P-Delta beside a strong cubic spring
+#: that only the lab's nominal model shows (the identified K takes in the floors' weight); a stiffness
+#: loss whose linear refit diverged on the held-out run (the diagnosis stopped with an error).
+SLOW_CASES = [("gap_brace", 0), ("stop", 9), ("two_storey", 0), ("two_storey", 4), ("two_storey", 5),
+              ("library_fault", 5), ("stiffness_change", 7)]
 
 
 @pytest.mark.slow

@@ -15,9 +15,13 @@ earns its place:
   and the model with it must remove at least ``EARNS`` of the training replays' misfit above noise
   that the model without it leaves.  The loop stops when none does, when the replays are at the
   noise level, or at ``MAX_MECHANISMS``.  The trials of a step run on two processes
-  (:mod:`~momentid.diagnosis.workers`) and return their results as values;
+  (:mod:`~momentid.diagnosis.workers`) and return their results as values.  (What a step screens:
+  :mod:`~momentid.diagnosis.compound_screening`.)  Then every mechanism named is **re-tested** by
+  the same rule with the others in the model: the model without it, its other sizes searched again,
+  must leave ``EARNS`` more of the misfit; the weakest that does not is dropped (:func:`_retest`);
 * beside the physics, a **sensor fault** that contended with it in screening is undone and the
-  corrected experiment diagnosed again (:func:`_fault_beside`).
+  corrected experiment diagnosed again (:func:`_fault_beside`); else a fault of the table channel
+  that only the physics makes visible is sized by re-simulation with it (:func:`_table_fault`).
 
 Every size is then refitted jointly (errors-in-variables with every force as an input, the damping
 pattern on the refitted C, then each force's size searched by re-simulation with the others in the
@@ -42,25 +46,24 @@ from typing import Callable
 from momentid import mechanisms
 from momentid.core.series import Experiment
 from momentid.core.structure import Structure
+from momentid.diagnosis.compound_screening import (STEP_SHORTLIST, candidates, elastic, force_entries,
+                                                   refitted, shortlist)
 from momentid.diagnosis.refit import SEARCH_RANGE, ForceRefit
 from momentid.diagnosis.replay import Entry, identified_structure, records
-from momentid.diagnosis.screening import Candidate, Domain, damping_pattern, pattern_fit, remaining_excess, screen_equation
-from momentid.diagnosis.selection import SHORTLIST_FLOOR, Finding, Step, explained_share
+from momentid.diagnosis.screening import Candidate, Domain, pattern_fit
+from momentid.diagnosis.selection import Finding, Step, explained_share
 from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.diagnosis.workers import run_forked
 from momentid.mechanisms.base import Refit
-from momentid.mechanisms.place import Target
+from momentid.mechanisms.place import Place
 
 __all__ = ["Compound", "Correction", "extend", "MAX_MECHANISMS", "STEP_SHORTLIST", "MAX_CORRECTIONS", "shortlist"]
 
 #: At most this many mechanisms in one diagnosis: a guard on the loop, not the rule that stops it
 #: (a further mechanism must earn its place, ``EARNS``).
 MAX_MECHANISMS = 3
-#: Candidates re-simulated per step: the best of each kind, by the share of the remaining excess they
-#: explain, up to this many (the replay test, ``EARNS``, decides among them).
-STEP_SHORTLIST = 3
 #: The joint refinement of a size found alone searches this range around it (the other mechanism
 #: shifts it by tens of percent at most; a newcomer's regression may be 3x low: see refit.SEARCH_RANGE).
 JOINT_SPAN = (0.7, 1.4)
@@ -198,117 +201,44 @@ def _after_correction(stages: Stages, start: _Start, corrections: int) -> Compou
     return Correction(_corrected(stages.model.experiment, entry), known, corrections - 1, then)
 
 
-def _candidates(stages: Stages, entries) -> list[Candidate]:
-    """The library screened on what the mechanisms of ``entries`` leave in the equation residual,
-    in the domains (identified, nominal model) where an excess is left; best first."""
-    model, residuals = stages.model, stages.residuals
-    # A sensor fault is undone on the data, not fitted; an attachment's equation signature is a grid
-    # over frequencies, not a few columns: neither is carried as columns, and an attachment is not
-    # screened again (its replay screening, stage 4, is its test; the grid would cost most of the time).
-    found = [(e.kind, e.place) for e in entries
-             if e.kind.target is not Target.CHANNEL and e.kind.refit is not Refit.ATTACHMENT]
-    domains = [(model.result, residuals.rows, Domain.EQUATION)]
-    if residuals.nominal_rows is not None:
-        domains.append((model.nominal_result, residuals.nominal_rows, Domain.NOMINAL))
-    out = []
-    for result, rows, domain in domains:
-        if remaining_excess(result, rows, residuals.noise_floor, model.f_top, found).max() > EXCESS:
-            out += screen_equation(result, rows, residuals.noise_floor, model.f_top, domain, found,
-                                   kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
-    # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the forces
-    # found (unmodelled, they distort the identified C).
-    refit = _refitted(stages, entries)
-    pattern = damping_pattern(_elastic(stages, entries, refit.result if refit else model.result), model.storeys)
-    if pattern is not None:
-        out.append(pattern.candidate)
-    done = {(e.kind, e.place) for e in entries}
-    out = [c for c in out if (c.kind, c.place) not in done and c.kind.physical(c.parameters)
-           and c.kind.refit is not Refit.CORRECT_DATA]
-    return sorted(out, key=lambda c: -c.explained)
-
-
-def shortlist(candidates: list[Candidate]) -> list[Candidate]:
-    """The best candidate of each kind that explains at least ``SHORTLIST_FLOOR`` of what is left (and
-    the damping pattern), up to ``STEP_SHORTLIST``, and beside a dashpot of the damping pattern the
-    best dissipative force at its link: the replay decides among them.
-
-    Not ``EXPLAINED``: with a mechanism in the model, what is left is partly that mechanism's own
-    misfit (friction's signature, a smoothed sign of noisy drift velocities, leaves part of a
-    friction force in the residual), so a second mechanism that is really there may explain well
-    under half of it in screening and still halve the replays' misfit.  And a friction the identified
-    C has taken in as an equivalent viscous damping leaves little in the residual at all: the
-    pattern shows a damper where it is.
-    """
-    out, kinds = [], set()
-    for c in candidates:
-        if c.kind in kinds or (c.domain is not Domain.PARAMETERS and c.explained < SHORTLIST_FLOOR):
-            continue
-        kinds.add(c.kind)
-        out.append(c)
-    out = out[:STEP_SHORTLIST]
-    for damper in [c for c in out if c.domain is Domain.PARAMETERS]:
-        rivals = [c for c in candidates if c.place.target.link and c.place.nodes == damper.place.nodes
-                  and c.kind not in kinds and c.kind.dissipative and c.kind.refit is Refit.RESIMULATE]
-        if rivals:
-            kinds.add(rivals[0].kind)
-            out.append(rivals[0])
-    return out
-
-
-def _forces(stages: Stages, entries) -> list[Entry]:
-    """The forces (``RESIMULATE`` kinds) of ``entries`` the errors-in-variables refit takes as inputs
-    (none for noise-free data, identified by the plain equation error)."""
-    return [] if stages.model.ideal else [e for e in entries if e.kind.refit is Refit.RESIMULATE]
-
-
-def _refitted(stages: Stages, entries) -> ForceRefit | None:
-    """The linear model refitted by errors-in-variables with the forces of ``entries`` as inputs; None
-    when there are none (or noise-free data, or runs the refit cannot use)."""
-    forces = _forces(stages, entries)
-    return stages.refitter.refit_forces(forces) if forces else None
-
-
-def _elastic(stages: Stages, entries, result):
-    """``result`` with its stiffness matrix as the storeys' elastic one, the one Rayleigh damping is
-    proportional to: without what the mechanisms of ``entries`` take from it in the model (P-Delta's
-    loss to the floors' own weight, which an identified K holds)."""
-    structure = identified_structure(result, stages.model.nominal)
-    for kind, place, params in entries:
-        structure = kind.replay_structure(structure, place, params, True)
-    return replace(result, K=structure.stiffness_matrix())
-
-
 def _quadrature(sim_std: dict, std: dict) -> dict:
     """A search's standard errors (conditional on the linear model) with a refit's (marginal), in quadrature."""
     return {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
 
 
-def _joint(stages: Stages, entries, stds, *, newcomer: bool):
+def _joint(stages: Stages, entries, stds, *, newcomer: bool, at: Place | None = None):
     """The joint model of ``entries`` (:class:`Entry` each): the linear part refitted with every
     force, and sizes searched by re-simulation with the others in the model.
 
     With ``newcomer``, the last entry is new: it starts from the joint regression and only its size
     is searched (over the full range); without, every size but the last is searched again around its
-    value (``JOINT_SPAN``: one pass of coordinate descent after a newcomer joined).
+    value (``JOINT_SPAN``: one pass of coordinate descent after a newcomer joined); with ``at``, the
+    place of a mechanism that left, the sizes of the forces at its link (those that can take in what it
+    did, as a storey's friction does its damper's dissipation).  A newcomer whose size is not searched (a dashpot
+    read from the damping pattern) has the others' sizes searched again beside it instead: they were
+    sized without it and took in what it does (a friction grown by the damper's dissipation).
     Returns (structure, entries, stds), or None when a size comes out unphysical.
     """
     refitter, model = stages.refitter, stages.model
     entries, stds = list(entries), [dict(s) for s in stds]
     last = len(entries) - 1
+    searched = set(range(last)) if at is None else {i for i, e in enumerate(entries) if _same_link(e.place, at)}
+    if newcomer and entries[last].kind.refit is Refit.RESIMULATE:
+        searched = {last}
     forces = [i for i, e in enumerate(entries) if e.kind.refit is Refit.RESIMULATE]
     result, structure = model.result, refitter.linear_structure
-    refit = _refitted(stages, entries)
+    refit = refitted(stages, entries)
     if refit is not None:
         result = refit.result
         structure = identified_structure(result, model.nominal)
         for i, p, s in zip(forces, refit.parameters, refit.std):
-            if (i == last) == newcomer:   # to be searched: the refit's std, in quadrature below
+            if i in searched:             # to be searched: the refit's std, in quadrature below
                 stds[i] = dict(s)
             if newcomer and i == last:    # the newcomer starts from the joint regression
                 entries[i] = entries[i]._replace(parameters=p)
     for i, (kind, place, params) in enumerate(entries):
         if kind.refit is Refit.DAMPING_PATTERN:
-            _, (a, b, c) = pattern_fit(_elastic(stages, entries, result), kind.damping_pattern(place, model.storeys))
+            _, (a, b, c) = pattern_fit(elastic(stages, entries, result), kind.damping_pattern(place, model.storeys))
             structure = replace(structure, rayleigh_mu=max(a, 0.0), rayleigh_kappa=max(b, 0.0))
             entries[i] = Entry(kind, place, dict(params, **{kind.fitted.name: float(c)}))
     if not all(e.kind.physical(e.parameters) for e in entries):
@@ -316,10 +246,10 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool):
     if model.nominal is not None:
         structure = min((structure, model.nominal), key=lambda b: refitter.misfit(b, entries))
     for i in forces:
-        if (i == last) != newcomer:
+        if i not in searched:
             continue
         params, sim_std = refitter.resimulate(structure, entries[i], entries[:i] + entries[i + 1:],
-                                              SEARCH_RANGE if newcomer else JOINT_SPAN)
+                                              SEARCH_RANGE if i == last and newcomer else JOINT_SPAN)
         entries[i] = entries[i]._replace(parameters=params)
         stds[i] = _quadrature(sim_std, stds[i])
     return structure, entries, stds
@@ -336,7 +266,7 @@ def _descend(stages: Stages, entries, stds):
     regression, or a size it makes unphysical).
     """
     refitter, nominal = stages.refitter, stages.model.nominal
-    refit = _refitted(stages, entries)
+    refit = refitted(stages, entries)
     if nominal is None or refit is None:
         return None
     entries, stds = list(entries), [dict(s) for s in stds]
@@ -353,20 +283,24 @@ def _descend(stages: Stages, entries, stds):
 
 
 class _How(enum.Enum):
-    """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`)."""
+    """How a newcomer is tried: the joint model (:func:`_joint`) or the descent (:func:`_descend`);
+    or a mechanism re-tested: the joint model of the others, those at its link re-sized (``WITHOUT``)."""
 
     JOINT = "joint"
     DESCENT = "descent"
+    WITHOUT = "without"
 
 
 @dataclass(frozen=True)
 class _Task:
-    """One trial of a step: a newcomer ``candidate`` beside the mechanisms found, and how it is sized."""
+    """One trial of a step: a newcomer ``candidate`` beside the mechanisms found, and how it is sized
+    (``WITHOUT``: ``entries`` are the mechanisms found but the one at ``at``; ``candidate`` is None)."""
 
-    candidate: Candidate
+    candidate: Candidate | None
     how: _How
     entries: tuple[Entry, ...]
     stds: tuple[dict, ...]
+    at: Place | None = None
 
 
 @dataclass(frozen=True)
@@ -385,9 +319,11 @@ class _Trial:
 
 def _trial(stages: Stages, task: _Task) -> _Trial:
     """One trial (runs in a worker process: its results come back as this value)."""
-    sized = (_joint(stages, task.entries, task.stds, newcomer=True) if task.how is _How.JOINT
-             else _descend(stages, task.entries, task.stds))
-    forces = tuple(_forces(stages, task.entries))
+    if task.how is _How.DESCENT:
+        sized = _descend(stages, task.entries, task.stds)
+    else:
+        sized = _joint(stages, task.entries, task.stds, newcomer=task.how is _How.JOINT, at=task.at)
+    forces = tuple(force_entries(stages, task.entries))
     refit = stages.refitter.refit_forces(forces) if forces else None
     if sized is None:
         return _Trial(task, None, None, task.entries, task.stds, forces, refit)
@@ -406,16 +342,12 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     steps = []
     while len(entries) < MAX_MECHANISMS and score > EXCESS * noise:
         tasks = []
-        for c in shortlist(_candidates(stages, entries)):
+        for c in shortlist(candidates(stages, entries)):
             trial = (tuple(entries) + (Entry(c.kind, c.place, dict(c.parameters)),), tuple(stds) + (dict(c.std),))
             tasks.append(_Task(c, _How.JOINT, *trial))
             if partial and len(entries) == 1 and c.kind.refit is Refit.RESIMULATE:
                 tasks.append(_Task(c, _How.DESCENT, *trial))
-        trials = run_forked(lambda task: _trial(stages, task), tasks)
-        for t in trials:
-            if t.forces:
-                refitter.remember_refit(t.forces, t.refit)
-        trials = [t for t in trials if t.score is not None]
+        trials = [t for t in _run(stages, tasks) if t.score is not None]
         if not trials:
             break
         best = min(trials, key=lambda t: t.score)
@@ -429,12 +361,15 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     if len(entries) == 1:   # stage 6's answer stands
         return replace(_single(replace(found, selection=replace(found.selection, steps=steps))), steps=steps,
                        score=score)
-    if any(e.kind.refit is Refit.RESIMULATE for e in entries[:-1]):
-        # the earlier sizes were searched before the last mechanism came in: refine them with it
+    if any(e.kind.refit is Refit.RESIMULATE for e in entries[:-1]) and entries[-1].kind.refit is Refit.RESIMULATE:
+        # the earlier sizes were searched before the last mechanism came in: refine them with it (a
+        # dashpot's trial did, :func:`_joint`)
         joint = _joint(stages, entries, stds, newcomer=False)
         if joint is not None:
             structure, entries, stds = joint
             score = refitter.score_joint(structure, entries, records(entries))
+    structure, entries, stds, score, retests = _retest(stages, structure, entries, stds, score)
+    steps += retests
     overall = explained_share(linear, score, noise)
     selection = replace(found.selection, steps=steps, joint=score, joint_explained=overall)
     if found.verdict is Verdict.UNEXPLAINED and overall < ACCEPTED:   # together still too little: unexplained
@@ -444,6 +379,50 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     finding = Finding(Verdict.MECHANISM, first.kind, first.place, named[0].location, named[0].parameters,
                       named[0].std, structure, records(entries), selection)
     return Compound(finding, named, tuple(entries), steps, score)
+
+
+def _same_link(place: Place, other: Place) -> bool:
+    """Whether two places are the same link between two nodes of the rig."""
+    return place.target.link and other.target.link and place.nodes == other.nodes
+
+
+def _run(stages: Stages, tasks) -> list[_Trial]:
+    """The trials of ``tasks``, on the worker processes; their refits recorded by the refitter."""
+    trials = run_forked(lambda task: _trial(stages, task), tasks)
+    for t in trials:
+        if t.forces:
+            stages.refitter.remember_refit(t.forces, t.refit)
+    return trials
+
+
+def _retest(stages: Stages, structure, entries, stds, score):
+    """Every mechanism named is tested again by the rule it joined by, now that the others are in the
+    model: the model without it (the linear part refitted with the other forces, the sizes of those at
+    its link searched again) must leave at least ``EARNS`` more misfit above noise than the model with it.  The one that
+    earns least is dropped; the others are tested again only when more than one did not earn (one that
+    earned beside a mechanism adding less than ``EARNS`` keeps its verdict).  (A mechanism found first
+    may hold what a later one does: a friction's dissipation taken in by a storey damper before the
+    friction joined.)  The last to join earned its place beside all the others and is not tested
+    again until one leaves.  Returns (structure, entries, stds, score, steps).
+    """
+    noise, steps = stages.refitter.noise_nrmse(), []
+    tested = list(range(len(entries) - 1))
+    while tested:
+        tasks = [_Task(None, _How.WITHOUT, tuple(entries[:i] + entries[i + 1:]), tuple(stds[:i] + stds[i + 1:]),
+                       entries[i].place) for i in tested]
+        trials = [(i, t) for i, t in zip(tested, _run(stages, tasks)) if t.score is not None]
+        # (a model without it that replays within the noise, or better than with it: it removes nothing)
+        retests = [(Step(entries[i].kind.name, entries[i].place.location, None, t.score, score, noise,
+                         explained_share(t.score, score, noise) if t.score > max(score, noise) else 0.0,
+                         retest=True), t) for i, t in trials]
+        steps += [s for s, _ in retests]
+        failed = [st for st in retests if not st[0].earned]
+        if not failed:
+            break
+        t = min(failed, key=lambda st: st[0].explained)[1]
+        structure, entries, stds, score = t.structure, list(t.entries), list(t.stds), t.score
+        tested = list(range(len(entries))) if len(failed) > 1 and len(entries) > 1 else []
+    return structure, entries, stds, score, tuple(steps)
 
 
 def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compound | Correction:
@@ -464,7 +443,7 @@ def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compou
     faults = [c for c in sorted(stages.screening.candidates, key=lambda c: -c.explained)
               if c.kind.refit is Refit.CORRECT_DATA and c.explained >= EXPLAINED and _contender(stages, physics, c)]
     if not faults:
-        return physics
+        return _table_fault(stages, physics)
     c = faults[0]
     fault = Entry(c.kind, c.place, dict(c.parameters))
 
@@ -484,6 +463,44 @@ def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compou
         return Compound(replace(again.finding, selection=selection), named, entries, steps, after)
     return Correction(_corrected(stages.model.experiment, fault), refitter.identify_corrected(*fault),
                       corrections - 1, then)
+
+
+def _table_fault(stages: Stages, physics: Compound) -> Compound:
+    """A fault of the table channel beside the physics found, by re-simulation: of those the replay
+    screening fitted (:func:`~momentid.diagnosis.screening.screen_replay`) and the kinematic check
+    does not rule out, the one that replays best with the physics at its screened size is sized with
+    the physics in the model, and joins when it removes at least ``EARNS`` of the training replays'
+    misfit above noise that the physics alone leaves.
+
+    Screening fits a table channel's faults on the linear model's replay, where a bias of the table
+    accelerometer is a step response that the band removes almost entirely; a storey that slips by
+    friction turns the same bias into a steady shear (the floors' weight times it) that makes its
+    slips one-sided: the fault shows only with the physics in the model.  (The floor equations, which
+    named the physics, do not read the table channel: the physics stands as found.)  Physics the MJCF
+    holds as springs and dashpots (no ``callback`` force) leaves the model linear: screening's replay
+    was the faults' test.
+    """
+    refitter, found = stages.refitter, physics.finding
+    noise, score = refitter.noise_nrmse(), physics.score
+    faults = [c for c in stages.screening.candidates if c.domain is Domain.REPLAY
+              and c.kind.refit is Refit.CORRECT_DATA and c.kind.physical(c.parameters)]
+    if score is None or score <= EXCESS * noise or not faults or not any(e.kind.callback for e in physics.entries):
+        return physics
+
+    def replayed(c: Candidate, params: dict) -> float:
+        entries = (Entry(c.kind, c.place, params),) + physics.entries
+        return refitter.score_joint(found.structure, entries, found.records)
+    c = min(faults, key=lambda c: replayed(c, c.parameters))
+    params, std = refitter.resimulate(found.structure, Entry(c.kind, c.place, dict(c.parameters)), physics.entries)
+    after = replayed(c, params)
+    step = Step(c.mechanism, c.location, c.explained, score, after, noise, explained_share(score, after, noise))
+    steps = physics.steps + (step,)
+    if not step.earned:
+        return replace(physics, finding=replace(found, selection=replace(found.selection, steps=steps)), steps=steps)
+    fault = Entry(c.kind, c.place, params)
+    finding = replace(found, selection=replace(found.selection, steps=steps, joint=after))
+    return Compound(finding, physics.mechanisms + (Named(c.mechanism, c.location, params, std),),
+                    (fault,) + physics.entries, steps, after)
 
 
 def _contender(stages: Stages, physics: Compound, fault: Candidate) -> bool:

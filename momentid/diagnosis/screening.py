@@ -33,7 +33,7 @@ from momentid.mechanisms.place import Place, Target
 
 __all__ = ["Domain", "Candidate", "ReplayResiduals", "DampingPattern", "screen_equation", "screen_replay",
            "screen_attachment", "damping_pattern", "signature_columns", "remaining_excess", "pattern_fit",
-           "screening_order"]
+           "screening_order", "linear_springs_left"]
 
 #: Attachment frequencies tried by replay: from just above the top mode ...
 ATTACHMENT_LOW_OVER_TOP_MODE = 1.1
@@ -258,6 +258,29 @@ def remaining_excess(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndar
         coef = np.linalg.lstsq(X[train].reshape(-1, X.shape[-1]), target[train].ravel(), rcond=None)[0]
         left = left - X[~train] @ coef
     return np.sqrt(np.mean(left ** 2, axis=0)) / noise_floor
+
+
+def linear_springs_left(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float, found,
+                        candidates) -> list[Candidate]:
+    """Candidates of ``linear_spring`` kinds (P-Delta) fitted to the nominal model's residual ``rows``,
+    scored by the share of the excess the mechanisms ``found`` leave that their columns (with their
+    confounds: a spring and a dashpot at the storey) remove on held-out blocks.
+
+    Their own score leaves out what the confounds take: the storey's spring, which for a linear
+    spring kind is most of it (the floors' own weight, the same in every run).  Beside a strong
+    nonlinearity elsewhere, which distorts the identified model more than the added masses change
+    the storey, what the lab's model leaves at that storey is the evidence; re-simulation decides.
+    """
+    before = remaining_excess(result, rows, noise_floor, f_top, found) ** 2
+    if before.max() <= EXCESS ** 2:
+        return []
+    out = []
+    for c in candidates:
+        if c.kind.linear_spring:
+            after = remaining_excess(result, rows, noise_floor, f_top, list(found) + [(c.kind, c.place)]) ** 2
+            share = float(np.sum(before - after) / np.sum(np.maximum(before - 1.0, 0.0)))
+            out.append(Candidate(c.kind, c.place, c.parameters, c.std, share, c.domain))
+    return out
 
 
 def screen_replay(result, runs, d: int, band) -> ReplayResiduals:

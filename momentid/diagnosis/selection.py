@@ -103,15 +103,18 @@ class Partial:
 @dataclass(frozen=True)
 class Step:
     """A further mechanism tried by a compound diagnosis: the training runs' NRMSE before and with it,
-    the noise's, and the share of the misfit above noise it removes."""
+    the noise's, and the share of the misfit above noise it removes.  A ``retest``: a mechanism
+    named, tested again once the others are in the model (``before``: the model without it;
+    ``screening_explained`` None)."""
 
     mechanism: str
     location: dict
-    screening_explained: float
+    screening_explained: float | None
     before: float
     after: float
     noise: float
     explained: float
+    retest: bool = False
 
     @property
     def earned(self) -> bool:
@@ -119,10 +122,14 @@ class Step:
         return self.explained >= EARNS
 
     def to_dict(self) -> dict:
-        return {"mechanism": self.mechanism, "location": self.location,
-                "screening_explained": self.screening_explained, "training_nrmse_before": self.before,
-                "training_nrmse_with": self.after, "training_nrmse_noise": self.noise, "explained": self.explained,
-                "earns_above": EARNS, "earned": self.earned}
+        out = {"mechanism": self.mechanism, "location": self.location,
+               "screening_explained": self.screening_explained, "training_nrmse_before": self.before,
+               "training_nrmse_with": self.after, "training_nrmse_noise": self.noise, "explained": self.explained,
+               "earns_above": EARNS, "earned": self.earned}
+        if self.retest:
+            del out["screening_explained"]
+            out["retest"] = True
+        return out
 
 
 @dataclass(frozen=True)

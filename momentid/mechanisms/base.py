@@ -250,6 +250,10 @@ class MechanismKind:
     #: A force that opposes its place's stretch rate: a linear identification takes it into C as an
     #: equivalent viscous damping, so where C's pattern shows a damper, this kind there is its rival.
     dissipative: ClassVar[bool] = False
+    #: A linear storey spring (a loss of stiffness) the identified K takes in, in every run alike: an
+    #: identified model shows it only through what the added masses change; the lab's nominal model
+    #: shows it whole (see :func:`~momentid.diagnosis.screening.linear_springs_left`).
+    linear_spring: ClassVar[bool] = False
     #: A storey kind that adds bodies, joints and tendons of its own to the MJCF
     #: (:meth:`storey_elements`), e.g. ``joint_friction``'s sliders.
     mjcf_elements: ClassVar[bool] = False

@@ -27,6 +27,7 @@ class PDelta(MechanismKind):
                     example=1.0),)
     fitted = Param("weight_per_height", "1/m", "factor / storey height", low=0.0, low_open=True)
     refit = Refit.RESIMULATE
+    linear_spring = True
     summary = "-factor g (mass above) / h x drift across a storey"
 
     def storey_tendon(self, mech, stiffness, damping, weight_above, height):

@@ -58,6 +58,16 @@ def test_hysteresis_switch_and_mixtures():
     assert physics(Place(Target.STOREY, 1), _terms()) == {"class": "linear"}
 
 
+def test_a_hysteresis_that_puts_energy_in_is_not_described_as_one():
+    # the sign of a dissipating hysteretic term (positive: loops of positive area) reversed
+    hyst = {"term": "hysteretic", "coefficient": -500.0, "hysteretic_yield": 0.001, "hysteretic_exponent": 2.0}
+    words = describe(Place(Target.STOREY, 1), _terms(hyst), STRUCTURE, 0.003)
+    assert "negative area" in words and "not a physical hysteresis" in words
+    assert "softening" not in words
+    normal = describe(Place(Target.STOREY, 1), _terms(dict(hyst, coefficient=500.0)), STRUCTURE, 0.003)
+    assert "negative area" not in normal and "loops of area" in normal
+
+
 def test_a_term_larger_than_the_linear_force_is_flagged():
     # storey 1: 2000 N/m; at the peak 5 mm the linear force is 10 N.  A cubic -683 % of the stiffness
     # at the peak (k3 x^2 = -6.83 x 2000) is 68 N there: far above LOUD x 10 N.

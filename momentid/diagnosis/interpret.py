@@ -175,6 +175,10 @@ def _term_words(t: dict, k_lin: float, peak: float, short: str) -> str:
         return f"a friction-like force of {c:.3g} N"
     if term == "hysteretic":
         area = _loop_area(c, t["hysteretic_yield"], t["hysteretic_exponent"], peak)
+        if area < 0:      # a passive hysteresis dissipates: its loops enclose a positive area
+            return (f"a hysteretic-shaped term whose loops have negative area ({1e3 * area:.3g} mJ at the peak "
+                    f"{1e3 * peak:.1f} mm): it puts energy in, which no passive joint or material does; a stand-in "
+                    f"for something the library and the search lack, not a physical hysteresis")
         return (f"hysteretic: softening with amplitude (yield near |{short}| = {1e3 * t['hysteretic_yield']:.2f} mm),"
                 f" loops of area {1e3 * area:.3g} mJ at the peak {1e3 * peak:.1f} mm")
     change = -c / k_lin

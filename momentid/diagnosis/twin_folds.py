@@ -40,7 +40,8 @@ __all__ = ["Fold", "hold_out", "linear_start", "amplitude_trend", "FRICTION_STAR
 FRICTION_STARTS = ((0.02, 0.03, -0.5),)
 #: Optimiser evaluations of the augmented fit (each costs a Jacobian of all its physical parameters: the
 #: augmented fit is ~80 % of `diagnose`'s CPU).  On the shipped rig's four folds (benchmarks/real_folds.py)
-#: 10 hold every criterion; 12 cost 20 % more CPU for no better held-out fit.
+#: 10 hold every criterion (after/refit 0.24-0.61); 12 cost ~20 % more CPU (on the sine_2p0 fold they
+#: reached 18.6 % against 20.4 % held-out NRMSE, in a probe without the command's one-thread BLAS).
 AUGMENTED_NFEV = 10
 #: Seed of the sensor noise added to a simulated trial before it is identified.
 NOISE_SEED = 7
@@ -126,7 +127,8 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int | Non
     # the cores while the augmented fit's single rollouts and Python run; each fit is the same on its own
     guesses = [twin_fit.friction_start(linear.model, tuple(range(1, d + 1)), loss, slip, chi)
                for loss, slip, chi in starts]
-    fits = twin_fit.each(lambda job: job[0](job[1]), [(own_fit, linear.model)] + [(augmented_fit, g) for g in guesses])
+    jobs = [lambda: own_fit(linear.model)] + [lambda guess=guess: augmented_fit(guess) for guess in guesses]
+    fits = twin_fit.each(lambda job: job(), jobs)
     own, augmented = fits[0], min(fits[1:], key=lambda fit: fit.cost)
     tr = trials[held]
     omega, zeta, residues = twin_fit.twin_modes(own.model)

@@ -1,7 +1,8 @@
 """What a step of a compound diagnosis (:mod:`~momentid.diagnosis.compound`) screens: the library
 on what the mechanisms found leave, in the equation residuals of the identified and the nominal
-model, and the damping pattern of C refitted with the forces found; and which candidates of it are
-re-simulated (:func:`shortlist`).
+model (each storey kind also on its own storey's shear residual, where a mechanism found elsewhere
+leaves nothing: :func:`~momentid.diagnosis.screening.screen_storeys`), and the damping pattern of C
+refitted with the forces found; and which candidates of it are re-simulated (:func:`shortlist`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from momentid import mechanisms
 from momentid.diagnosis.refit import ForceRefit
 from momentid.diagnosis.replay import Entry, identified_structure
 from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, linear_springs_left, remaining_excess,
-                                          screen_equation)
+                                          screen_equation, screen_storeys)
 from momentid.diagnosis.selection import SHORTLIST_FLOOR
 from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import EXCESS
@@ -35,6 +36,7 @@ def candidates(stages: Stages, entries) -> list[Candidate]:
     # screened again (its replay screening, stage 4, is its test; the grid would cost most of the time).
     found = [(e.kind, e.place) for e in entries
              if e.kind.target is not Target.CHANNEL and e.kind.refit is not Refit.ATTACHMENT]
+    storey_kinds = [k for k in mechanisms.library() if k.refit is Refit.RESIMULATE]
     domains = [(model.result, residuals.rows, Domain.EQUATION)]
     if residuals.nominal_rows is not None:
         domains.append((model.nominal_result, residuals.nominal_rows, Domain.NOMINAL))
@@ -45,6 +47,8 @@ def candidates(stages: Stages, entries) -> list[Candidate]:
                                     kinds=[k for k in mechanisms.library() if k.refit is not Refit.ATTACHMENT])
             if domain is Domain.NOMINAL and found:   # P-Delta scored by what the lab's model leaves there
                 cands += linear_springs_left(result, rows, residuals.noise_floor, model.f_top, found, cands)
+            if found:   # ... and every storey kind by what is left in its own storey's shear
+                cands += screen_storeys(result, rows, model.f_top, domain, found, kinds=storey_kinds)
             out += cands
     # A linear damper leaves no residual: the pattern of C shows it, once C is refitted with the forces
     # found (unmodelled, they distort the identified C).

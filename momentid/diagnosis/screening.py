@@ -33,7 +33,7 @@ from momentid.mechanisms.place import Place, Target
 
 __all__ = ["Domain", "Candidate", "ReplayResiduals", "DampingPattern", "screen_equation", "screen_replay",
            "screen_attachment", "damping_pattern", "signature_columns", "remaining_excess", "pattern_fit",
-           "screening_order", "linear_springs_left"]
+           "screening_order", "linear_springs_left", "screen_storeys", "storey_shear"]
 
 #: Attachment frequencies tried by replay: from just above the top mode ...
 ATTACHMENT_LOW_OVER_TOP_MODE = 1.1
@@ -280,6 +280,60 @@ def linear_springs_left(result, rows: tuple[ResidualRow, ...], noise_floor: np.n
             after = remaining_excess(result, rows, noise_floor, f_top, list(found) + [(c.kind, c.place)]) ** 2
             share = float(np.sum(before - after) / np.sum(np.maximum(before - 1.0, 0.0)))
             out.append(Candidate(c.kind, c.place, c.parameters, c.std, share, c.domain))
+    return out
+
+
+def storey_shear(x: np.ndarray) -> np.ndarray:
+    """Storey shears from floor forces (..., d): ``V_s = sum over floors i >= s``.  A force across
+    storey ``s`` alone shows in ``V_s`` alone (it pushes its two floors equally and oppositely)."""
+    return np.cumsum(x[..., ::-1], axis=-1)[..., ::-1]
+
+
+def screen_storeys(result, rows: tuple[ResidualRow, ...], f_top: float, domain: Domain, found=(),
+                   kinds=None) -> list[Candidate]:
+    """Storey candidates scored on their own storey's shear residual, at the storeys where the
+    mechanisms ``found`` leave an excess there (above ``EXCESS`` of the noise's shear).
+
+    :func:`screen_equation` scores a candidate by the share of the whole residual's excess it
+    explains; beside a mechanism whose own misfit is large (a friction that sticks, whose signature
+    is a smoothed sign of noisy drift velocities), a second mechanism in another storey holds a few
+    percent of that excess and is never re-simulated, though its storey's shear holds nothing else.
+    Here each storey's shear is the target, the found mechanisms' columns (those acting across it)
+    confounds; ``explained`` is the share of that storey's excess (re-simulation decides).
+    """
+    fs = rows[0].run.sample_rate
+    train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
+    test = ~train
+    V = storey_shear(np.concatenate([r.residual for r in rows]))
+    N = storey_shear(np.concatenate([r.noise for r in rows]))
+    signals = _equation_signals(result, rows, f_top)
+    found_columns = [storey_shear(c) for kind, place in found for c in signature_columns(kind, signals, place)]
+    kinds = mechanisms.library() if kinds is None else kinds
+    done, out = set(found), []
+    for s in range(signals.storeys):
+        noise_ms = float(np.mean(N[:, s] ** 2))
+        extra = [c[:, s] for c in found_columns if np.any(c[train, s] != 0)]
+        left = V[:, s]
+        if extra:
+            X = np.column_stack(extra)
+            left = left - X @ np.linalg.lstsq(X[train], left[train], rcond=None)[0]
+        if noise_ms <= 0 or np.mean(left[test] ** 2) <= EXCESS ** 2 * noise_ms:
+            continue
+
+        def fit(columns, confounds, place, to_params, s=s, extra=extra):
+            confounds = [c[:, s] for c in map(storey_shear, confounds) if np.any(c[train, s] != 0)]
+            res = _fit([storey_shear(c)[:, s] for c in columns], confounds + extra, V[:, s], train, test,
+                       noise_ms * int(test.sum()))
+            if res is None:
+                return []
+            coef, std, explained = res
+            params, pstd = to_params(coef, std)
+            return [Screened(place, params, pstd, explained)]
+        for kind in kinds:
+            for place in kind.places(signals.storeys):
+                if place.target is Target.STOREY and place.level == s + 1 and (kind, place) not in done:
+                    out += [Candidate(kind, sc.place, sc.parameters, sc.std, sc.explained, domain)
+                            for sc in kind.screen_equation(signals, fit, place)]
     return out
 
 

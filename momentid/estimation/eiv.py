@@ -43,6 +43,7 @@ import scipy.optimize
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
+from momentid.estimation.columns import Cached, forward_jacobian, point_map
 from momentid.estimation.noise import estimate_noise
 from momentid.estimation.linear import discretize, force_response, frequency_response, output_matrix
 
@@ -259,14 +260,19 @@ def _scales(layout, theta):
     return s
 
 
-def _jacobian(problem, theta, scale, base=None):
-    r0 = problem.residual(theta) if base is None else base
-    J = np.empty((r0.size, theta.size))
+def _jacobian(problem, theta, scale, evaluate=None):
+    """Central-difference Jacobian (residuals x parameters) at ``theta`` in steps of ``1e-6 scale``;
+    ``evaluate``: a :func:`~momentid.estimation.columns.point_map` (default: one point after another)."""
+    step = 1e-6
+    points = []
     for i in range(theta.size):
-        step = 1e-6
         e = np.zeros_like(theta)
         e[i] = scale[i] * step
-        J[:, i] = (problem.residual(theta + e) - problem.residual(theta - e)) / (2 * step)
+        points += [theta + e, theta - e]
+    values = (evaluate or (lambda xs: [problem.residual(x) for x in xs]))(points)
+    J = np.empty((values[0].size, theta.size))
+    for i in range(theta.size):
+        J[:, i] = (values[2 * i] - values[2 * i + 1]) / (2 * step)
     return J
 
 
@@ -279,7 +285,7 @@ def _with_forces(sp: Spectra, run: RunData, force) -> Spectra:
     return _replace(sp, forces=np.asarray(directions, float), F=F[k])
 
 
-def _rescaled_start(layout, problem, theta0):
+def _rescaled_start(layout, problem, theta0, evaluate):
     """Best overall scale of M, C, K for the start.
 
     Noise biases the equation-form start mostly as a common scale factor
@@ -293,13 +299,7 @@ def _rescaled_start(layout, problem, theta0):
         return t
 
     factors = np.geomspace(0.3, 30.0, 41)
-    costs = []
-    for f in factors:
-        try:
-            r = problem.residual(scaled(f))
-            costs.append(float(r @ r))
-        except (IdentificationError, np.linalg.LinAlgError, ValueError):
-            costs.append(np.inf)
+    costs = [float(r @ r) for r in evaluate([scaled(f) for f in factors])]   # (residual() catches failures)
     best = int(np.argmin(costs))
     return scaled(factors[best]) if np.isfinite(costs[best]) else theta0
 
@@ -349,16 +349,19 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
         spectra_list = [_with_forces(sp, r, f) for sp, r, f in zip(spectra_list, runs, forces)]
     _require_memory(spectra_list, len(theta0), runs)
     problem = _Problem(layout, spectra_list)
-    theta0 = _rescaled_start(layout, problem, np.asarray(theta0, float))
+    with point_map(problem.residual) as evaluate:
+        theta0 = _rescaled_start(layout, problem, np.asarray(theta0, float), evaluate)
     scale = _scales(layout, theta0)
-    result = scipy.optimize.least_squares(
-        lambda delta: problem.residual(theta0 + scale * delta), np.zeros_like(theta0),
-        jac="2-point", method="trf", x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10,
-        max_nfev=max_nfev,
-    )
+    fun = Cached(lambda delta: problem.residual(theta0 + scale * delta))
+    with point_map(fun.fun) as evaluate:   # the Jacobians' columns on the cores (the same numbers)
+        result = scipy.optimize.least_squares(
+            fun, np.zeros_like(theta0), jac=lambda delta: forward_jacobian(fun, delta, evaluate),
+            method="trf", x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev,
+        )
     theta = theta0 + scale * result.x
     r = problem.residual(theta)
-    J = _jacobian(problem, theta, scale, base=r)
+    with point_map(problem.residual) as evaluate:
+        J = _jacobian(problem, theta, scale, evaluate)
     dof = max(r.size - theta.size - problem.n_nuisance, 1)
     s2 = float(r @ r) / dof
     try:

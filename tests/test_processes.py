@@ -129,3 +129,26 @@ def test_sigkill_of_diagnose_leaves_no_worker(friction_recording, tmp_path):
     checks the same in the default run, in a second)."""
     proc = _diagnose(friction_recording, tmp_path / "report")
     _kill_and_check(proc, _workers_of(proc, 2), signal.SIGKILL)
+
+
+def _slow_square(x):
+    time.sleep(0.2)
+    return x * x
+
+
+def test_a_background_job_returns_its_result_and_raises_its_error():
+    from momentid.core.processes import in_background
+    with in_background(lambda: _slow_square(7)) as result:
+        assert result() == 49 and result() == 49   # asked twice: the same value, one job
+    with in_background(lambda: 1 / 0) as result:
+        with pytest.raises(ZeroDivisionError):
+            result()
+
+
+def test_a_background_job_not_asked_for_is_killed_when_the_block_ends():
+    from momentid.core.processes import in_background
+    with in_background(lambda: time.sleep(60)):
+        assert len(_children(os.getpid())) >= 1
+    # The speculative job is gone at once, not after its minute.
+    assert not [p for p in _children(os.getpid()) if Path(f"/proc/{p}/cmdline").exists()
+                and b"pytest" in Path(f"/proc/{p}/cmdline").read_bytes()]

@@ -26,7 +26,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator
 
-__all__ = ["die_with_parent", "forked_pool", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
+__all__ = ["die_with_parent", "forked_pool", "in_background", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
            "quiet_broken_pipe"]
 
 #: ``prctl`` option asking for a signal when the parent dies (linux/prctl.h).
@@ -97,6 +97,59 @@ def forked_pool(workers: int, initializer: Callable | None = None, initargs: tup
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _background_child(job: Callable, send, parent: int) -> None:
+    die_with_parent(parent)
+    try:
+        out = (True, job())
+    except BaseException as exc:   # noqa: BLE001  (re-raised in the parent)
+        out = (False, exc)
+    try:
+        send.send(out)
+    except Exception as exc:       # noqa: BLE001  (an unpicklable result or error: say so)
+        send.send((False, RuntimeError(f"background job's result could not be sent back: {exc}")))
+    send.close()
+
+
+@contextlib.contextmanager
+def in_background(job: Callable[[], object]) -> Iterator[Callable[[], object]]:
+    """Start ``job()`` in a forked process (which inherits it: nothing is pickled but its result);
+    yields a callable returning the result (re-raising the job's exception).  A job whose result is
+    not asked for is killed when the block is left (work started on speculation, not needed).
+
+    In a worker process (a job of :func:`forked_pool`: the other core is busy), or where fork does
+    not exist, the job runs here, when its result is first asked for.
+    """
+    if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.parent_process() is not None:
+        done: list = []
+        yield lambda: done[0] if done else done.append(job()) or done[0]
+        return
+    context = multiprocessing.get_context("fork")
+    receive, send = context.Pipe(duplex=False)
+    process = context.Process(target=_background_child, args=(job, send, os.getpid()), daemon=True)
+    process.start()
+    send.close()
+    got: list = []
+
+    def result():
+        if not got:
+            try:
+                got.append(receive.recv())
+            except EOFError:
+                got.append((False, RuntimeError(f"background job died (exit code {process.exitcode})")))
+            process.join()
+        ok, value = got[0]
+        if not ok:
+            raise value
+        return value
+    try:
+        yield result
+    finally:
+        if process.is_alive():
+            process.kill()
+        process.join()
+        receive.close()
 
 
 class Terminated(KeyboardInterrupt):

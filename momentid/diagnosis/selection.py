@@ -11,12 +11,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.locate import Localisation
 from momentid.diagnosis.refit import Augmented, ForceRefit, Refitter
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel
 from momentid.diagnosis.screening import (Candidate, DampingPattern, Domain, ReplayResiduals, damping_pattern,
-                                          screen_attachment, screen_equation, screen_replay)
+                                          screen_attachment, screen_equation, screen_replay, screening_order)
 from momentid.diagnosis.sensor_check import SensorCheck
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
@@ -239,21 +240,31 @@ def _physical(c: Candidate) -> bool:
 def screen(model: LinearModel, residuals: EquationResiduals, sensors: SensorCheck) -> Screening:
     """Stage 4: screen every mechanism in every domain; keep the physical candidates."""
     d, result, band, f_top = model.storeys, model.result, model.band, model.f_top
-    candidates = screen_equation(result, residuals.rows, residuals.noise_floor, f_top, Domain.EQUATION)
+    has_nominal = model.nominal_result is not None
+    domains = [(result, residuals.rows, Domain.EQUATION)]
     if residuals.nominal_rows is not None:
-        candidates += screen_equation(model.nominal_result, residuals.nominal_rows, residuals.noise_floor, f_top,
-                                      Domain.NOMINAL)
+        domains.append((model.nominal_result, residuals.nominal_rows, Domain.NOMINAL))
+    # An attachment's equation signature is a grid over frequencies (most of the time): its own job.
+    kinds = mechanisms.library()
+    groups = [[k for k in kinds if k.refit is not Refit.ATTACHMENT], [k for k in kinds if k.refit is Refit.ATTACHMENT]]
+    jobs = [lambda r=r, rows=rows, domain=domain, group=group: screen_equation(r, rows, residuals.noise_floor, f_top,
+                                                                               domain, kinds=group)
+            for r, rows, domain in domains for group in groups]
+    # A flexibly attached mass, by replay: of the nominal model when the lab states one (the identified
+    # model has partly absorbed the attachment in the runs that carry it), else of the identified one.
+    jobs.append(lambda: screen_attachment(model.nominal_result if has_nominal else result, model.train.runs, d, band,
+                                          f_top))
     # Replay residuals (table accelerometer effects).  The floor equations do not involve the table
     # accelerometer, so when the nominal model explains them, it is the fair model to replay (a fit
     # driven by a faulty base channel has partly absorbed the fault).
-    has_nominal = model.nominal_result is not None
-    replay = screen_replay(model.nominal_result if has_nominal and not residuals.nominal_mismatch else result,
-                           model.train.runs, d, band)
-    candidates += replay.candidates
-    # A flexibly attached mass, by replay: of the nominal model when the lab states one (the identified
-    # model has partly absorbed the attachment in the runs that carry it), else of the identified one.
-    candidates += screen_attachment(model.nominal_result if has_nominal else result, model.train.runs, d, band,
-                                    f_top)
+    jobs.append(lambda: screen_replay(model.nominal_result if has_nominal and not residuals.nominal_mismatch
+                                      else result, model.train.runs, d, band))
+    *equation, attachment, replay = run_forked(lambda job: job(), jobs)   # independent: on the workers
+    order = {pair: i for i, pair in enumerate(screening_order(kinds, d))}
+    candidates = []
+    for i in range(len(domains)):   # each domain's candidates in screening order, as one screen gives them
+        candidates += sorted(equation[2 * i] + equation[2 * i + 1], key=lambda c: order[(c.kind, c.place)])
+    candidates += list(replay.candidates) + attachment
     pattern = damping_pattern(result, d)
     pattern_info = pattern.info if pattern else {}
     if pattern and not _physical(pattern.candidate):   # a negative damper is no explanation

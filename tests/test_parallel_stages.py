@@ -1,0 +1,29 @@
+"""Stages that run on the worker processes give what they give one after the other, bit for bit."""
+
+from __future__ import annotations
+
+from threadpoolctl import threadpool_limits
+
+from momentid.diagnosis import selection
+from momentid.diagnosis.residuals import equation_residuals, fit_linear_model
+from momentid.diagnosis.selection import screen
+from momentid.diagnosis.sensor_check import check_sensors
+
+
+def _screened(experiment):
+    with threadpool_limits(limits=1, user_api="blas"):   # as diagnose() runs its stages, and a worker its job
+        model = fit_linear_model(experiment, None)
+        residuals = equation_residuals(model)
+        out = screen(model, residuals, check_sensors(model))
+    return [(c.kind.name, c.place, c.parameters, c.std, c.explained, c.domain) for c in out.candidates], out.pool
+
+
+def test_screening_on_the_workers_is_screening_in_turn(simulated, monkeypatch):
+    experiment = simulated("hidden/flexible_floor3", ideal=True)
+    forked, forked_pool = _screened(experiment)
+    monkeypatch.setattr(selection, "run_forked", lambda job, tasks: [job(t) for t in tasks])   # here, in turn
+    here, here_pool = _screened(experiment)
+    # Every candidate, in the same order, with the same numbers: the jobs are deterministic and
+    # single-threaded, and their results are merged in the order one screen gives them.
+    assert forked == here and len(forked) > 10
+    assert [(c.kind, c.place) for c in forked_pool] == [(c.kind, c.place) for c in here_pool]

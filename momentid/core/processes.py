@@ -26,8 +26,15 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator
 
-__all__ = ["die_with_parent", "forked_pool", "in_background", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
+__all__ = ["die_with_parent", "forked_pool", "in_background", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
            "quiet_broken_pipe"]
+
+#: Processes fork helpers of their own above this depth: the command (depth 0), not its workers (a
+#: diagnosis trial's errors-in-variables fit parallelised inside a worker measured no faster: the
+#: other worker keeps the cores busy).
+NESTING = 1
+#: This process's depth: 0 in the command, one more in each forked worker (set as it starts).
+_DEPTH = 0
 
 #: ``prctl`` option asking for a signal when the parent dies (linux/prctl.h).
 PR_SET_PDEATHSIG = 1
@@ -62,7 +69,19 @@ def die_with_parent(parent: int) -> None:
     threading.Thread(target=_watch, args=(parent,), daemon=True, name="momentid-parent-watch").start()
 
 
+def _deeper() -> None:
+    global _DEPTH
+    _DEPTH += 1
+
+
+def may_fork() -> bool:
+    """Whether this process may start helper processes: fork exists and it is not too deep
+    (:data:`NESTING`)."""
+    return "fork" in multiprocessing.get_all_start_methods() and _DEPTH < NESTING
+
+
 def _start(parent: int, initializer: Callable | None, initargs: tuple) -> None:
+    _deeper()
     die_with_parent(parent)
     if initializer is not None:
         initializer(*initargs)
@@ -100,6 +119,8 @@ def forked_pool(workers: int, initializer: Callable | None = None, initargs: tup
 
 
 def _background_child(job: Callable, send, parent: int) -> None:
+    global _DEPTH
+    _DEPTH = NESTING   # a job on speculation keeps to one core: it starts no helpers of its own
     die_with_parent(parent)
     try:
         out = (True, job())
@@ -118,10 +139,10 @@ def in_background(job: Callable[[], object]) -> Iterator[Callable[[], object]]:
     yields a callable returning the result (re-raising the job's exception).  A job whose result is
     not asked for is killed when the block is left (work started on speculation, not needed).
 
-    In a worker process (a job of :func:`forked_pool`: the other core is busy), or where fork does
-    not exist, the job runs here, when its result is first asked for.
+    In a process too deep to fork (:func:`may_fork`), or where fork does not exist, the job runs
+    here, when its result is first asked for.
     """
-    if "fork" not in multiprocessing.get_all_start_methods() or multiprocessing.parent_process() is not None:
+    if not may_fork():
         done: list = []
         yield lambda: done[0] if done else done.append(job()) or done[0]
         return

@@ -6,21 +6,20 @@ few milliseconds of small dense algebra that holds the GIL.  :func:`point_map` e
 residual at a list of points on :data:`WORKERS` forked processes, which inherit the function (only
 the points and the residuals are pickled); :func:`forward_jacobian` is scipy's ``'2-point'``
 Jacobian (the same steps and the same arithmetic, so the same numbers, bit for bit) with its columns
-evaluated that way.  Inside a worker process (a diagnosis trial already runs on the other core)
-the points are evaluated one after the other.
+evaluated that way.  In a worker process (a diagnosis trial: the other worker keeps the other core
+busy) the points are evaluated one after the other.
 """
 
 from __future__ import annotations
 
 import contextlib
 import math
-import multiprocessing
 from typing import Callable, Iterator
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from momentid.core.processes import forked_pool
+from momentid.core.processes import forked_pool, may_fork
 
 __all__ = ["WORKERS", "point_map", "forward_jacobian", "Cached"]
 
@@ -47,10 +46,11 @@ def point_map(fun: Callable[[np.ndarray], np.ndarray], workers: int = WORKERS
         Deterministic and single-threaded: ``x`` (n,) -> residual (m,).  Inherited by the workers,
         not pickled; it must not change while the block runs.
     workers : int
-        Processes; below 2, or inside a worker process, the points are evaluated here in turn.
+        Processes; below 2, or in a process that may not fork (:func:`~momentid.core.processes.may_fork`:
+        a worker), the points are evaluated here in turn.
     """
     global _FUN
-    if workers < 2 or multiprocessing.parent_process() is not None or _FUN is not None:
+    if workers < 2 or not may_fork() or _FUN is not None:
         yield lambda points: [fun(x) for x in points]
         return
     _FUN = fun

@@ -354,6 +354,14 @@ def _physics(stages: Stages, start: _Start) -> Compound:
         c = best.task.candidate
         steps.append(Step(c.mechanism, c.location, c.explained, score, best.score, noise,
                           explained_share(score, best.score, noise)))
+        if not steps[-1].earned and partial and len(entries) == 1:
+            # the partial start may be wrong (a damper taking in a friction's dissipation a storey
+            # away): the two best newcomers together, without it
+            best = _pair(stages, trials)
+            if best is not None:
+                c = best.task.candidate
+                steps.append(Step(c.mechanism, c.location, c.explained, score, best.score, noise,
+                                  explained_share(score, best.score, noise)))
         if not steps[-1].earned:
             break
         score, structure, entries, stds = best.score, best.structure, list(best.entries), list(best.stds)
@@ -379,6 +387,24 @@ def _physics(stages: Stages, start: _Start) -> Compound:
     finding = Finding(Verdict.MECHANISM, first.kind, first.place, named[0].location, named[0].parameters,
                       named[0].std, structure, records(entries), selection)
     return Compound(finding, named, tuple(entries), steps, score)
+
+
+def _pair(stages: Stages, trials) -> _Trial | None:
+    """The two newcomers whose trials beside a partial start replayed best (storey forces at two
+    places), sized together by the descent on the lab's nominal model without the start: its trial,
+    or None (fewer than two such newcomers, or a size unphysical)."""
+    ranked, places = [], set()
+    for t in sorted(trials, key=lambda t: t.score):
+        c = t.task.candidate
+        if c is not None and c.kind.refit is Refit.RESIMULATE and c.place not in places:
+            places.add(c.place)
+            ranked.append(c)
+    if len(ranked) < 2:
+        return None
+    c1, c2 = ranked[:2]
+    entries = (Entry(c1.kind, c1.place, dict(c1.parameters)), Entry(c2.kind, c2.place, dict(c2.parameters)))
+    trial = _run(stages, [_Task(c2, _How.DESCENT, entries, (dict(c1.std), dict(c2.std)))])[0]
+    return trial if trial.score is not None else None
 
 
 def _same_link(place: Place, other: Place) -> bool:

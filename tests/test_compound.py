@@ -170,3 +170,27 @@ def test_forked_trials_keep_their_order_and_return_their_results():
     assert run_forked(job, [3, 1, 2]) == [(4, 9), (2, 1), (3, 4)]
     assert seen == []                  # nothing but the values came back
     assert run_forked(job, [5]) == [(6, 25)] and seen == [5]   # one task: in process
+
+
+def test_a_failed_partial_start_gives_way_to_its_two_best_newcomers(monkeypatch):
+    """Beside a wrong partial start no newcomer earns its place; the two that replayed best beside it
+    (storey forces at two places: not a damper of the pattern, not the same place twice) are tried
+    together without it, by the descent."""
+    from momentid.diagnosis import compound
+    start = compound.Entry(mechanisms.get("extra_damper"), Place(Target.STOREY, 3), {"c": 30.0})
+
+    def trial(c, score):
+        task = compound._Task(c, compound._How.JOINT, (start, compound.Entry(c.kind, c.place, c.parameters)),
+                              ({}, {}))
+        return compound._Trial(task, score, None, task.entries, task.stds, (), None)
+    trials = [trial(_candidate("extra_damper", 4, 0.3, Domain.PARAMETERS), 0.12),   # best, but a damper
+              trial(_candidate("p_delta", 5, 0.9), 0.13), trial(_candidate("cubic_stiffness", 5, 0.5), 0.14),
+              trial(_candidate("coulomb_friction", 4, 0.8), 0.15)]
+    seen = []
+    monkeypatch.setattr(compound, "_run", lambda stages, tasks: seen.extend(tasks) or [
+        compound._Trial(tasks[0], 0.01, None, tasks[0].entries, tasks[0].stds, (), None)])
+    got = compound._pair(None, trials)
+    assert len(seen) == 1 and seen[0].how is compound._How.DESCENT and got.score == 0.01
+    assert [(e.kind.name, e.place.index) for e in seen[0].entries] == [("p_delta", 5), ("coulomb_friction", 4)]
+    # Fewer than two storey forces at two places: nothing to try.
+    assert compound._pair(None, trials[:3]) is None

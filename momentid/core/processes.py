@@ -144,7 +144,12 @@ def in_background(job: Callable[[], object]) -> Iterator[Callable[[], object]]:
     """
     if not may_fork():
         done: list = []
-        yield lambda: done[0] if done else done.append(job()) or done[0]
+
+        def here():
+            if not done:
+                done.append(job())
+            return done[0]
+        yield here
         return
     context = multiprocessing.get_context("fork")
     receive, send = context.Pipe(duplex=False)

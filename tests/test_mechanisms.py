@@ -378,3 +378,29 @@ def test_a_storey_candidate_is_scored_on_its_own_storey_shear():
     # On the whole residual the friction's misfit dominates the excess: the cubic's share is a few per
     # cent at most (measured -0.1 %), below the 15 % a compound step needs to re-simulate it.
     assert whole.explained < 0.1
+
+
+def _bitwise_equal(a, b) -> bool:
+    return np.float64(a).tobytes() == np.float64(b).tobytes()
+
+
+@pytest.mark.parametrize("name", [k.name for k in mechanisms.rig_kinds() if k.callback])
+def test_a_kinds_law_on_floats_is_its_force_law_bit_for_bit(name):
+    """The simulator's callback calls each kind's ``link_law`` on floats; it must be the registered
+    storey or floor force law as the callback applied it before (on numpy scalars), to the last bit:
+    replays, and so every diagnosis, stay the same."""
+    kind = mechanisms.get(name)
+    records = [{p.name: p.example for p in kind.params}]
+    if kind.open_search:   # every term of a discovered force at once, not the example's one
+        records.append({p.name: (p.example or 1e3) if p.name.startswith("c_") else p.example for p in kind.params})
+    place, stiffness = kind.place(2), 2500.0
+    force = kind.storey_force if place.target is Target.STOREY else kind.floor_force
+    rng = np.random.default_rng(3)
+    x, v = rng.normal(0, 3e-3, 400), rng.normal(0, 3e-2, 400)
+    x[:3], v[:3] = 0.0, [0.0, -0.0, 1e-9]   # the rest state and signed zeros
+    for params in records:
+        law = kind.link_law(params, place, stiffness)
+        state = {"state": 1e-3} if kind.has_state(params) else {}
+        for xi, vi, t in zip(x, v, np.linspace(0.0, 10.0, len(x))):
+            want = force(params, np.float64(xi), np.float64(vi), float(t), stiffness, **state)
+            assert _bitwise_equal(law(float(xi), float(vi), float(t), **state), want), (params, xi, vi, t)

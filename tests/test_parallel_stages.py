@@ -27,3 +27,30 @@ def test_screening_on_the_workers_is_screening_in_turn(simulated, monkeypatch):
     # single-threaded, and their results are merged in the order one screen gives them.
     assert forked == here and len(forked) > 10
     assert [(c.kind, c.place) for c in forked_pool] == [(c.kind, c.place) for c in here_pool]
+
+
+def test_replays_on_the_workers_are_replays_in_turn(simulated, monkeypatch):
+    """A size search replays its grid and its curvature's neighbours side by side, and a score its
+    training runs: the same numbers as one after the other."""
+    from momentid import mechanisms
+    from momentid.diagnosis import refit
+    from momentid.diagnosis.replay import Entry, records
+
+    experiment = simulated("hidden/friction_storey2")
+    with threadpool_limits(limits=1, user_api="blas"):
+        model = fit_linear_model(experiment, None)
+    kind = mechanisms.get("coulomb_friction")
+    entry = Entry(kind, kind.place(2), {"force": 0.2})
+
+    def searched():
+        refitter = refit.Refitter(model, None)   # its caches empty
+        structure = refitter.better_of((refitter.linear_structure, model.nominal), [entry])
+        params, std = refitter.resimulate(structure, entry, span=(0.8, 2.0), grid=3)
+        found = Entry(kind, entry.place, params)
+        return structure, params, std, refitter.score_joint(structure, [found], records([found]))
+
+    forked = searched()
+    monkeypatch.setattr(refit, "run_forked", lambda job, tasks: [job(t) for t in tasks])   # here, in turn
+    here = searched()
+    # Each replay is deterministic and single-threaded: equal, not close.
+    assert forked == here and 0.2 < forked[1]["force"] < 0.4

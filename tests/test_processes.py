@@ -152,3 +152,33 @@ def test_a_background_job_not_asked_for_is_killed_when_the_block_ends():
     # The speculative job is gone at once, not after its minute.
     assert not [p for p in _children(os.getpid()) if Path(f"/proc/{p}/cmdline").exists()
                 and b"pytest" in Path(f"/proc/{p}/cmdline").read_bytes()]
+
+
+def _borrower(task: str):
+    """``short``: its pid.  ``long``: the pids of two jobs it runs with run_forked, retried until a
+    core of the pool is idle (the short task's worker, with no task left) and helpers ran them."""
+    from momentid.diagnosis.workers import run_forked
+    if task == "short":
+        return [os.getpid()]
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline:
+        pids = run_forked(lambda i: os.getpid(), [0, 1])
+        if os.getpid() not in pids:
+            return pids
+        time.sleep(0.05)
+    return [os.getpid()]
+
+
+def test_a_worker_borrows_the_core_of_a_worker_with_no_task_left():
+    from momentid.core import processes
+    from momentid.diagnosis.workers import run_forked
+    short, long = run_forked(_borrower, ["short", "long"])
+    # The long task's own jobs ran in processes of its own (not in itself, not in the short task's
+    # worker), once the short task's worker was idle; inside a worker with its partner busy they run
+    # in the worker itself (``helpers_allowed`` is False there: checked by the retry loop's first
+    # passes when the short task has not finished yet, and by the diagnosis tests' equal results).
+    assert len(set(long)) == 2 and not set(long) & set(short) and os.getpid() not in long
+    # The command lends nothing once its pool is gone.
+    assert processes._IDLE is None
+    with processes.helpers_allowed() as allowed:
+        assert allowed   # the command itself may always start helpers

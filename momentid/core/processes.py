@@ -26,7 +26,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator
 
-__all__ = ["die_with_parent", "forked_pool", "in_background", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
+__all__ = ["die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
            "quiet_broken_pipe"]
 
 #: Processes fork helpers of their own above this depth: the command (depth 0), not its workers (a
@@ -78,6 +78,54 @@ def may_fork() -> bool:
     """Whether this process may start helper processes: fork exists and it is not too deep
     (:data:`NESTING`)."""
     return "fork" in multiprocessing.get_all_start_methods() and _DEPTH < NESTING
+
+
+#: Cores of the running pool of :func:`lending` whose worker has no task left: a semaphore its
+#: workers' tasks borrow from (:func:`helpers_allowed`); None outside such a pool.
+_IDLE = None
+
+
+@contextlib.contextmanager
+def lending() -> Iterator[Callable[[int], None]]:
+    """Around a pool of workers forked in the block: yields ``idle(n)``, which the command calls
+    with how many of the pool's workers have no task left; each such core is lent, one at a time,
+    to a task still running (:func:`helpers_allowed`), so that the last and longest task of a batch
+    does not run on one core while the other waits.  (Forked helpers change no result: each job is
+    deterministic and single-threaded.)"""
+    global _IDLE
+    if not may_fork():
+        yield lambda n: None
+        return
+    _IDLE = multiprocessing.get_context("fork").Semaphore(0)
+    lent = 0
+
+    def idle(n: int) -> None:
+        nonlocal lent
+        while lent < n:
+            _IDLE.release()
+            lent += 1
+    try:
+        yield idle
+    finally:
+        _IDLE = None
+
+
+@contextlib.contextmanager
+def helpers_allowed() -> Iterator[bool]:
+    """Whether this process may start helper processes for the block: the command may
+    (:func:`may_fork`); a worker of a :func:`lending` pool may while it holds one of the pool's idle
+    cores, borrowed for the block (the helpers, deeper, start none of their own)."""
+    if may_fork():
+        yield True
+        return
+    idle = _IDLE
+    if _DEPTH != NESTING or idle is None or not idle.acquire(block=False):
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        idle.release()
 
 
 def _start(parent: int, initializer: Callable | None, initargs: tuple) -> None:

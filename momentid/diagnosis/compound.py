@@ -244,7 +244,7 @@ def _joint(stages: Stages, entries, stds, *, newcomer: bool, at: Place | None = 
     if not all(e.kind.physical(e.parameters) for e in entries):
         return None
     if model.nominal is not None:
-        structure = min((structure, model.nominal), key=lambda b: refitter.misfit(b, entries))
+        structure = refitter.better_of((structure, model.nominal), entries)
     for i in forces:
         if i not in searched:
             continue
@@ -413,8 +413,15 @@ def _same_link(place: Place, other: Place) -> bool:
 
 
 def _run(stages: Stages, tasks) -> list[_Trial]:
-    """The trials of ``tasks``, on the worker processes; their refits recorded by the refitter."""
-    trials = run_forked(lambda task: _trial(stages, task), tasks)
+    """The trials of ``tasks``, on the worker processes; their refits recorded by the refitter.
+
+    The descents (a grid of replays for each force) start first, so that the short trials fill
+    the cores at the end; the trials come back in the order of ``tasks``.
+    """
+    order = sorted(range(len(tasks)), key=lambda i: tasks[i].how is not _How.DESCENT)
+    trials: list = [None] * len(tasks)
+    for i, t in zip(order, run_forked(lambda task: _trial(stages, task), [tasks[i] for i in order])):
+        trials[i] = t
     for t in trials:
         if t.forces:
             stages.refitter.remember_refit(t.forces, t.refit)

@@ -33,6 +33,7 @@ from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks,
 from momentid.diagnosis.selection import Finding, OutsideLibrary, explained_share
 from momentid.diagnosis.thresholds import EXCESS
 from momentid.diagnosis.verdict import Verdict
+from momentid.diagnosis.workers import run_forked
 from momentid.errors import ModelError, SimulationError
 from momentid.mechanisms.data_driven import TERMS
 from momentid.mechanisms.place import Place, Target
@@ -318,12 +319,13 @@ def _open_search(model: LinearModel, residuals: EquationResiduals, refitter: Res
     bases = [(residuals.rows, refitter.linear_structure)]
     if residuals.nominal_rows is not None and model.nominal is not None:
         bases.append((residuals.nominal_rows, model.nominal))
-    trials = []
-    for rows, structure in bases:
+
+    def tried(base):   # the search on one base and its replay (the bases side by side, on the workers)
+        rows, structure = base
         with threadpool_limits(limits=1, user_api="blas"):   # tall, thin products: threads only add waiting
             got = search(rows, residuals.noise_floor, model.storeys)
-        if got is not None:
-            trials.append((_misfit(refitter, structure, _record(got)), structure, got))
+        return None if got is None else (_misfit(refitter, structure, _record(got)), got)
+    trials = [(t[0], structure, t[1]) for (_, structure), t in zip(bases, run_forked(tried, bases)) if t is not None]
     if not trials:
         return None
     _, structure, got = min(trials, key=lambda t: t[0])

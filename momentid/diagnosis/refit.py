@@ -26,6 +26,7 @@ from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.replay import Entry, identified_structure, joint_replay, records
 from momentid.diagnosis.residuals import LinearModel, band_signals, nrmse, replay_noise
+from momentid.diagnosis.workers import run_forked
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
 from momentid.estimation.reconstruct import Prefilter, band_filter
@@ -155,6 +156,7 @@ class Resimulator(Protocol):
     def linear_score(self) -> float: ...
     def noise_nrmse(self) -> float: ...
     def misfit(self, structure: Structure, entries) -> float: ...
+    def better_of(self, structures, entries) -> Structure: ...
     def resimulate(self, structure: Structure, entry: Entry, others=(), span=SEARCH_RANGE,
                    grid: int = 0) -> tuple[dict, dict]: ...
     def refit_forces(self, entries) -> ForceRefit | None: ...
@@ -276,7 +278,7 @@ class Refitter:
             # (a friction that sticks a storey leaves the linear fit poorly determined); the pair that
             # replays best wins.
             bases = [structure] + ([nominal] if nominal is not None else [])
-            structure = min(bases, key=lambda b: self.misfit(b, [Entry(kind, place, params)]))
+            structure = self.better_of(bases, [Entry(kind, place, params)])
             params, sim_std = self.resimulate(structure, Entry(kind, place, params))
             # the search's std is conditional on the linear model; the refit's marginal std carries
             # the linear model's own uncertainty: report both, in quadrature
@@ -298,12 +300,12 @@ class Refitter:
                 a_, b_ = structure.rayleigh_mu, structure.rayleigh_kappa
             structure = replace(structure, rayleigh_mu=max(a_, 0.0), rayleigh_kappa=max(b_, 0.0))
             if nominal is not None:   # the lab's own model with the damper may replay better
-                structure = min((structure, nominal), key=lambda b: self.misfit(b, [Entry(kind, place, params)]))
+                structure = self.better_of((structure, nominal), [Entry(kind, place, params)])
         elif kind.refit is Refit.CORRECT_DATA:
             corrected = self.identify_corrected(kind, place, params)
             structure = identified_structure(corrected, nominal)
             if nominal is not None:   # the corrected data may fit the lab's own model better
-                structure = min((structure, nominal), key=lambda b: self.misfit(b, [Entry(kind, place, params)]))
+                structure = self.better_of((structure, nominal), [Entry(kind, place, params)])
         return Augmented(kind, place, structure, params, std, kind.as_records(place, params), refit, corrected)
 
     # ---------------------------------------------------------------- replays of the training runs
@@ -326,6 +328,17 @@ class Refitter:
             m = band_filter(measured[g], fs, band)
             q += float(np.sum(((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
         return q
+
+    def misfits(self, trials) -> list[float]:
+        """:meth:`misfit` of each ``(structure, entries)`` of ``trials``, on the worker processes when
+        there are several (independent replays: the same values as one after the other)."""
+        return run_forked(lambda trial: self.misfit(*trial), list(trials))
+
+    def better_of(self, structures, entries) -> Structure:
+        """The one of ``structures`` whose model with ``entries`` has the least :meth:`misfit` (the
+        first of equals)."""
+        q = self.misfits([(b, entries) for b in structures])
+        return structures[min(range(len(q)), key=q.__getitem__)]
 
     def resimulate(self, structure: Structure, entry: Entry, others=(), span=SEARCH_RANGE,
                    grid: int = 0) -> tuple[dict, dict]:
@@ -354,17 +367,21 @@ class Refitter:
             return params, {}
         seen: dict[float, float] = {}
 
+        def costs(xs) -> list[float]:   # sizes known in advance: replayed side by side
+            xs = [float(x) for x in xs]
+            new = list(dict.fromkeys(x for x in xs if x not in seen))
+            trials = [(structure, [*others, Entry(kind, place, dict(params, **{key: x}))]) for x in new]
+            seen.update(zip(new, self.misfits(trials)))
+            return [seen[x] for x in xs]
+
         def cost(x):
-            x = float(x)
-            if x not in seen:
-                seen[x] = self.misfit(structure, [*others, Entry(kind, place, dict(params, **{key: x}))])
-            return seen[x]
+            return costs([x])[0]
 
         sign = math.copysign(1.0, p0)
         bounds = (math.log(span[0] * abs(p0)), math.log(span[1] * abs(p0)))
         if grid > 1:
             u = np.linspace(*bounds, grid)
-            k = int(np.argmin([cost(sign * math.exp(x)) for x in u]))
+            k = int(np.argmin(costs([sign * math.exp(x) for x in u])))
             bounds = (u[max(k - 1, 0)], u[min(k + 1, grid - 1)])
             p0 = sign * math.exp(u[k])
         res = scipy.optimize.minimize_scalar(lambda u: cost(sign * math.exp(u)), bounds=bounds,
@@ -372,7 +389,7 @@ class Refitter:
                                              options={"xatol": SEARCH_TOLERANCE, "maxiter": SEARCH_REPLAYS})
         best = sign * math.exp(float(res.x)) if res.fun < cost(p0) else p0
         step = CURVATURE_STEP * abs(best)
-        q0, qm, qp = cost(best), cost(best - step), cost(best + step)
+        q0, qm, qp = costs([best, best - step, best + step])
         curvature = (qp - 2 * q0 + qm) / step ** 2
         if curvature > 0:   # the search stops within its tolerance: finish with the parabola's vertex
             vertex = best - step * (qp - qm) / (2 * (qp - 2 * q0 + qm))
@@ -394,16 +411,15 @@ class Refitter:
         :func:`~momentid.diagnosis.replay.joint_replay` does) and their ``mechanism_records``."""
         key = self._score_key(structure, entries, mechanism_records)
         if key not in self._scores:
-            out = []
-            for run in self.model.train.runs:
+            def replayed(run: RunData) -> float:
                 try:
                     sim, measured = joint_replay(structure, entries, mechanism_records, run, self.d,
                                                  structure != self.nominal)
                 except (SimulationError, ModelError):   # an unstable augmented model explains nothing
-                    out.append(float("inf"))
-                    break
-                out.append(nrmse(sim, measured, run.sample_rate, self.model.band))
-            self._scores[key] = float(np.mean(out))
+                    return float("inf")
+                return nrmse(sim, measured, run.sample_rate, self.model.band)
+            out = run_forked(replayed, self.model.train.runs)   # independent runs: side by side
+            self._scores[key] = float("inf") if math.inf in out else float(np.mean(out))
         return self._scores[key]
 
     def linear_score(self) -> float:

@@ -12,11 +12,12 @@ other (each job is deterministic and single-threaded).
 
 from __future__ import annotations
 
+from concurrent.futures import as_completed
 from typing import Callable, Sequence
 
 from threadpoolctl import threadpool_limits
 
-from momentid.core.processes import forked_pool
+from momentid.core.processes import forked_pool, helpers_allowed, lending
 
 __all__ = ["WORKERS", "run_forked"]
 
@@ -34,7 +35,10 @@ def _call(i: int):
 
 
 def run_forked(job: Callable, tasks: Sequence) -> list:
-    """``[job(task) for task in tasks]``, on :data:`WORKERS` forked processes when there are several.
+    """``[job(task) for task in tasks]``, on :data:`WORKERS` forked processes when there are several
+    and this process may start them (:func:`~momentid.core.processes.helpers_allowed`: the command,
+    or a worker's task while a core of its pool is idle).  The cores of workers with no task left
+    are lent to the tasks still running (:func:`~momentid.core.processes.lending`).
 
     Parameters
     ----------
@@ -50,10 +54,21 @@ def run_forked(job: Callable, tasks: Sequence) -> list:
     """
     if len(tasks) < 2:
         return [job(task) for task in tasks]
+    with helpers_allowed() as allowed:
+        if not allowed:
+            return [job(task) for task in tasks]
+        return _forked(job, tasks)
+
+
+def _forked(job: Callable, tasks: Sequence) -> list:
     global _JOB
-    _JOB = (job, tasks)
+    outer, _JOB = _JOB, (job, tasks)   # (a worker's own task is the outer job: restored after)
+    n = min(WORKERS, len(tasks))
     try:
-        with forked_pool(min(WORKERS, len(tasks))) as pool:   # workers that die with the diagnosis
-            return list(pool.map(_call, range(len(tasks))))
+        with lending() as idle, forked_pool(n) as pool:   # workers that die with the diagnosis
+            futures = [pool.submit(_call, i) for i in range(len(tasks))]
+            for done, _ in enumerate(as_completed(futures), start=1):
+                idle(n - min(n, len(tasks) - done))   # workers with no task left lend their cores
+            return [f.result() for f in futures]
     finally:
-        _JOB = None
+        _JOB = outer

@@ -19,7 +19,7 @@ from typing import Callable, Iterator
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from momentid.core.processes import forked_pool, may_fork
+from momentid.core.processes import forked_pool, helpers_allowed
 
 __all__ = ["WORKERS", "point_map", "forward_jacobian", "Cached"]
 
@@ -46,19 +46,22 @@ def point_map(fun: Callable[[np.ndarray], np.ndarray], workers: int = WORKERS
         Deterministic and single-threaded: ``x`` (n,) -> residual (m,).  Inherited by the workers,
         not pickled; it must not change while the block runs.
     workers : int
-        Processes; below 2, or in a process that may not fork (:func:`~momentid.core.processes.may_fork`:
-        a worker), the points are evaluated here in turn.
+        Processes; below 2, or in a process that may not start helpers
+        (:func:`~momentid.core.processes.helpers_allowed`: a worker with no idle core to borrow), the
+        points are evaluated here in turn.
     """
     global _FUN
-    if workers < 2 or not may_fork() or _FUN is not None:
-        yield lambda points: [fun(x) for x in points]
-        return
-    _FUN = fun
-    try:
-        with forked_pool(workers) as pool:
-            yield lambda points: list(pool.map(_evaluate, points, chunksize=max(1, math.ceil(len(points) / workers))))
-    finally:
-        _FUN = None
+    with helpers_allowed() as allowed:
+        if workers < 2 or not allowed or _FUN is not None:
+            yield lambda points: [fun(x) for x in points]
+            return
+        _FUN = fun
+        try:
+            with forked_pool(workers) as pool:
+                yield lambda points: list(pool.map(_evaluate, points,
+                                                   chunksize=max(1, math.ceil(len(points) / workers))))
+        finally:
+            _FUN = None
 
 
 class Cached:

@@ -65,14 +65,15 @@ class CallbackForces:
     (:func:`momentid.lab.rig.callback_forces`) to the floor joints at every RK4 stage, and act_dyn
     callback returning the rates of their internal states (:meth:`state_rate`).
 
-    Called about 4 times a step, so it works on floats: each mechanism's place (a storey, a floor
-    against the table, two floors) is read from its upper floor's joint and its lower one's (none for
-    the table) and pushes on both, with its kind's registered law
-    (:meth:`~momentid.mechanisms.base.MechanismKind.storey_force` for a storey,
+    Called about 4 times a step, most of a replay's time, so it works on Python floats: each
+    mechanism's place (a storey, a floor against the table, two floors) is read from its upper floor's
+    joint and its lower one's (none for the table) and pushes on both, with its kind's law on floats
+    (:meth:`~momentid.mechanisms.base.MechanismKind.link_law`: the registered
+    :meth:`~momentid.mechanisms.base.MechanismKind.storey_force` for a storey,
     :meth:`~momentid.mechanisms.base.MechanismKind.floor_force` for another link; the same that
-    :func:`~momentid.lab.rig.callback_forces` applies to arrays).  A force with memory reads its state
-    from its actuator's activation (:func:`momentid.lab.rig.state_actuator`), the trial value of the
-    RK4 stage.
+    :func:`~momentid.lab.rig.callback_forces` applies to arrays).  The floors' forces are summed in a
+    list and written once.  A force with memory reads its state from its actuator's activation
+    (:func:`momentid.lab.rig.state_actuator`), the trial value of the RK4 stage.
 
     Parameters
     ----------
@@ -88,8 +89,12 @@ class CallbackForces:
         self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
         dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
+        if dofs != list(range(dofs[0], dofs[0] + d)):
+            raise SimulationError(f"the floor joints' dofs {dofs} are not one after another: expected the "
+                                  f"chain of momentid.lab.rig.build_spec")
         self.floor_dofs = np.array(dofs)
-        self.terms = []
+        self._floors = slice(dofs[0], dofs[0] + d)
+        self.terms = []   # (law on floats, upper dof, lower dof or -1, activation address or -1)
         self.rates: dict[int, tuple] = {}   # state actuator id -> (rate law, top, below, params, act address)
         for m in self.mechanisms:
             kind = mechanisms_registry.get(m.type)
@@ -99,24 +104,31 @@ class CallbackForces:
             k = structure.storey_stiffness[upper - 1] if structure is not None and kind.needs_stiffness else None
             if kind.needs_stiffness and k is None:
                 raise SimulationError(f"{m.type} needs the structure's storey stiffnesses")
-            law = kind.storey_force if place.target is Target.STOREY else kind.floor_force
             p, adr = dict(m.parameters), -1
             if kind.has_state(p):
                 act = model.actuator(rig.state_actuator(len(self.rates)))
                 adr = int(model.actuator_actadr[act.id])
                 self.rates[act.id] = (kind.state_rate, top, below, p, adr)
-            self.terms.append((law, top, below, p, k, adr))
+            self.terms.append((kind.link_law(p, place, k), top, below, adr))
+        self._bound = None   # (data, its qpos, qvel, qfrc_applied, act): the arrays of the last data seen
 
     def __call__(self, model, data) -> None:
-        qpos, qvel, out = data.qpos, data.qvel, data.qfrc_applied
-        out[self.floor_dofs] = 0.0
-        for law, top, below, p, k, adr in self.terms:
-            x = qpos[top] - (qpos[below] if below >= 0 else 0.0)
-            v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
-            f = law(p, x, v, data.time, k) if adr < 0 else law(p, x, v, data.time, k, state=float(data.act[adr]))
-            out[top] -= f               # the link resists its stretch on its upper floor ...
-            if below >= 0:              # ... and on its lower one
-                out[below] += f
+        bound = self._bound
+        if bound is None or bound[0] is not data:   # a rollout calls with one data throughout
+            bound = self._bound = (data, data.qpos, data.qvel, data.qfrc_applied, data.act)
+        _, qpos, qvel, out, act = bound
+        q, v, t, lo = qpos.tolist(), qvel.tolist(), data.time, self._floors.start
+        forces = [0.0] * (self._floors.stop - lo)
+        for law, top, below, adr in self.terms:
+            if below >= 0:
+                x, xd = q[top] - q[below], v[top] - v[below]
+            else:
+                x, xd = q[top], v[top]
+            f = law(x, xd, t) if adr < 0 else law(x, xd, t, state=float(act[adr]))
+            forces[top - lo] -= f           # the link resists its stretch on its upper floor ...
+            if below >= 0:                  # ... and on its lower one
+                forces[below - lo] += f
+        out[self._floors] = forces
 
     def state_rate(self, model, data, actuator: int) -> float:
         """``mjcb_act_dyn``: the rate of a state actuator's activation (a force's internal state)."""

@@ -337,6 +337,19 @@ class MechanismKind:
         """
         raise NotImplementedError(f"{self.name} is not a callback link force")
 
+    def link_law(self, params: dict, place: Place, stiffness: float | None) -> Callable[..., float]:
+        """The force across ``place``'s link as the simulator's callback calls it, about four times a
+        step: a function of floats ``(stretch, rate, time)`` (and the keyword ``state`` when the force
+        has memory) returning a float.
+
+        The default binds ``params`` and ``stiffness`` to :meth:`storey_force` (a storey) or
+        :meth:`floor_force` (another link).  A kind may return a leaner function with the same
+        arithmetic on floats, bit for bit (the callback's Python is most of a replay's time; tested
+        against the law in ``tests/test_model.py``).
+        """
+        law = self.storey_force if place.target is Target.STOREY else self.floor_force
+        return lambda x, v, t, **state: law(params, x, v, t, stiffness, **state)
+
     def has_state(self, params: dict) -> bool:
         """True when the force has memory: one internal state the simulator integrates with the
         motion (a MuJoCo actuator's activation, see :mod:`momentid.lab.rig`), passed to

@@ -44,6 +44,10 @@ class CoulombFriction(MechanismKind):
     def storey_force(self, params, drift, drift_velocity, time, stiffness):
         return params["force"] * smooth_sign(drift_velocity / FRICTION_SMOOTHING)
 
+    def link_law(self, params, place, stiffness):
+        force, tanh = params["force"], math.tanh   # storey_force on floats, without its calls
+        return lambda x, v, t: force * tanh(v / FRICTION_SMOOTHING)
+
     def screen_equation(self, signals, fit, place):
         velocity = signals.stretch_rate(place)
         eps = SCREENING_SMOOTHING * float(np.sqrt(np.mean(velocity ** 2))) or _STILL

@@ -21,6 +21,10 @@ class CubicStiffness(MechanismKind):
     def storey_force(self, params, drift, drift_velocity, time, stiffness):
         return params["k3"] * drift * drift * drift
 
+    def link_law(self, params, place, stiffness):
+        k3 = params["k3"]   # storey_force on floats, without its call
+        return lambda x, v, t: k3 * x * x * x
+
     def screen_equation(self, signals, fit, place):
         return fit([signals.columns(signals.stretch(place) ** 3, place)], signals.linear_confounds(place), place,
                    one_coefficient("k3"))

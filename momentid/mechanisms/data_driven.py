@@ -77,41 +77,42 @@ _BY_NAME = {t.name: t for t in TERMS}
 _EXAMPLES = {"x3": 3.5e7}
 
 
+#: Each term's signal ``(params, x, v, time, state)`` -> force per unit coefficient; floats or arrays.
+_SIGNALS = {
+    "x": lambda p, x, v, time, state: x,
+    "v": lambda p, x, v, time, state: v,
+    "x_abs_x": lambda p, x, v, time, state: x * abs(x),
+    "x3": lambda p, x, v, time, state: x ** 3,
+    "v_abs_v": lambda p, x, v, time, state: v * abs(v),
+    "sign_v": lambda p, x, v, time, state: np.tanh(v / p["sign_v_scale"]),
+    "dead_zone": lambda p, x, v, time, state: np.sign(x) * np.maximum(abs(x) - p["dead_zone_delta"], 0.0),
+    "gap_pos": lambda p, x, v, time, state: np.maximum(x - p["gap_pos_delta"], 0.0),
+    "gap_neg": lambda p, x, v, time, state: np.minimum(x + p["gap_neg_delta"], 0.0),
+    "hysteretic": lambda p, x, v, time, state: state,
+    "switch": lambda p, x, v, time, state: x * (np.asarray(time) >= p["switch_time"]),
+}
+
+
 def term_signal(name: str, params: dict, x, v, time, state=0.0):
     """The signal of term ``name`` (its force per unit coefficient) at ``x`` (m), ``v`` (m/s), ``time``
     (s) and hysteretic state ``state`` (m), with the record's shape parameters; floats or arrays."""
-    if name == "x":
-        return x
-    if name == "v":
-        return v
-    if name == "x_abs_x":
-        return x * abs(x)
-    if name == "x3":
-        return x ** 3
-    if name == "v_abs_v":
-        return v * abs(v)
-    if name == "sign_v":
-        return np.tanh(v / params["sign_v_scale"])
-    if name == "dead_zone":
-        return np.sign(x) * np.maximum(abs(x) - params["dead_zone_delta"], 0.0)
-    if name == "gap_pos":
-        return np.maximum(x - params["gap_pos_delta"], 0.0)
-    if name == "gap_neg":
-        return np.minimum(x + params["gap_neg_delta"], 0.0)
-    if name == "hysteretic":
-        return state
-    if name == "switch":
-        return x * (np.asarray(time) >= params["switch_time"])
-    raise KeyError(f"unknown term {name!r}: expected one of {', '.join(_BY_NAME)}")
+    if name not in _SIGNALS:
+        raise KeyError(f"unknown term {name!r}: expected one of {', '.join(_BY_NAME)}")
+    return _SIGNALS[name](params, x, v, time, state)
 
 
 def law(params: dict, x, v, time, state=0.0):
     """The discovered force (N, positive resists ``x``): the sum of the record's terms; floats or arrays."""
+    return _summed(params, [(params[t.coefficient], _SIGNALS[t.name]) for t in TERMS], x, v, time, state)
+
+
+def _summed(params: dict, active, x, v, time, state):
+    """``sum c signal(x, v, time, state)`` over ``active`` ((coefficient, signal) pairs, in
+    :data:`TERMS`' order; those of coefficient 0 are skipped)."""
     total = 0.0 * x
-    for term in TERMS:
-        c = params[term.coefficient]
+    for c, signal in active:
         if c != 0.0:
-            total = total + c * term_signal(term.name, params, x, v, time, state)
+            total = total + c * signal(params, x, v, time, state)
     return float(total) if isinstance(x, float) else total
 
 
@@ -124,6 +125,10 @@ class _DataDriven(MechanismKind):
 
     def has_state(self, params):
         return params["c_hysteretic"] != 0.0
+
+    def link_law(self, params, place, stiffness):
+        active = [(params[t.coefficient], _SIGNALS[t.name]) for t in TERMS if params[t.coefficient] != 0.0]
+        return lambda x, v, t, state=0.0: _summed(params, active, x, v, t, state)
 
     def state_rate(self, params, state, displacement, velocity):
         return bouc_wen_rate(state, velocity, params["hysteretic_yield"], params["hysteretic_exponent"],

@@ -392,15 +392,31 @@ def test_a_kinds_law_on_floats_is_its_force_law_bit_for_bit(name):
     kind = mechanisms.get(name)
     records = [{p.name: p.example for p in kind.params}]
     if kind.open_search:   # every term of a discovered force at once, not the example's one
-        records.append({p.name: (p.example or 1e3) if p.name.startswith("c_") else p.example for p in kind.params})
+        every = {p.name: (p.example or 1e3) if p.name.startswith("c_") else p.example for p in kind.params}
+        records += [every, {k: 0.0 if k.endswith("_delta") else value for k, value in every.items()}]   # gaps of 0
     place, stiffness = kind.place(2), 2500.0
     force = kind.storey_force if place.target is Target.STOREY else kind.floor_force
     rng = np.random.default_rng(3)
     x, v = rng.normal(0, 3e-3, 400), rng.normal(0, 3e-2, 400)
     x[:3], v[:3] = 0.0, [0.0, -0.0, 1e-9]   # the rest state and signed zeros
+    x[3:5] = [1e-3, -1e-3]                  # at the examples' gaps: a stretch of exactly +-0 beyond them
     for params in records:
         law = kind.link_law(params, place, stiffness)
         state = {"state": 1e-3} if kind.has_state(params) else {}
         for xi, vi, t in zip(x, v, np.linspace(0.0, 10.0, len(x))):
             want = force(params, np.float64(xi), np.float64(vi), float(t), stiffness, **state)
             assert _bitwise_equal(law(float(xi), float(vi), float(t), **state), want), (params, xi, vi, t)
+
+
+def test_a_discovered_forces_terms_on_floats_are_numpys_bit_for_bit():
+    """Each term's signal on floats (the callback's) against its numpy form, term by term, at the
+    values where numpy's choices show: signed zeros, a gap of exactly 0 and NaN."""
+    from momentid.mechanisms import data_driven as dd
+    params = {"sign_v_scale": 1e-3, "dead_zone_delta": 0.0, "gap_pos_delta": 0.0, "gap_neg_delta": 0.0,
+              "switch_time": 1.0}
+    values = [0.0, -0.0, 1e-3, -1e-3, float("nan")]
+    for name in dd._SIGNALS:
+        for x in values:
+            for t in (0.5, 1.0, 2.0):
+                want = dd._SIGNALS[name](params, np.float64(x), np.float64(x), t, 0.0)
+                assert _bitwise_equal(dd._FLOAT_SIGNALS[name](params, x, x, t, 0.0), want), (name, x, t)

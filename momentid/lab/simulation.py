@@ -72,7 +72,7 @@ class CallbackForces:
     :meth:`~momentid.mechanisms.base.MechanismKind.storey_force` for a storey,
     :meth:`~momentid.mechanisms.base.MechanismKind.floor_force` for another link; the same that
     :func:`~momentid.lab.rig.callback_forces` applies to arrays).  The floors' forces are summed in a
-    list and written once.  A force with memory reads its state from its actuator's activation
+    list and written to the floors they push.  A force with memory reads its state from its actuator's activation
     (:func:`momentid.lab.rig.state_actuator`), the trial value of the RK4 stage.
 
     Parameters
@@ -110,13 +110,22 @@ class CallbackForces:
                 adr = int(model.actuator_actadr[act.id])
                 self.rates[act.id] = (kind.state_rate, top, below, p, adr)
             self.terms.append((kind.link_law(p, place, k), top, below, adr))
+        lo = self._floors.start
+        self._pushed = [(i, i - lo) for i in sorted({i for _, top, below, _ in self.terms for i in (top, below)
+                                                      if i >= 0})]   # (dof, index in the floors' forces)
         self._bound = None   # (data, its qpos, qvel, qfrc_applied, act): the arrays of the last data seen
 
-    def __call__(self, model, data) -> None:
+    def _bind(self, data) -> tuple:
+        """(data, its qpos, qvel, qfrc_applied, act): the arrays of ``data``, made once per data (a
+        rollout calls with one data throughout)."""
         bound = self._bound
-        if bound is None or bound[0] is not data:   # a rollout calls with one data throughout
+        if bound is None or bound[0] is not data:
             bound = self._bound = (data, data.qpos, data.qvel, data.qfrc_applied, data.act)
-        _, qpos, qvel, out, act = bound
+            data.qfrc_applied[self._floors] = 0.0   # floors no force pushes stay at 0
+        return bound
+
+    def __call__(self, model, data) -> None:
+        _, qpos, qvel, out, act = self._bind(data)
         q, v, t, lo = qpos.tolist(), qvel.tolist(), data.time, self._floors.start
         forces = [0.0] * (self._floors.stop - lo)
         for law, top, below, adr in self.terms:
@@ -128,14 +137,16 @@ class CallbackForces:
             forces[top - lo] -= f           # the link resists its stretch on its upper floor ...
             if below >= 0:                  # ... and on its lower one
                 forces[below - lo] += f
-        out[self._floors] = forces
+        for i, j in self._pushed:
+            out[i] = forces[j]
 
     def state_rate(self, model, data, actuator: int) -> float:
         """``mjcb_act_dyn``: the rate of a state actuator's activation (a force's internal state)."""
         rate, top, below, p, adr = self.rates[actuator]
-        x = data.qpos[top] - (data.qpos[below] if below >= 0 else 0.0)
-        v = data.qvel[top] - (data.qvel[below] if below >= 0 else 0.0)
-        return float(rate(p, float(data.act[adr]), float(x), float(v)))
+        _, qpos, qvel, _, act = self._bind(data)
+        x = qpos[top] - (qpos[below] if below >= 0 else 0.0)
+        v = qvel[top] - (qvel[below] if below >= 0 else 0.0)
+        return float(rate(p, float(act[adr]), float(x), float(v)))
 
 
 def initial_state(model: mujoco.MjModel, z: float, zd: float, zdd: float) -> np.ndarray:

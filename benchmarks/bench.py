@@ -16,6 +16,10 @@ Stages and their baselines:
     same-sized models on rollout's own pool, or one call per model on a
     thread pool); and ``simulate(workers=1)`` against the same
     rollout on one thread.
+``replay``
+    A diagnosis's replay of a run with a storey friction and a cubic storey spring (the force
+    callback's Python at every RK4 stage) against ``mujoco.rollout`` of the same model and
+    controls with no callback.
 ``record``
     ``write_experiment`` + ``read_recording`` against the ``mcap`` library
     writing the very same records (taken from momentid's file) and reading
@@ -44,14 +48,14 @@ from pathlib import Path
 from typing import Callable
 
 from benchmarks.common import Row, bench_scenario, describe_scenario, machine, scenario_variant_file
-from benchmarks.stages import (RUN_TARGET_S, bench_identify, bench_record, bench_run, bench_simulate, bench_view,
-                               stacked_regressor)
+from benchmarks.stages import (RUN_TARGET_S, bench_identify, bench_record, bench_replay, bench_run, bench_simulate,
+                               bench_view, stacked_regressor)
 from momentid.errors import MomentidError
 
 __all__ = ["STAGES", "RUN_TARGET_S", "bench_scenario", "scenario_variant_file", "run_benchmarks", "stacked_regressor",
            "format_report", "format_markdown", "add_arguments", "main"]
 
-STAGES = ("simulate", "record", "identify", "view", "run")
+STAGES = ("simulate", "replay", "record", "identify", "view", "run")
 #: Record length of ``--quick`` (s): a CI-sized smoke run of every stage.
 QUICK_DURATION = 0.5
 
@@ -97,7 +101,7 @@ def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = Non
     with tempfile.TemporaryDirectory(prefix="momentid-bench-", dir=workdir) as tmp:
         tmp = Path(tmp)
         rows: list[Row] = []
-        needs_data = [s for s in stages if s in ("simulate", "record", "identify", "view")]
+        needs_data = [s for s in stages if s in ("simulate", "replay", "record", "identify", "view")]
         if needs_data:
             sc = bench_scenario(scenario, duration=duration)
             report["scenario"] = describe_scenario(sc)
@@ -106,6 +110,8 @@ def run_benchmarks(*, stages=STAGES, scenario=None, duration: float | None = Non
             say(f"  {stage} ...")
             if stage == "simulate":
                 rows += bench_simulate(sc, workers=workers, repeat=repeat)
+            elif stage == "replay":
+                rows += bench_replay(sc, experiment, repeat=repeat)
             elif stage == "record":
                 rows += bench_record(experiment, tmp, repeat=repeat)
             elif stage == "identify":

@@ -155,6 +155,46 @@ def bench_simulate(scenario, *, workers: int, repeat: int) -> list[Row]:
     return rows
 
 
+# ----------------------------------------------------------------------------- replay
+
+#: The forces the ``replay`` stage's callback applies: a storey friction and a cubic storey spring
+#: (the library's two ``callback`` kinds a diagnosis re-simulates most).
+REPLAY_FORCES = (("coulomb_friction", 1, (("force", 0.3),)), ("cubic_stiffness", 2, (("k3", 3.5e7),)))
+
+
+def bench_replay(scenario, experiment, *, repeat: int) -> list[Row]:
+    """A diagnosis's replay of one run with callback forces against ``mujoco.rollout`` of the same
+    compiled model from the same state under the same controls, with no callback installed: what the
+    Python force callback costs over MuJoCo's own stepping."""
+    import mujoco
+    from mujoco import rollout
+
+    from momentid.core.structure import Mechanism
+    from momentid.lab import rig
+    from momentid.lab.simulation import initial_state, replay, table_jerk
+
+    forces = tuple(Mechanism(*f) for f in REPLAY_FORCES if f[1] <= scenario.structure.storeys)
+    run = experiment.runs[0]
+    h = 1.0 / run.sample_rate
+    model = rig.compile_model(rig.build_spec(scenario.structure, run.added_mass, timestep=h, name="replay",
+                                             mechanisms=forces))
+    zdd = np.asarray(run["zdd"], float)
+    nodes = np.append(zdd, zdd[-1])
+    state, jerk = initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h)
+    data = mujoco.MjData(model)
+    t = {k: min(v) for k, v in timed(
+        repeat, momentid=lambda: replay(scenario.structure, forces, run),
+        rollout=lambda: rollout.rollout(model, data, state[None], jerk[None, :, None])).items()}
+    calls = 4 * len(jerk)   # RK4: the callback at each of a step's four stages
+    return [Row("replay", t["momentid"], t["rollout"],
+                f"replay of run {run.name!r} ({len(jerk)} steps) with {', '.join(f[0] for f in REPLAY_FORCES)}",
+                "mujoco.rollout of the same model and controls, no callback",
+                note=f"the force callback: {1e6 * (t['momentid'] - t['rollout']) / calls:.2f} us a call "
+                     f"({calls} calls), model building and the outputs' copy included",
+                extra={"steps": len(jerk), "callback_calls": calls,
+                       "us_per_call": 1e6 * (t["momentid"] - t["rollout"]) / calls})]
+
+
 # ----------------------------------------------------------------------------- record
 
 def _mcap_records(path: Path) -> list:

@@ -55,9 +55,9 @@ def test_stacked_regressor_is_satisfied_by_the_analytic_model():
 
 def test_cli_bench_quick_writes_json(tmp_path, capsys):
     out = tmp_path / "bench.json"
-    assert bench_main(["--quick", "--stages", "identify,run", "--json-out", str(out)]) == 0
+    assert bench_main(["--quick", "--stages", "identify,replay,run", "--json-out", str(out)]) == 0
     report = json.loads(out.read_text())
-    assert [r["stage"] for r in report["rows"]] == ["identify", "run"]
+    assert [r["stage"] for r in report["rows"]] == ["identify", "replay", "run"]
     _check_rows(report["rows"])
     assert report["settings"]["quick"] and "ratio" in capsys.readouterr().out
     assert bench_main(["--stages", "nope"]) == 2

@@ -54,3 +54,28 @@ def test_replays_on_the_workers_are_replays_in_turn(simulated, monkeypatch):
     here = searched()
     # Each replay is deterministic and single-threaded: equal, not close.
     assert forked == here and 0.2 < forked[1]["force"] < 0.4
+
+
+def test_the_size_searchs_opening_is_the_one_scipy_asks_for():
+    """``brent_opening`` names the first three points scipy's bounded search evaluates, replayed side
+    by side before it asks (a wrong prediction would waste a replay each search)."""
+    import math
+
+    import numpy as np
+    import scipy.optimize
+
+    from momentid.diagnosis.refit import brent_opening
+    grid = np.linspace(math.log(0.3), math.log(3.0), 11)
+    for bounds, xatol in (((math.log(0.5 * 0.2), math.log(5.0 * 0.2)), 0.005), ((math.log(0.5), math.log(2.0)), 0.02),
+                          ((grid[3], grid[5]), 0.005)):
+        for low in (bounds[0] - 1.0, bounds[1] + 1.0, 0.5 * (bounds[0] + bounds[1])):   # minimum below, above, inside
+            asked, values = [], []
+
+            def f(u):
+                asked.append(u)
+                values.append((u - low) ** 2)
+                return values[-1]
+            scipy.optimize.minimize_scalar(f, bounds=bounds, method="bounded", options={"xatol": xatol})
+            # equal, not close: they are the cache's keys
+            assert asked[:2] == brent_opening(bounds, xatol)
+            assert asked[2:3] == brent_opening(bounds, xatol, (values[0], values[1]))

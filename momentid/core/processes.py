@@ -7,6 +7,10 @@ runs with callback physics, sweep cases): every worker asks the kernel to kill i
 dies (:func:`die_with_parent`), and leaving the pool by an exception (Ctrl-C, or SIGTERM, which the
 command line turns into Ctrl-C) kills the workers at once instead of waiting for their tasks.
 
+Who may start workers: the command (:func:`may_fork`); a worker only while it holds a core of its
+pool that has no task left (:func:`lending`, :func:`helpers_allowed`), so that the last, longest
+task of a batch does not run on one core while the other waits.
+
 A command (:func:`momentid.cli.main`) handles SIGTERM like Ctrl-C (:func:`sigterm_as_interrupt`:
 outputs are closed as on an interrupt, and it exits 143), and a reader of its output that goes away
 ends it quietly (:func:`quiet_broken_pipe`: exit 141, no text).
@@ -26,7 +30,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from typing import Callable, Iterator
 
-__all__ = ["die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
+__all__ = ["borrow", "die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
            "quiet_broken_pipe"]
 
 #: Processes fork helpers of their own above this depth: the command (depth 0), not its workers (a
@@ -110,22 +114,28 @@ def lending() -> Iterator[Callable[[int], None]]:
         _IDLE = None
 
 
-@contextlib.contextmanager
-def helpers_allowed() -> Iterator[bool]:
-    """Whether this process may start helper processes for the block: the command may
-    (:func:`may_fork`); a worker of a :func:`lending` pool may while it holds one of the pool's idle
-    cores, borrowed for the block (the helpers, deeper, start none of their own)."""
+def borrow() -> Callable[[], None] | None:
+    """Leave to start helper processes now: a callable that gives it back, or None.  The command has
+    it (:func:`may_fork`); a worker of a :func:`lending` pool has it while it holds one of the pool's
+    idle cores (the helpers, deeper, start none of their own)."""
     if may_fork():
-        yield True
-        return
+        return lambda: None
     idle = _IDLE
     if _DEPTH != NESTING or idle is None or not idle.acquire(block=False):
-        yield False
-        return
+        return None
+    return idle.release
+
+
+@contextlib.contextmanager
+def helpers_allowed() -> Iterator[bool]:
+    """Whether this process may start helper processes for the block (:func:`borrow`, given back
+    when the block ends)."""
+    release = borrow()
     try:
-        yield True
+        yield release is not None
     finally:
-        idle.release()
+        if release is not None:
+            release()
 
 
 def _start(parent: int, initializer: Callable | None, initargs: tuple) -> None:

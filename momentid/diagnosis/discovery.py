@@ -27,7 +27,7 @@ from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.function_library import ALWAYS, Selected, columns, hysteretic_columns, refine, select
 from momentid.diagnosis.interpret import describe, physics
-from momentid.diagnosis.refit import Resimulator
+from momentid.diagnosis.refit import Resimulator, brent_opening
 from momentid.diagnosis.replay import Entry, measured_groups
 from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
 from momentid.diagnosis.selection import Finding, OutsideLibrary, explained_share
@@ -39,7 +39,8 @@ from momentid.mechanisms.data_driven import TERMS
 from momentid.mechanisms.place import Place, Target
 
 __all__ = ["Discovery", "Found", "discover", "search", "found_terms", "challenge", "as_unexplained", "plot_discovered",
-           "ACCEPTED_SHARE", "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS", "PLOT_POINTS"]
+           "ACCEPTED_SHARE", "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS", "SCALE_TOLERANCE",
+           "PLOT_POINTS"]
 
 #: A discovered force is reported when its model removes this share of the held-out run's replay
 #: misfit above the noise (0.5: the misfit's excess power at least halves).
@@ -57,6 +58,8 @@ TERM_EARNS = 0.5
 #: (noisy signals pull the regression towards zero), in at most this many replays.
 SCALE_RANGE = (0.5, 2.0)
 SCALE_REPLAYS = 8
+#: ... to this tolerance of its logarithm.
+SCALE_TOLERANCE = 0.02
 #: Samples drawn in ``discovered.png``.
 PLOT_POINTS = 4000
 
@@ -224,16 +227,24 @@ def _sized(refitter: Resimulator, structure: Structure, found: Found) -> tuple[f
     """Common scale of the nonlinear terms by re-simulation of the search run, and its misfit."""
     if all(c.term in ALWAYS for c in found.selected.columns):
         return 1.0, _misfit(refitter, structure, _record(found))
-    seen: dict[float, float] = {}
+
+    def misfit(u: float) -> float:
+        return _misfit(refitter, structure, _record(found, math.exp(u)))
+
+    low, high = SCALE_RANGE
+    bounds = (math.log(low), math.log(high))
+    first = brent_opening(bounds, SCALE_TOLERANCE)   # the search's first points and 0: side by side
+    seen: dict[float, float] = dict(zip(first, run_forked(misfit, first)))
+    known = brent_opening(bounds, SCALE_TOLERANCE, (seen[first[0]], seen[first[1]])) + [0.0]
+    seen.update(zip(known, run_forked(misfit, known)))
 
     def cost(u: float) -> float:
         if u not in seen:
-            seen[u] = _misfit(refitter, structure, _record(found, math.exp(u)))
+            seen[u] = misfit(u)
         return seen[u]
 
-    low, high = SCALE_RANGE
-    res = scipy.optimize.minimize_scalar(cost, bounds=(math.log(low), math.log(high)), method="bounded",
-                                         options={"maxiter": SCALE_REPLAYS, "xatol": 0.02})
+    res = scipy.optimize.minimize_scalar(cost, bounds=bounds, method="bounded",
+                                         options={"maxiter": SCALE_REPLAYS, "xatol": SCALE_TOLERANCE})
     u = float(res.x) if res.fun < cost(0.0) else 0.0
     return math.exp(u), cost(u)
 

@@ -34,7 +34,7 @@ from momentid.mechanisms.base import MechanismKind, Refit
 from momentid.mechanisms.place import Place
 
 __all__ = ["Augmented", "ForceRefit", "Refitter", "Resimulator", "refit_eiv", "noise_ratios", "noise_carrier",
-           "SEARCH_RANGE"]
+           "brent_opening", "SEARCH_RANGE"]
 
 #: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
 _UNSTABLE = 1e200
@@ -51,6 +51,36 @@ SEARCH_TOLERANCE = 0.005
 SEARCH_REPLAYS = 14
 #: ... and the relative step of the misfit's curvature at the optimum (the standard error).
 CURVATURE_STEP = 0.02
+
+
+#: scipy's bounded search: its golden section and its floor on the square root of the machine epsilon.
+_GOLDEN = 0.5 * (3.0 - np.sqrt(5.0))
+_SQRT_EPS = np.sqrt(2.2e-16)
+
+
+def _golden_step(a: float, b: float, xf: float, xatol: float) -> float:
+    """The golden-section step of scipy's bounded search from its best point ``xf`` in ``[a, b]``."""
+    tol1 = _SQRT_EPS * np.abs(xf) + xatol / 3.0
+    rat = _GOLDEN * ((a - xf) if xf >= 0.5 * (a + b) else (b - xf))
+    return float(xf + (np.sign(rat) + (rat == 0)) * np.maximum(np.abs(rat), tol1))
+
+
+def brent_opening(bounds: tuple[float, float], xatol: float, values: tuple[float, float] | None = None
+                  ) -> list[float]:
+    """The points scipy's bounded scalar search (``minimize_scalar(method="bounded")``) evaluates
+    first within ``bounds``: the golden-section point and a golden step beyond it (they depend on the
+    bounds alone); given their ``values``, the third (a golden step again: two points fit no
+    parabola).  Replayed side by side before the search asks for them, they are there when it does (a
+    prediction that missed would cost a replay, never change a result: the search reads values only
+    of the points it asks for; ``tests/test_parallel_stages.py`` checks the prediction)."""
+    a, b = bounds
+    x1 = float(a + _GOLDEN * (b - a))
+    x2 = _golden_step(a, b, x1, xatol)
+    if values is None:
+        return [x1, x2]
+    if values[1] <= values[0]:   # the step found a better point: the bracket closes from below
+        return [_golden_step(x1, b, x2, xatol)]
+    return [_golden_step(a, x2, x1, xatol)]
 
 
 @dataclass(frozen=True)
@@ -384,6 +414,10 @@ class Refitter:
             k = int(np.argmin(costs([sign * math.exp(x) for x in u])))
             bounds = (u[max(k - 1, 0)], u[min(k + 1, grid - 1)])
             p0 = sign * math.exp(u[k])
+        # the search's first three points and its start, known before it asks: side by side
+        first = [sign * math.exp(u) for u in brent_opening(bounds, SEARCH_TOLERANCE)]
+        third = brent_opening(bounds, SEARCH_TOLERANCE, tuple(costs(first)))
+        costs([sign * math.exp(third[0]), p0])
         res = scipy.optimize.minimize_scalar(lambda u: cost(sign * math.exp(u)), bounds=bounds,
                                              method="bounded",
                                              options={"xatol": SEARCH_TOLERANCE, "maxiter": SEARCH_REPLAYS})

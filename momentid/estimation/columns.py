@@ -19,7 +19,7 @@ from typing import Callable, Iterator
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from momentid.core.processes import forked_pool, helpers_allowed
+from momentid.core.processes import borrow, forked_pool
 
 __all__ = ["WORKERS", "point_map", "forward_jacobian", "Cached"]
 
@@ -46,22 +46,42 @@ def point_map(fun: Callable[[np.ndarray], np.ndarray], workers: int = WORKERS
         Deterministic and single-threaded: ``x`` (n,) -> residual (m,).  Inherited by the workers,
         not pickled; it must not change while the block runs.
     workers : int
-        Processes; below 2, or in a process that may not start helpers
-        (:func:`~momentid.core.processes.helpers_allowed`: a worker with no idle core to borrow), the
-        points are evaluated here in turn.
+        Processes.  Below 2 the points are evaluated here in turn; so they are until this process
+        may start helpers (:func:`~momentid.core.processes.borrow`: the command may; a worker may
+        once a core of its pool is idle, asked again at each call until it is).
     """
+    if workers < 2 or _FUN is not None:
+        yield lambda points: [fun(x) for x in points]
+        return
+    with contextlib.ExitStack() as stack:
+        pool = None
+
+        def evaluate(points: list) -> list:
+            nonlocal pool
+            if pool is None and len(points) > 1:
+                pool = _started(stack, fun, workers)
+            if pool is None:
+                return [fun(x) for x in points]
+            return list(pool.map(_evaluate, points, chunksize=max(1, math.ceil(len(points) / workers))))
+        yield evaluate
+
+
+def _started(stack: contextlib.ExitStack, fun: Callable, workers: int):
+    """A pool of ``workers`` forked processes evaluating ``fun``, closed by ``stack`` (which then gives
+    back the leave to start them), or None when this process may not start them now."""
     global _FUN
-    with helpers_allowed() as allowed:
-        if workers < 2 or not allowed or _FUN is not None:
-            yield lambda points: [fun(x) for x in points]
-            return
-        _FUN = fun
-        try:
-            with forked_pool(workers) as pool:
-                yield lambda points: list(pool.map(_evaluate, points,
-                                                   chunksize=max(1, math.ceil(len(points) / workers))))
-        finally:
-            _FUN = None
+    release = borrow()
+    if release is None:
+        return None
+    stack.callback(release)
+    _FUN = fun
+    stack.callback(_forget)
+    return stack.enter_context(forked_pool(workers))
+
+
+def _forget() -> None:
+    global _FUN
+    _FUN = None
 
 
 class Cached:

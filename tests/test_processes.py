@@ -173,10 +173,9 @@ def test_a_worker_borrows_the_core_of_a_worker_with_no_task_left():
     from momentid.core import processes
     from momentid.diagnosis.workers import run_forked
     short, long = run_forked(_borrower, ["short", "long"])
-    # The long task's own jobs ran in processes of its own (not in itself, not in the short task's
-    # worker), once the short task's worker was idle; inside a worker with its partner busy they run
-    # in the worker itself (``helpers_allowed`` is False there: checked by the retry loop's first
-    # passes when the short task has not finished yet, and by the diagnosis tests' equal results).
+    # The long task's jobs ran in helpers of its own (not in itself, not in the short task's worker)
+    # once the short task's worker was idle; without a lent core they would run in the worker itself
+    # and the retry loop would give up after a minute with its own pid.
     assert len(set(long)) == 2 and not set(long) & set(short) and os.getpid() not in long
     # The command lends nothing once its pool is gone.
     assert processes._IDLE is None

@@ -72,8 +72,8 @@ class CallbackForces:
     :meth:`~momentid.mechanisms.base.MechanismKind.storey_force` for a storey,
     :meth:`~momentid.mechanisms.base.MechanismKind.floor_force` for another link; the same that
     :func:`~momentid.lab.rig.callback_forces` applies to arrays).  The floors' forces are summed in a
-    list and written to the floors they push.  A force with memory reads its state from its actuator's activation
-    (:func:`momentid.lab.rig.state_actuator`), the trial value of the RK4 stage.
+    list and written to the floors they push.  A force with memory reads its state from its
+    actuator's activation (:func:`momentid.lab.rig.state_actuator`), the trial value of the RK4 stage.
 
     Parameters
     ----------
@@ -92,7 +92,6 @@ class CallbackForces:
         if dofs != list(range(dofs[0], dofs[0] + d)):
             raise SimulationError(f"the floor joints' dofs {dofs} are not one after another: expected the "
                                   f"chain of momentid.lab.rig.build_spec")
-        self.floor_dofs = np.array(dofs)
         self._floors = slice(dofs[0], dofs[0] + d)
         self.terms = []   # (law on floats, upper dof, lower dof or -1, activation address or -1)
         self.rates: dict[int, tuple] = {}   # state actuator id -> (rate law, top, below, params, act address)

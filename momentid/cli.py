@@ -19,6 +19,7 @@ from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
 from momentid.cli_output import only_json_on_stdout, output_folder, output_path, replaced
 from momentid.cli_values import finite_time, positive_float, positive_int, run_names
+from momentid.io.outputs import check_file, drop_link
 
 __all__ = ["main", "only_json_on_stdout"]
 
@@ -106,8 +107,9 @@ def _cmd_run(args) -> int:
     if unknown:   # before minutes of simulation, not after
         raise MomentidError(f"--runs {args.runs}: {path} has no run named {unknown[0]!r}; its runs are "
                             f"{', '.join(r.name for r in scenario.runs)}")
-    out = output_path(args.output, scenario.name)
+    out = output_path(args.output, scenario.name, force=args.force)
     progress, existed = not args.quiet and sys.stderr.isatty(), out.exists()
+    drop_link(out)
     experiment = run_experiment(scenario, out, progress=progress, workers=args.workers)
     replaced(out, existed)
     if not args.json:
@@ -186,9 +188,11 @@ def _warn(warnings, run: str | None = None) -> None:
 def _cmd_import(args) -> int:
     from momentid.io.importer import import_folder, report, summary, write_import
 
+    out = output_path(args.output, Path(args.folder).resolve().name, force=args.force)   # before the work
     experiment = import_folder(args.folder, relabel=not args.refuse_mislabelled)
-    out = output_path(args.output, Path(args.folder).resolve().name)
+    out = output_path(args.output, Path(args.folder).resolve().name, force=args.force)   # and again now
     existed = out.exists()
+    drop_link(out)
     out = write_import(experiment, out)
     replaced(out, existed)
     for line in report(experiment):
@@ -200,6 +204,9 @@ def _cmd_import(args) -> int:
 def _cmd_view(args) -> int:
     from momentid.report.viewer import view
 
+    if args.save is not None:
+        check_file(args.save, "rerun", option="--save", force=args.force)
+        drop_link(args.save)
     out = view(args.recording, save=args.save, result=args.result, exaggeration=args.exaggeration,
                run=args.run, twin=args.twin)
     if out is not None:
@@ -211,8 +218,10 @@ def _cmd_sweep(args) -> int:
     from momentid.io.exclusive import reserve
     from momentid.sweep import load_sweep, run_sweep, table_path, table_text
 
-    sweep = load_sweep(args.spec)
     out = table_path(args.output) if args.output else Path("out") / f"{Path(args.spec).stem}.csv"
+    check_file(out, "table", force=args.force)
+    sweep = load_sweep(args.spec)
+    drop_link(out)
     where = f"Dask scheduler {args.address}" if args.address else "local cores"
     show = not args.quiet and sys.stderr.isatty()
 
@@ -240,14 +249,16 @@ def _cmd_sweep(args) -> int:
 
 def _cmd_diagnose(args) -> int:
     from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.diagnosis.report import REPORT_FILES, report_folder
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
     out = output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_diagnosis"
+    report_folder(out, force=args.force).check(REPORT_FILES)   # before minutes of work
     experiment = read_recording(args.recording)
     with exclusive(out):   # one writer per report folder, refused before minutes of work
         diag = diagnose(experiment, hold_out=args.hold_out)
-        written = write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
+        written = write_report(diag, out, force=args.force)  # experiment.notes: stderr, by read_recording
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
@@ -260,12 +271,16 @@ def _cmd_twin(args) -> int:
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
     from momentid.twin import build_twin, write_twin
+    from momentid.twin.files import file_names, output_folder as twin_folder
 
     out = output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
+    runs = run_names(args.runs)
+    twin_folder(out, force=args.force).check(())   # before the recording is read
     experiment = read_recording(args.recording)
+    twin_folder(out, force=args.force).check(file_names([r.name for r in experiment.runs], not args.no_plots))
     with exclusive(out):   # one writer per twin folder, refused before the twin is built
-        twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
-        names = write_twin(twin, experiment, out, plots=not args.no_plots)
+        twin = build_twin(experiment, runs)
+        names = write_twin(twin, experiment, out, plots=not args.no_plots, force=args.force)
     if args.json:
         print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
     else:
@@ -358,6 +373,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", nargs="?", help="scenario TOML file (default: the embedded default scenario)")
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<name>.mcap) or a .mcap file (default: out/)")
+    _add_force(p)
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.add_argument("-j", "--workers", type=positive_int, metavar="N",
                    help="simulate up to N runs at once in worker processes (default: one per core; "
@@ -403,6 +419,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", metavar="PATH",
                    help="output folder (the recording is PATH/<folder name>.mcap) or a .mcap file "
                         "(default: out/)")
+    _add_force(p)
     p.set_defaults(func=_cmd_import)
 
     p = sub.add_parser("view", help="inspect a recording in the rerun viewer",
@@ -423,6 +440,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--twin", metavar="DIR",
                    help="a folder of `momentid twin`: beside each run, the twin moving and every floor sensor "
                         "recorded and as the twin reads it (the recording is not identified again)")
+    _add_force(p, "--save")
     p.set_defaults(func=_cmd_view)
 
     p = sub.add_parser("diagnose", help="locate a model/recording mismatch and name the missing physics",
@@ -442,6 +460,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", help="MCAP recording (momentid run or momentid import)")
     p.add_argument("-o", "--output", metavar="DIR",
                    help="report folder (default: out/<recording>_diagnosis)")
+    _add_force(p)
     p.add_argument("--json", action="store_true", help="print report.json to stdout")
     p.add_argument("--hold-out", metavar="RUN", default=None,
                    help="recordings without added mass: the run to hold out for the before/after check "
@@ -465,6 +484,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                    "trial is replayed, the others with the calibrated runs' mean sensors")
     p.add_argument("--json", action="store_true", help="print twin.json to stdout")
     p.add_argument("--no-plots", action="store_true", help="write twin.xml and twin.json only")
+    _add_force(p)
     p.set_defaults(func=_cmd_twin)
 
     p = sub.add_parser("plan", help="recommend added-mass runs and excitation from the Cramér-Rao bound",
@@ -499,9 +519,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run on the Dask cluster whose scheduler is at ADDR (e.g. tcp://host:8786; needs "
                         "pip install 'momentid[cluster]' here and momentid on the workers)")
     p.add_argument("-q", "--quiet", action="store_true", help="no per-case progress lines")
+    _add_force(p)
     p.set_defaults(func=_cmd_sweep)
 
     return parser
+
+
+def _add_force(p, option: str = "-o") -> None:
+    p.add_argument("--force", action="store_true",
+                   help=f"overwrite files at {option} that momentid did not write (and replace a symbolic link "
+                        "there, never the file it points to); without it such files are refused")
 
 
 def main(argv=None) -> int:

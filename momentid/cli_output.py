@@ -17,14 +17,18 @@ from momentid.errors import MomentidError
 __all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout"]
 
 
-def output_path(out: str | None, name: str) -> Path:
-    """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``."""
+def output_path(out: str | None, name: str, *, force: bool = False) -> Path:
+    """The recording ``-o`` names: a ``.mcap`` path, or a folder to hold ``<name>.mcap``; checked
+    before the work under the one output rule (:func:`momentid.io.outputs.check_file`): a folder, a
+    symbolic link or a file that is not a recording there is refused (the last two unless ``force``)."""
+    from momentid.io.outputs import check_file
+
     p = Path("out") / f"{name}.mcap" if out is None else Path(out)
     if p.suffix != ".mcap":
         p = output_folder(out) / f"{name}.mcap"
     if p.is_dir():
         raise OutputError(str(p), "a folder of that name exists; expected a .mcap file path")
-    return p
+    return check_file(p, "recording", force=force)
 
 
 def replaced(out: Path, existed: bool) -> None:
@@ -40,7 +44,7 @@ class OutputError(MomentidError):
         super().__init__(f"-o {out}: {expected}")
 
 
-def output_folder(out: str) -> Path:
+def output_folder(out) -> Path:
     """``-o`` as a folder to write into: refused when a file stands there."""
     p = Path(out)
     if p.exists() and not p.is_dir():

@@ -20,6 +20,7 @@ __all__ = [
     "ResourceError",
     "TimeLimitError",
     "OutputBusyError",
+    "OutputRefusedError",
     "RecoveryWarning",
 ]
 
@@ -106,6 +107,27 @@ def _size(nbytes: float) -> str:
 
 class OutputBusyError(MomentidError):
     """Another process is writing the same output (file or folder) now: one writer per output."""
+
+
+class OutputRefusedError(MomentidError):
+    """An output path the command must not write: another kind of file, a file the command did not
+    write, a symbolic link, or a place it cannot write.
+
+    Parameters
+    ----------
+    option : str
+        The option as the user gave it (``-o``, ``--save``).
+    path : str
+        The path the user gave, or a file inside the folder they gave.
+    found : str
+        What stands there.
+    expected : str
+        What was expected (and how to proceed).
+    """
+
+    def __init__(self, option: str, path: str, found: str, expected: str):
+        self.option, self.path, self.found, self.expected = option, str(path), found, expected
+        super().__init__(f"{option} {path}: {found}; expected {expected}")
 
 
 class RecoveryWarning(UserWarning):

@@ -27,6 +27,8 @@ from momentid.lab.scenario import parse_scenario
 from momentid.twin import (ExtraMode, SensorModel, TwinParameters, build_twin, model_matrices, read_twin,
                            replay_run, tendon_layout, transfer, twin_spec, write_twin)
 from momentid.twin.build import misfit_warning
+from momentid.errors import OutputRefusedError
+from momentid.io.outputs import MANIFEST
 from momentid.twin.files import TwinFolderError
 from momentid.twin.spec import MIN_LATENCY_STEPS, latency, timing
 
@@ -260,17 +262,18 @@ def test_cli_writes_the_folder(tmp_path, experiment, twin, capsys, monkeypatch):
     text = capsys.readouterr().out
     assert "small" in text and "large" in text and "NRMSE" in text and "twin written to" in text
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["replay_large.png", "replay_small.png", "transfer.png", "twin.json", "twin.xml"]
+    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "transfer.png", "twin.json", "twin.xml"]
     model = mujoco.MjModel.from_xml_path(str(out / "twin.xml"))
     assert model.nsensor > 0
     data = json.loads((out / "twin.json").read_text())
     assert [t["run"] for t in data["trials"]] == ["small", "large"]
     assert all(0 < t["nrmse"] < 1 for t in data["trials"])
     assert np.allclose(read_twin(out).K, twin.parameters.K, rtol=1e-12)
-    # Again into the same folder: replaced whole, same bytes (deterministic).
+    # Again into the same folder: the same bytes (deterministic), and the plots of the first twin, which
+    # this one does not draw, are its own stale files: removed.
     before = (out / "twin.json").read_bytes()
     assert main(["twin", str(rec), "-o", str(out), "--no-plots"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["twin.json", "twin.xml"]
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "twin.json", "twin.xml"]
     assert (out / "twin.json").read_bytes() == before
 
 
@@ -294,9 +297,9 @@ def test_refusals_are_one_line_and_write_nothing(tmp_path, experiment, capsys):
     write_experiment(tmp_path / "no_table.mcap", one)
     assert "no table sensor" in _refused(capsys, ["twin", str(tmp_path / "no_table.mcap"), "-o", str(out)])
     (tmp_path / "busy").mkdir()
-    (tmp_path / "busy" / "notes.txt").write_text("mine")
-    assert "holds files" in _refused(capsys, ["twin", str(rec), "-o", str(tmp_path / "busy")])
-    assert not out.exists() and (tmp_path / "busy" / "notes.txt").read_text() == "mine"
+    (tmp_path / "busy" / "twin.json").write_text("mine")   # saved from `twin --json`: not written by `twin -o`
+    assert "holds twin.json" in _refused(capsys, ["twin", str(rec), "-o", str(tmp_path / "busy")])
+    assert not out.exists() and (tmp_path / "busy" / "twin.json").read_text() == "mine"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]     # no partial folder left
 
 
@@ -308,7 +311,7 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path, experiment, twin, monk
 
     monkeypatch.setattr(plots, "plot_transfer", broken)
     monkeypatch.setattr(plots, "plot_replay", broken)
-    with pytest.raises(OSError):
+    with pytest.raises(OutputRefusedError, match=f"-o {tmp_path / 'twin'}: cannot write the twin files"):
         write_twin(twin, experiment, tmp_path / "twin")
     assert list(tmp_path.iterdir()) == []
 
@@ -327,7 +330,7 @@ def test_degenerate_identification_is_refused(experiment):
 
 def test_folder_checks(tmp_path):
     (tmp_path / "file").write_text("x")
-    with pytest.raises(TwinFolderError, match="a file of that name"):
+    with pytest.raises(OutputRefusedError, match="a file of that name"):
         write_twin(None, None, tmp_path / "file")
     with pytest.raises(TwinFolderError, match="no twin.json"):
         read_twin(tmp_path)
@@ -544,6 +547,6 @@ def test_two_twins_writing_the_same_folder(tmp_path, experiment, capsys):
     assert first.returncode == 0, first_err
     # (a second that succeeds started after the first had finished building and writing)
     assert second == 2 and err.count("\n") == 1 and err.startswith("error: ") and str(out) in err, err
-    assert sorted(p.name for p in out.iterdir()) == ["replay_large.png", "replay_small.png", "transfer.png",
-                                                     "twin.json", "twin.xml"]
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "replay_large.png", "replay_small.png",
+                                                     "transfer.png", "twin.json", "twin.xml"]
     assert read_twin(out).runs == ("small", "large")

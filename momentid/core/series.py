@@ -18,7 +18,7 @@ import numpy as np
 from momentid.errors import SensorDataError
 from momentid.core.structure import LabStatement, Structure
 
-__all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe"]
+__all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe", "run_name_problem"]
 
 #: SI unit of each channel group.
 UNITS = {"zdd": "m/s^2", "z": "m", "zd": "m/s", "a": "m/s^2", "q": "m", "v": "m/s"}
@@ -33,6 +33,31 @@ def json_safe(obj):
     if isinstance(obj, (list, tuple)):
         return [json_safe(v) for v in obj]
     return obj
+
+
+def run_name_problem(name) -> str | None:
+    """Why ``name`` cannot name a run, or None when it can.
+
+    A run name is printed in one-line reports and becomes part of file names: it must be a non-empty
+    string of at most 200 printable characters, without line breaks, tabs or other control characters,
+    without ``/`` or ``\\``, without ``..``, and without leading or trailing spaces.  Spaces inside
+    ("El Centro Trial 1") are fine.
+    """
+    import unicodedata
+
+    if not isinstance(name, str) or not name:
+        return "an empty name"
+    if len(name) > 200:
+        return f"{len(name)} characters (at most 200)"
+    bad = next((c for c in name if unicodedata.category(c)[0] == "C"), None)
+    if bad is not None:
+        return f"the control character {bad!r} (a line break or tab breaks every printed report line)"
+    for part in ("/", "\\", ".."):
+        if part in name:
+            return f"{part!r} (a run name becomes part of file names)"
+    if name != name.strip():
+        return "leading or trailing spaces"
+    return None
 
 
 def channel_unit(name: str) -> str:

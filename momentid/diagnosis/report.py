@@ -16,9 +16,10 @@ from momentid.diagnosis.modal_discovery import ModalDiscovery, plot_modal_discov
 from momentid.diagnosis.result import AddedMassEvidence, Diagnosis, TwinEvidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
+from momentid.io.outputs import OwnedFolder
 from momentid.mechanisms.place import Place
 
-__all__ = ["summary", "write_report"]
+__all__ = ["summary", "write_report", "report_folder", "REPORT_FILES"]
 
 
 def summary(diag: Diagnosis) -> str:
@@ -84,14 +85,32 @@ def summary(diag: Diagnosis) -> str:
     return "\n".join(lines)
 
 
-def write_report(diag: Diagnosis, folder) -> tuple[str, ...]:
+#: Every file a report folder may hold (checked against the folder before the diagnosis runs).
+REPORT_FILES = ("report.json", "summary.txt", "twin.xml", "model_augmented.xml", "replay.png", "diagnosis.rrd",
+                "locate.png", "discovered.png")
+
+
+def report_folder(folder, *, force: bool = False) -> OwnedFolder:
+    """The report folder under the one output rule (:mod:`momentid.io.outputs`)."""
+    return OwnedFolder(folder, "diagnose", force=force)
+
+
+def write_report(diag: Diagnosis, folder, *, force: bool = False) -> tuple[str, ...]:
     """Write the report folder; returns the names of the files written, in this order:
     ``report.json``, ``summary.txt``, ``twin.xml`` (the linear twin, on the twin path),
     ``model_augmented.xml`` (when there is an augmented model), ``replay.png`` (recorded vs. linear vs.
     augmented) and ``diagnosis.rrd`` (the same for ``rerun``), ``locate.png`` (where the mismatch is,
-    added-mass path) and ``discovered.png`` (the open search's force, when it found one)."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    added-mass path) and ``discovered.png`` (the open search's force, when it found one).
+
+    The folder follows the one output rule (:class:`momentid.io.outputs.OwnedFolder`): every file is
+    built before any is put in place; files of these names that ``momentid diagnose`` did not write
+    (the user's, a twin's) are refused unless ``force``; this command's files of an earlier report
+    that the new one does not write (a stale ``discovered.png``) are removed; other files are left
+    alone."""
+    return tuple(report_folder(folder, force=force).write(lambda staging: _write_files(diag, staging)))
+
+
+def _write_files(diag: Diagnosis, folder: Path) -> list[str]:
     (folder / "report.json").write_text(json.dumps(json_safe(diag.to_dict()), indent=2))
     (folder / "summary.txt").write_text(diag.summary + "\n")
     written = ["report.json", "summary.txt"]
@@ -118,7 +137,7 @@ def write_report(diag: Diagnosis, folder) -> tuple[str, ...]:
         plot = plot_modal_discovered if isinstance(diag.discovered, ModalDiscovery) else plot_discovered
         plot(diag.discovered, folder / "discovered.png")
         written.append("discovered.png")
-    return tuple(written)
+    return written
 
 
 def _rerun(diag: Diagnosis, path: Path) -> None:

@@ -91,7 +91,8 @@ def open_locked(path) -> BinaryIO:
         The file cannot be created (no folder, no permission).
     """
     path = Path(path)
-    fd = _locked_fd(path, os.O_RDWR | os.O_CREAT)
+    # O_NOFOLLOW: a symbolic link at an output file is never followed onto the file it points to
+    fd = _locked_fd(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0))
     try:
         os.ftruncate(fd, 0)
         return os.fdopen(fd, "wb")
@@ -172,6 +173,8 @@ def reserve(path) -> Iterator[_Slot]:
         file = open_locked(temp)
     except OutputBusyError:
         raise _busy(path) from None   # name the output the user gave, not its temporary file
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:
         yield _Slot(path, file)
     finally:

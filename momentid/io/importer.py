@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from momentid.core.series import UNITS, Experiment, RunData
+from momentid.core.series import UNITS, Experiment, RunData, run_name_problem
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError, SensorDataError
 from momentid.io.align import SensorReport, align_sensors
@@ -144,8 +144,10 @@ def _description(folder: Path) -> _Description:
         if added is not None and max(added) > MASS_RANGE[1]:
             raise tab.error("added_mass", f"added masses (kg) of at most {MASS_RANGE[1]:g} kg per floor")
         name = tab.string("name", files[0].name.split(".")[0])
-        if not name:
-            raise tab.error("name", "a non-empty run name")
+        problem = run_name_problem(name)
+        if problem:
+            raise tab.error("name" if tab.has("name") else "file",
+                            f"a run name of one printable line; {name!r} has {problem}")
         tab.finish()
         if name in (r.name for r in runs):
             raise tab.error("name" if tab.has("name") else "file",

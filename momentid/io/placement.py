@@ -221,9 +221,9 @@ def _nodal_misfit(shapes: list[np.ndarray], d: int) -> int:
 
 def _cross_term(shapes: list[np.ndarray], masses) -> float:
     """Largest normalised cross term of the first d resonances' shapes with the stated masses."""
-    d = len(masses)
-    if len(shapes) < 2 or masses is None:
+    if masses is None or len(shapes) < 2:   # masses are optional: no orthogonality evidence without them
         return float("nan")
+    d = len(masses)
     P = np.column_stack([s for _, s in shapes[:d]])
     O = P.T @ np.diag(masses) @ P
     norm = np.sqrt(np.outer(np.diag(O), np.diag(O)))

@@ -18,6 +18,7 @@ and the format's public names are re-exported here.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 from pathlib import Path
@@ -25,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from mcap.writer import CompressionType, Writer
 
-from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe
+from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe, run_name_problem
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import RecordingError
 from momentid.io.exclusive import open_locked
@@ -109,6 +110,9 @@ class RecordingWriter:
         try:   # locked before it is truncated: a second writer of the same file is refused, not mixed in
             self._file = open_locked(self.path)
         except OSError as e:
+            if e.errno == errno.ELOOP:
+                raise RecordingError(f"{self.path}: a symbolic link; expected a regular file path (a recording "
+                                     "is never written through a link onto another file)") from None
             raise RecordingError(f"{self.path}: cannot create the recording ({e.strerror}); "
                                  "expected a writable file path") from None
         self._closed = False
@@ -200,6 +204,9 @@ class RecordingWriter:
         if not run.name or run.name in self._runs:
             raise RecordingError(f"{where}: expected a non-empty run name not already used "
                                  f"(used: {', '.join(self._runs) or 'none'})")
+        problem = run_name_problem(run.name)
+        if problem:
+            raise RecordingError(f"{where}: the run name has {problem}; expected a name of one printable line")
         if not isinstance(block_size, int) or block_size < 1:
             raise RecordingError(f"{where}: block_size = {block_size!r}; expected an int >= 1")
         channels = tuple(run.channels)

@@ -1,30 +1,27 @@
 """Write a twin's folder whole or not at all, and read it back.
 
-:func:`write_twin` builds every file in a temporary folder beside ``DIR`` and renames it into place at
-the end, so ``DIR`` never holds a half-built file: an error (or an interrupt) leaves ``DIR`` as it was.
-A ``DIR`` that exists must be empty or a previous twin (it holds ``twin.json``): it is replaced whole;
-a folder with other files is refused rather than emptied.  One writer per folder: ``DIR`` is held
-(:func:`momentid.io.exclusive.exclusive`) while the twin is written, so a second writer of the same
-folder gets one line naming it and the first finishes intact.
+:func:`write_twin` follows the one output rule (:mod:`momentid.io.outputs`): it builds every file in a
+private folder inside ``DIR`` and renames each into place at the end, so ``DIR`` never holds a
+half-built file and an error (or an interrupt) leaves it as it was.  Only the twin's files are written:
+the user's other files in ``DIR`` are never touched, a file of a twin's name that ``momentid twin`` did
+not write is refused (unless ``force``), and the plots of a previous twin that are not drawn again are
+removed.  One writer per folder: ``DIR`` is held (:func:`momentid.io.exclusive.exclusive`) while the
+twin is written, so a second writer of the same folder gets one line naming it.
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from momentid.core.series import json_safe
 from momentid.errors import MomentidError, RecordingError
-from momentid.io.exclusive import exclusive
+from momentid.io.outputs import OwnedFolder
 from momentid.twin.parameters import ExtraMode, SensorModel, TwinParameters
 
-__all__ = ["write_twin", "read_twin", "check_against", "TWIN_XML", "TWIN_JSON", "TRANSFER_PNG", "TwinFolderError"]
+__all__ = ["write_twin", "read_twin", "check_against", "file_names", "output_folder", "TWIN_XML", "TWIN_JSON", "TRANSFER_PNG", "TwinFolderError"]
 
 TWIN_XML, TWIN_JSON, TRANSFER_PNG = "twin.xml", "twin.json", "transfer.png"
 
@@ -33,12 +30,16 @@ class TwinFolderError(MomentidError):
     """The twin's output folder cannot be used, or a twin folder cannot be read."""
 
 
-def _check_out(out: Path) -> None:
-    if out.exists() and not out.is_dir():
-        raise TwinFolderError(f"-o {out}: a file of that name exists; expected a folder (or a new path)")
-    if out.is_dir() and any(out.iterdir()) and not (out / TWIN_JSON).exists():
-        raise TwinFolderError(f"-o {out}: the folder holds files and no {TWIN_JSON}: expected a new or empty "
-                              f"folder, or a previous twin's (which is replaced whole)")
+def file_names(runs, plots: bool = True) -> list[str]:
+    """Every file a twin of trials ``runs`` may write (checked against the folder before the build)."""
+    from momentid.twin.plots import replay_files
+
+    return [TWIN_XML, TWIN_JSON] + ([TRANSFER_PNG, *replay_files(runs).values()] if plots else [])
+
+
+def output_folder(out, *, force: bool = False) -> OwnedFolder:
+    """The twin's folder ``out`` under the one output rule (:mod:`momentid.io.outputs`)."""
+    return OwnedFolder(out, "twin", force=force)
 
 
 def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
@@ -55,14 +56,20 @@ def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
         def plot(replay):
             if replay is None:
                 return plotting.plot_transfer(twin, experiment, folder / TRANSFER_PNG).name
-            return plotting.plot_replay(replay, folder / plotting.replay_file(replay.run)).name
+            return plotting.plot_replay(replay, folder / files[replay.run]).name
 
+        files = plotting.replay_files([replay.run for replay in twin.replays])
         names += run_forked(plot, list(twin.replays) + [None])
     return names
 
 
-def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
-    """Write ``twin.xml``, ``twin.json`` and the plots into the folder ``out``, atomically.
+def write_twin(twin, experiment, out, *, plots: bool = True, force: bool = False) -> list:
+    """Write ``twin.xml``, ``twin.json`` and the plots into the folder ``out``, each file whole.
+
+    The folder follows the one output rule (:class:`momentid.io.outputs.OwnedFolder`): only the
+    twin's files are written; every other file in ``out`` is left alone; a file of the same name that
+    ``momentid twin`` did not write is refused, unless ``force``; the plots of a previous twin that
+    this one does not draw again are removed.  Nothing in ``out`` changes until every file is built.
 
     Parameters
     ----------
@@ -71,9 +78,11 @@ def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
     experiment : Experiment
         The recording it was built from (the plots' recorded spectra).
     out : str or Path
-        The folder; created, or replaced when it holds a previous twin.
+        The folder; created when missing.
     plots : bool
         Write the PNG plots too.
+    force : bool
+        Overwrite files of the twin's names that ``momentid twin`` did not write.
 
     Returns
     -------
@@ -82,40 +91,12 @@ def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
 
     Raises
     ------
-    TwinFolderError
-        ``out`` is a file, or a folder holding other files.
+    OutputRefusedError
+        ``out`` is a file, cannot be written, or holds a file of the twin's names it did not write.
     OutputBusyError
         Another process is writing ``out`` (left as that process writes it).
     """
-    out = Path(out)
-    _check_out(out)
-    with exclusive(out):    # one writer per folder (a new one is made here, and removed on failure)
-        return _replace(twin, experiment, out, plots)
-
-
-def _replace(twin, experiment, out: Path, plots: bool) -> list:
-    """Build the folder beside ``out`` and rename it into place (see :func:`write_twin`)."""
-    parent = out.absolute().parent
-    parent.mkdir(parents=True, exist_ok=True)
-    building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
-    old = None
-    try:
-        names = _write_files(twin, experiment, building, plots)
-        os.chmod(building, 0o755)                    # mkdtemp makes it private; a result folder is not
-        if out.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))
-            os.replace(out, old / out.name)
-        os.replace(building, out)
-    except BaseException:
-        shutil.rmtree(building, ignore_errors=True)
-        if old is not None and not out.exists() and (old / out.name).exists():
-            os.replace(old / out.name, out)          # put the previous twin back
-        raise
-    finally:
-        if old is not None:
-            with contextlib.suppress(OSError):
-                shutil.rmtree(old)
-    return names
+    return output_folder(out, force=force).write(lambda staging: _write_files(twin, experiment, staging, plots))
 
 
 def _sensors(d: dict) -> SensorModel:
@@ -151,16 +132,70 @@ def read_twin(folder) -> TwinParameters:
     if params.K.shape != (d, d) or params.C.shape != (d, d) or params.masses.shape != (d,):
         raise TwinFolderError(f"{path}: K, C and masses have shapes {params.K.shape}, {params.C.shape}, "
                               f"{params.masses.shape}: expected ({d}, {d}) and ({d},)")
+    _check_values(params, path)
     return params
 
 
+def _check_values(params: TwinParameters, path: Path) -> None:
+    """Refuse a twin.json whose values no rig has (NaN, a gain of 1e308, a K that is not positive
+    definite), naming the key and value, before anything is computed from them."""
+    from momentid.estimation.modal_model import GAIN_RANGE
+
+    def refuse(key, value, expected):
+        raise TwinFolderError(f"{path}: key '{key}' = {value}: expected {expected} (a twin written by "
+                              f"`momentid twin` has them; was the file edited?)")
+
+    arrays = {"masses_kg": params.masses, "K_N_m": params.K, "C_N_s_m": params.C,
+              "storey_heights_m": params.storey_heights, "added_mass_damping_1_s": params.added_mass_damping}
+    for run, sensors in [("nominal", params.nominal), *params.sensors.items()]:
+        arrays.update({f"sensors.{run}.gain": sensors.gain, f"sensors.{run}.clock_offset_s": sensors.clock_offset,
+                       f"sensors.{run}.bias_m_s2": sensors.bias})
+    for key, value in arrays.items():
+        if not np.all(np.isfinite(value)):
+            refuse(key, np.asarray(value).tolist(), "finite numbers")
+    if np.any(params.masses <= 0):
+        refuse("masses_kg", params.masses.tolist(), "positive floor masses")
+    if np.any(params.storey_heights <= 0):
+        refuse("storey_heights_m", params.storey_heights.tolist(), "positive storey heights")
+    for key, M in (("K_N_m", params.K), ("C_N_s_m", params.C)):
+        if not np.allclose(M, M.T, rtol=1e-9, atol=0.0):
+            refuse(key, M.tolist(), "a symmetric matrix")
+    if np.linalg.eigvalsh(params.K).min() <= 0:
+        refuse("K_N_m", params.K.tolist(), "a positive definite stiffness matrix")
+    if np.linalg.eigvalsh(params.C).min() < -1e-9 * np.abs(params.C).max():   # rounding of a PSD matrix
+        refuse("C_N_s_m", params.C.tolist(), "a positive semi-definite damping matrix")
+    for run, sensors in [("nominal", params.nominal), *params.sensors.items()]:
+        gain = np.asarray(sensors.gain, float)
+        if np.any((gain < GAIN_RANGE[0]) | (gain > GAIN_RANGE[1])):
+            refuse(f"sensors.{run}.gain", gain.tolist(), f"sensor gains of {GAIN_RANGE[0]:g}-{GAIN_RANGE[1]:g} "
+                                                         "x the table's (an accelerometer's calibration)")
+        if np.any(np.abs(sensors.clock_offset) > 1.0):
+            refuse(f"sensors.{run}.clock_offset_s", np.asarray(sensors.clock_offset).tolist(),
+                   "clock offsets within 1 s (the import aligns clocks to a few samples)")
+
+
 def check_against(params: TwinParameters, experiment) -> None:
-    """Refuse a twin of another rig than ``experiment``'s (storey count).
+    """Refuse a twin of another rig or recording than ``experiment``: another storey count, trials it
+    was calibrated on that the recording does not hold (the twin of another recording: a simulated
+    scenario's twin over a real rig), or other stated floor masses.
 
     Raises
     ------
     RecordingError
     """
+    where = f"the twin (calibrated on {', '.join(params.runs)})"
     if params.storeys != experiment.storeys:
         raise RecordingError(f"the twin has {params.storeys} storeys but {experiment.source} records "
                              f"{experiment.storeys}: it is the twin of another rig")
+    names = {run.name for run in experiment.runs}
+    missing = [r for r in params.runs if r not in names]
+    if missing:
+        raise RecordingError(f"{where}: {experiment.source} has no trial named {missing[0]!r} (its trials: "
+                             f"{', '.join(sorted(names))}): expected the twin of this recording; it is the "
+                             "twin of another recording")
+    stated = experiment.statement.masses if experiment.statement is not None else None
+    if stated is None and experiment.structure is not None:
+        stated = experiment.structure.masses
+    if not params.mass_normalised and stated is not None and not np.allclose(params.masses, stated, rtol=1e-6):
+        raise RecordingError(f"{where}: floor masses {params.masses.tolist()} kg but {experiment.source} states "
+                             f"{np.asarray(stated, float).tolist()} kg: expected the twin of this recording")

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import re
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import scipy.signal
 
 from momentid.twin.replay import Replay, transfer
 
-__all__ = ["plot_replay", "plot_transfer", "replay_file", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
+__all__ = ["plot_replay", "plot_transfer", "replay_file", "replay_files", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
 
 #: Stretches a whole-trial panel is drawn as (minimum and maximum of each): about its width in pixels.
 ENVELOPE_BINS = 1500
@@ -59,9 +60,18 @@ def envelope(t: np.ndarray, x: np.ndarray, bins: int = ENVELOPE_BINS):
 
 
 def replay_file(run: str) -> str:
-    """File name of a trial's replay plot (the trial name with anything but letters, digits, ``-`` and
-    ``_`` as ``_``)."""
-    return f"replay_{re.sub(r'[^A-Za-z0-9_-]', '_', run)}.png"
+    """File name of a trial's replay plot: ``replay_<name>.png`` for a name of letters, digits, ``-``
+    and ``_``; any other name has those characters as ``_`` and the first 8 hex digits of its SHA-1
+    appended, so two trials never share a plot ("trial 1", "trial_1")."""
+    safe = re.sub(r"[^A-Za-z0-9_-]", "_", run)
+    if safe != run or not run:
+        safe += "-" + hashlib.sha1(run.encode("utf-8")).hexdigest()[:8]
+    return f"replay_{safe}.png"
+
+
+def replay_files(runs) -> dict[str, str]:
+    """Each trial's replay plot file name (:func:`replay_file`), in trial order."""
+    return {run: replay_file(run) for run in runs}
 
 
 def plot_replay(replay: Replay, path: Path) -> Path:

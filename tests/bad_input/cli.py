@@ -74,6 +74,13 @@ def _file(name: str, text: str = "keep me"):
     return lambda folder: (folder / name).write_text(text)
 
 
+def _recording_stub(path: Path) -> None:
+    """The first bytes of a recording (an interrupted one, say): momentid's own kind of file there."""
+    from momentid.io.mcap_check import MCAP_MAGIC
+
+    path.write_bytes(MCAP_MAGIC)
+
+
 def _scenario(folder: Path):
     write(folder)
 
@@ -211,8 +218,12 @@ CASES = [
          _in("run", "s.toml", "-o", "taken", setup=lambda f: (_scenario(f), _file("taken")(f))), ("taken",)),
     # an existing recording is replaced (a simulation can be made again: same scenario, same seed), and said
     Case(Group.CLI, "run-output-exists", Outcome.RECOVERY,
-         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: (_scenario(f), _file("o.mcap")(f))),
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: (_scenario(f), _recording_stub(f / "o.mcap"))),
          ("o.mcap: an existing file, replaced by this recording",)),
+    # a file of the user's under a .mcap name is theirs: refused (issue 32), kept
+    Case(Group.CLI, "run-output-is-a-users-file", Outcome.ERROR,
+         _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: (_scenario(f), _file("o.mcap")(f))),
+         ("-o o.mcap", "not an MCAP recording", "--force")),
     Case(Group.CLI, "run-mass-1e308", Outcome.ERROR,
          _in("run", "s.toml", "-q", "-o", "o.mcap", setup=lambda f: write(f, "masses = [10.0, 12.0]",
                                                                            "masses = [1e308, 12.0]")),

@@ -154,6 +154,12 @@ CASES = [
     # A saturated floor sensor: import used to read its clipped shape as floors 2 and 3 swapped, and relabel.
     Case(Group.IMU, "shipped-floor-clipped", Outcome.ERROR, _importing(_clipped),
          ("f3.csv", "channel a3 is clipped", "consecutive samples at")),
+    # No masses stated (they are optional) and floors 1 and 2 listed swapped: the relabelling used to crash
+    # with "object of type 'NoneType' has no len()" (issue 32).
+    Case(Group.IMU, "shipped-swapped-without-masses", Outcome.RECOVERY,
+         _importing(None, TOML.replace("masses = [0.160, 0.160, 0.142]\n", "").replace(
+             '"f1.csv", "f2.csv"', '"f2.csv", "f1.csv"')),
+         ("appear swapped",)),
     # A clock step with the packet counter running on used to be named "6 samples lost".
     Case(Group.IMU, "shipped-clock-step", Outcome.ERROR, _importing(_clock_step),
          ("f1.csv", "'SampleTimeFine'", "the device clock stepped +50.0 ms and no packet was lost")),

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 
 import enum
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy import signal
@@ -37,7 +37,7 @@ from scipy import signal
 from momentid.errors import SensorDataError
 from momentid.io.formats import SensorRecord
 
-__all__ = ["Alignment", "SensorReport", "AlignedRun", "align_sensors", "ALIGN_BAND", "CLOCK_AGREEMENT",
+__all__ = ["Alignment", "SensorReport", "AlignedRun", "align_sensors", "common_delays", "ALIGN_BAND", "CLOCK_AGREEMENT",
            "MIN_ALIGN_CORRELATION", "STILL_RMS", "STILL_FRACTION", "MIN_ALIGN_PERIODS", "min_align_samples"]
 
 #: Band (Hz) used to pick the shaking axis, estimate clock offsets and signs:
@@ -71,6 +71,15 @@ STILL_FRACTION = 0.2
 DRIFT_LIMIT = 1.0
 #: Window (s) in which the lag is read to find the drift: a few of the slowest cycles of ALIGN_BAND.
 DRIFT_WINDOW = 10.0
+#: Largest clock drift (relative rate difference) read from the data or accepted from a device's
+#: stamps: 1 % (10000 ppm), twice the 5000 ppm a cheap crystal oscillator can be off; a larger
+#: difference is another sample rate, refused.
+MAX_DRIFT = 0.01
+#: Readings of a drift at most (the first and those of what is left after resampling).
+DRIFT_PASSES = 4
+#: How many standard errors of the lag's slope a drift must exceed (with more than three windows):
+#: the floors' own phase wanders with the motion's content, a clock drifts steadily.
+DRIFT_SIGNIFICANCE = 3.0
 #: Largest relative difference between two sensors' sample intervals.
 STEP_TOLERANCE = 1e-3
 #: Fewest periods of the lowest frequency of :data:`ALIGN_BAND` a sensor's record must span: the
@@ -151,8 +160,9 @@ class SensorReport:
         """One line for the import report."""
         sign = "+" if self.sign > 0 else "-"
         how = {Alignment.REFERENCE: "the reference (time and direction)",
-               Alignment.CLOCK: f"shared clock, confirmed by the data to {self.clock_error * 1e3:+.1f} ms "
-                                f"(r = {self.correlation:+.2f})",
+               Alignment.CLOCK: (f"shared clock, confirmed by the data to {self.clock_error * 1e3:+.1f} ms "
+                                 f"(r = {self.correlation:+.2f})" if self.correlation >= MIN_ALIGN_CORRELATION
+                                 else "shared clock, which the data cannot confirm"),
                Alignment.DATA: f"aligned from the data (r = {self.correlation:+.2f})"}[self.alignment]
         text = (f"{self.channel:>3}: axis {sign}{self.axis}, gravity {self.gravity:+.2f} m/s^2 on "
                 f"{self.gravity_axis}, offset {self.offset:+.3f} m/s^2 removed, starts at "
@@ -173,12 +183,17 @@ class AlignedRun:
     reports : tuple of SensorReport, length c
     notes : tuple of str
         Run-level notes (span trimmed to the common part, ...).
+    stamp_delays : dict
+        Per floor channel whose stamps overlap the table's and whose data align it (|r| >=
+        :data:`MIN_ALIGN_CORRELATION`) away from a periodic ambiguity: how many samples (sub-sample) its
+        data lag the position its stamps give (:func:`common_delays` reads them across runs).
     """
 
     time: np.ndarray
     values: np.ndarray
     reports: tuple[SensorReport, ...]
     notes: tuple[str, ...]
+    stamp_delays: dict = field(default_factory=dict)
 
 
 def _filled(x: np.ndarray) -> np.ndarray:
@@ -205,11 +220,12 @@ def _band(x: np.ndarray, step: float) -> np.ndarray:
     return signal.sosfiltfilt(sos, x - np.mean(x, axis=0), axis=0)
 
 
-def _lag(table: np.ndarray, floor: np.ndarray, near: float | None = None) -> tuple[float, float]:
+def _lag(table: np.ndarray, floor: np.ndarray, near: float | None = None,
+         reach: float = CLOCK_AGREEMENT + 1) -> tuple[float, float]:
     """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there.
 
-    With ``near`` (a lag the shared clock gives), only lags within :data:`CLOCK_AGREEMENT` + 1 samples
-    of it are candidates and each is normalised by the two records' energy over the samples they
+    With ``near`` (a lag the shared clock gives), only lags within ``reach`` samples (default
+    :data:`CLOCK_AGREEMENT` + 1) of it are candidates and each is normalised by the two records' energy over the samples they
     share at that lag: a record that stops early (a table sensor that died halfway) is then judged on
     what it recorded, not against a lag where a periodic motion matches more samples.
     """
@@ -224,7 +240,7 @@ def _lag(table: np.ndarray, floor: np.ndarray, near: float | None = None) -> tup
         energy_t = np.concatenate([[0.0], np.cumsum(table ** 2)])
         energy_f = np.concatenate([[0.0], np.cumsum(floor ** 2)])
         norm = np.sqrt((energy_t[hi] - energy_t[lo]) * (energy_f[hi + lags] - energy_f[lo + lags]))
-        candidate = (np.abs(lags - near) <= CLOCK_AGREEMENT + 1) & (hi - lo >= 3) & (norm > 0)
+        candidate = (np.abs(lags - near) <= reach) & (hi - lo >= 3) & (norm > 0)
     if not candidate.any():
         return float(lags[0] if near is None else near), 0.0
     r = np.where(candidate, xc / np.where(candidate, norm, 1.0), 0.0)
@@ -277,7 +293,8 @@ def _axes(rec: SensorRecord, step: float) -> tuple[int, int, np.ndarray]:
     return g, others[j], band[:, j]
 
 
-def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> AlignedRun:
+def align_sensors(records: list[SensorRecord], channels: tuple[str, ...],
+                  delays: dict | None = None) -> AlignedRun:
     """Put one run's sensor files on the table's time base along the shaking direction.
 
     Parameters
@@ -286,6 +303,10 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
         The table sensor first, then floor 1 .. d.
     channels : tuple of str, length c
         Their channel names (``("zdd", "a1", ..., "ad")``).
+    delays : dict, optional
+        Per floor channel, ``(samples, note)``: the delay of its data behind its stamps that the
+        other runs of the experiment agree on (:func:`common_delays`), applied to its stamps before
+        the data confirm them, with the note.
 
     Returns
     -------
@@ -300,10 +321,7 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
         cannot align a sensor, no common span.
     """
     step = records[0].step
-    for rec in records[1:]:
-        if abs(rec.step / step - 1) > STEP_TOLERANCE:
-            raise SensorDataError(f"{rec.path}: sample interval {rec.step:.6g} s differs from "
-                                  f"{step:.6g} s of {records[0].path}; expected sensors at one rate")
+    records = [records[0], *(_on_table_rate(rec, records[0]) for rec in records[1:])]
     _check_distinct(records)
     _check_length(records, step)
     axes = [_axes(rec, step) for rec in records]
@@ -319,14 +337,93 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...]) -> Ali
             raise SensorDataError(f"{rec.path}: sensor {ch} does not move ({rms:.3g} m/s^2 RMS in "
                                   f"{ALIGN_BAND[0]:g}-{ALIGN_BAND[1]:g} Hz, the table {table_rms:.3g}); "
                                   f"expected a sensor fixed to the floor, moving with the table")
-        links.append(_offset(records[0], rec, ch, axes[0][2], band, step))
+        links.append(_offset(records[0], rec, ch, axes[0][2], band, step, (delays or {}).get(ch)))
     records, links = _correct_drift(records, axes, links, step)
-    return _assemble(records, channels, axes, links, step)
+    aligned = _assemble(records, channels, axes, links, step)
+    found = {ch: link.stamp_delay for ch, link in zip(channels, links) if np.isfinite(link.stamp_delay)}
+    return replace(aligned, stamp_delays=found)
+
+
+#: Fewest runs whose data align a floor sensor against its stamps with one delay for that delay to
+#: be applied to every run (:func:`common_delays`): one run's delay may be its own accident.
+MIN_DELAY_RUNS = 2
+
+
+def common_delays(runs: list[AlignedRun], names: list[str]) -> dict:
+    """The delay of each floor sensor's data behind its stamps that the runs agree on.
+
+    A sensor whose stamps share the table's origin but whose data lag them (a device latency, a
+    clock set late) shows the same delay in every trial.  Where the data align it, each run reads
+    that delay; where a run's data cannot (a disturbance, a periodic table motion whose half period
+    fits as well), the others' delay is the better clock.  The delay is taken when at least
+    :data:`MIN_DELAY_RUNS` runs and a majority of those that read one agree within
+    :data:`CLOCK_AGREEMENT` samples of their median, and it is more than :data:`CLOCK_AGREEMENT`
+    from the stamps (smaller ones the stamps already give to a sample).
+
+    Parameters
+    ----------
+    runs : list of AlignedRun
+        Each run's first alignment (with its ``stamp_delays``).
+    names : list of str
+        The runs' names, for the note.
+
+    Returns
+    -------
+    dict
+        Channel -> ``(samples, note)``, for :func:`align_sensors`'s ``delays``.
+    """
+    out = {}
+    channels = sorted({ch for run in runs for ch in run.stamp_delays})
+    for ch in channels:
+        read = {name: run.stamp_delays[ch] for name, run in zip(names, runs) if ch in run.stamp_delays}
+        if len(read) < MIN_DELAY_RUNS:
+            continue
+        median = float(np.median(list(read.values())))
+        agree = {n: v for n, v in read.items() if abs(v - median) <= CLOCK_AGREEMENT}
+        if len(agree) < MIN_DELAY_RUNS or 2 * len(agree) <= len(read) or abs(median) <= CLOCK_AGREEMENT:
+            continue
+        delay = float(np.median(list(agree.values())))
+        step = float(runs[0].time[1] - runs[0].time[0])
+        values = list(agree.values())
+        note = (f"its data lag its stamps by {delay * step * 1e3:+.1f} ms ({delay:+.2f} samples) against the "
+                f"table's, read alike in {len(agree)} of the {len(runs)} runs ({min(values):+.2f} to "
+                f"{max(values):+.2f} samples): one delay, applied to its stamps in every run")
+        out[ch] = (delay, note)
+    return out
+
+
+def _on_table_rate(rec: SensorRecord, table: SensorRecord) -> SensorRecord:
+    """``rec`` on the table's sample interval: as it is when its stamps give the same interval (to
+    :data:`STEP_TOLERANCE`), resampled by its stamps (linear interpolation, with a note naming the
+    ppm) when they give one up to :data:`MAX_DRIFT` off (a device sampling at its own rate, as its
+    stamps say), refused beyond."""
+    rate = rec.step / table.step - 1
+    if abs(rate) <= STEP_TOLERANCE:
+        return rec
+    if abs(rate) > MAX_DRIFT:
+        raise SensorDataError(f"{rec.path}: sample interval {rec.step:.6g} s differs from {table.step:.6g} s of "
+                              f"{table.path} by {rate * 1e6:+.0f} ppm; expected sensors at one rate (a clock "
+                              f"drift of up to {MAX_DRIFT * 1e6:.0f} ppm is resampled)")
+    grid = rec.time[0] + np.arange(int(np.floor((rec.time[-1] - rec.time[0]) / table.step)) + 1) * table.step
+    acc = np.column_stack([np.interp(grid, rec.time, _filled(rec.acc[:, j])) for j in range(rec.acc.shape[1])])
+    for j in range(rec.acc.shape[1]):   # a sample missing in the file stays missing
+        gone = np.isnan(rec.acc[:, j])
+        if gone.any():
+            near = np.searchsorted(rec.time, grid).clip(1, rec.time.size - 1)
+            acc[gone[near] | gone[near - 1], j] = np.nan
+    note = (f"its stamps give a sample interval of {rec.step * 1e6:.1f} us against the table's "
+            f"{table.step * 1e6:.1f} us ({rate * 1e6:+.0f} ppm): resampled onto the table's clock by its stamps")
+    return replace(rec, time=grid, step=table.step, acc=acc, notes=rec.notes + (note,))
 
 
 def _correct_drift(records: list, axes: list, links: list, step: float) -> tuple[list, list]:
     """Each floor sensor whose clock drifts from the table's by more than :data:`DRIFT_LIMIT` samples
-    over the span they share, resampled onto the table's clock, with a note naming the drift."""
+    over the span they share, resampled onto the table's clock, with a note naming the drift.
+
+    The drift is read again on the resampled record, up to :data:`DRIFT_PASSES` times, until what is
+    left is under a tenth of a sample over the span: a lag read in windows of a drifting record
+    comes out a few tens of percent short at thousands of ppm (the window's correlation averages a
+    lag that moves within it), and each pass takes most of what is left."""
     records, links = list(records), list(links)
     table_band = axes[0][2]
     for k in range(1, len(records)):
@@ -335,6 +432,12 @@ def _correct_drift(records: list, axes: list, links: list, step: float) -> tuple
         if drift is None or abs(drift[0] * drift[1]) <= DRIFT_LIMIT:
             continue
         rate, span, centre = drift
+        for _ in range(DRIFT_PASSES - 1):
+            fixed = _dedrift(rec, rate, link.start, centre)
+            left = _drift(table_band, _band(fixed.acc[:, [axes[k][1]]], step)[:, 0], link.start, step)
+            if left is None or abs(left[0] * span) <= 0.1:
+                break
+            rate += left[0]
         records[k] = _dedrift(rec, rate, link.start, centre)
         note = (f"its clock drifts from the table's by {rate * 1e6:+.0f} ppm ({rate * span:+.1f} samples over "
                 f"the {span * step:.0f} s of shaking, read from the lag in {DRIFT_WINDOW:g} s windows): "
@@ -354,6 +457,7 @@ class _Link:
     correlation: float
     clock_error: float
     notes: tuple[str, ...] = ()
+    stamp_delay: float = float("nan")   # samples the data lag the stamps (nan: not read)
 
     @property
     def sign(self) -> int:
@@ -361,25 +465,42 @@ class _Link:
 
 
 def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndarray, band: np.ndarray,
-            step: float) -> _Link:
-    """How ``rec`` joins the table: the shared clock if the data agree, else the data."""
+            step: float, delay: tuple | None = None) -> _Link:
+    """How ``rec`` joins the table: the shared clock if the data agree, else the data.
+
+    With ``delay = (samples, note)`` (the experiment's delay of this sensor's data behind its stamps)
+    the stamps are shifted by it first.  A sign is only ever taken from data that confirm it: where
+    they cannot, the sensor keeps the sign of its file and the note says so.  Data that put the sensor
+    a whole or half period of a repeating table motion away from its stamps cannot tell the two
+    apart: the stamps are kept."""
     lag, corr = _lag(table_band, band)
     data_start = int(round(-lag))
     overlap = min(table.time[-1], rec.time[-1]) - max(table.time[0], rec.time[0])
     reliable = abs(corr) >= MIN_ALIGN_CORRELATION
     if overlap > 0:  # a shared clock: trust it if the data agree
-        clock_start = int(round((rec.time[0] - table.time[0]) / step))
+        stamps = (rec.time[0] - table.time[0]) / step
+        shift, shifted = (0.0, ()) if delay is None else (delay[0], (delay[1],))
+        clock_start = int(round(stamps + shift))
         near_lag, near_corr = _lag(table_band, band, near=-clock_start)
         if abs(near_corr) >= MIN_ALIGN_CORRELATION:  # the data confirm the clock where both recorded
             lag, corr, reliable = near_lag, near_corr, True
         error = (-lag - clock_start) * step
-        if abs(-lag - clock_start) <= CLOCK_AGREEMENT or not reliable:
-            notes = () if reliable else (f"the data cannot confirm the clock (r = {corr:+.2f} with the "
-                                         f"table): its clock and sign are unchecked",)
-            return _Link(clock_start, Alignment.CLOCK, corr, error, notes)
+        periodic = reliable and _repeats(table_band, -lag - clock_start, step)
+        found = -lag - stamps if reliable and not periodic else float("nan")
+        if abs(-lag - clock_start) <= CLOCK_AGREEMENT or not reliable or periodic:
+            notes = shifted
+            if periodic:
+                notes += (f"its data fit as well {-lag - clock_start:+.1f} samples from its stamps (r = {corr:+.2f}): "
+                          f"the table's motion repeats there, so the data cannot decide: its stamps are kept and "
+                          f"its clock and sign unchecked",)
+            elif not reliable:
+                notes += (f"the data cannot confirm the clock (r = {corr:+.2f} with the table): its clock is "
+                          f"unchecked and its sign kept as the file's, unchecked",)
+            sign = corr if reliable and not periodic else abs(corr)   # a sign the data do not confirm is kept
+            return _Link(clock_start, Alignment.CLOCK, sign, error, notes, found)
         note = (f"its clock disagrees with the data by {error:+.4f} s ({-lag - clock_start:+.1f} samples): "
                 f"aligned from the data")
-        return _Link(data_start, Alignment.DATA, corr, error, (note,))
+        return _Link(data_start, Alignment.DATA, corr, error, shifted + (note,), found)
     if not reliable:
         raise SensorDataError(f"{rec.path}: sensor {ch}'s clock does not overlap the table's and its data "
                               f"correlate weakly with the table (r = {corr:+.2f}, expected |r| >= "
@@ -388,22 +509,70 @@ def _offset(table: SensorRecord, rec: SensorRecord, ch: str, table_band: np.ndar
     return _Link(data_start, Alignment.DATA, corr, float("nan"), (note,))
 
 
+def _repeats(table_band: np.ndarray, shift: float, step: float) -> bool:
+    """Whether the table's band-limited motion shifted by ``shift`` samples matches itself (|r| >=
+    :data:`MIN_ALIGN_CORRELATION`) although the shift exceeds a quarter period of the band's top
+    frequency: a repeating motion (a sine), whose lag the data give only up to its period."""
+    s = int(round(abs(shift)))
+    if s < 0.25 / (ALIGN_BAND[1] * step) or s >= table_band.size // 2:
+        return False
+    a, b = table_band[:-s], table_band[s:]
+    r = float(np.dot(a, b) / np.sqrt(np.dot(a, a) * np.dot(b, b)))
+    return abs(r) >= MIN_ALIGN_CORRELATION
+
+
 def _drift(table_band: np.ndarray, band: np.ndarray, start: int, step: float) -> tuple[float, int, float] | None:
     """The sensor's clock drift against the table's (samples of lag gained per sample), the span
-    (samples) it was read over and that span's centre (an index of the table's grid): the slope of the lag read in windows of :data:`DRIFT_WINDOW` s of the
-    span both recorded, over the windows where the data confirm it (|r| >=
-    :data:`MIN_ALIGN_CORRELATION`: a quiet lead-in or tail does not); None with fewer than three."""
+    (samples) it was read over and that span's centre (an index of the table's grid).
+
+    The lag is read in windows of :data:`DRIFT_WINDOW` s of the span both recorded, from the middle
+    window outwards, each near the lag its inner neighbour predicts (within what a drift of
+    :data:`MAX_DRIFT` adds over a window): a drift of thousands of ppm moves the lag by several
+    samples from one window to the next, more than a search around the record's mean lag reaches,
+    yet never by a half period of a repeating table motion.  Only windows where the data confirm the
+    lag (|r| >= :data:`MIN_ALIGN_CORRELATION`: not a quiet lead-in or tail) count; the drift is the
+    slope of a line through their lags, and None is returned with fewer than three such windows or
+    a slope within three of its standard errors of zero (the floors' own phase moving with the
+    motion's content, not a clock)."""
     lo, hi = max(0, start), min(table_band.size, start + band.size)
     width = max(int(DRIFT_WINDOW / step), min_align_samples(step))
-    centres, lags = [], []
-    for a in range(lo, hi - width + 1, width):
-        lag, corr = _lag(table_band[a:a + width], band[a - start:a - start + width], near=0.0)
-        if abs(corr) >= MIN_ALIGN_CORRELATION:
-            centres.append(a + 0.5 * width)
-            lags.append(lag)
-    if len(lags) < 3:
+    starts = list(range(lo, hi - width + 1, width))
+    if len(starts) < 3:
         return None
-    return float(np.polyfit(centres, lags, 1)[0]), int(centres[-1] - centres[0] + width), float(np.mean(centres))
+    middle = len(starts) // 2
+    reach = CLOCK_AGREEMENT + 1 + MAX_DRIFT * width
+    read: dict[int, float] = {}
+
+    def window(i: int, near: float) -> float | None:
+        a = starts[i]
+        lag, corr = _lag(table_band[a:a + width], band[a - start:a - start + width], near=near, reach=reach)
+        if abs(corr) < MIN_ALIGN_CORRELATION:
+            return None
+        read[i] = lag
+        return lag
+
+    for side in (range(middle, len(starts)), range(middle - 1, -1, -1)):
+        known: list[tuple[int, float]] = [(middle, read[middle])] if middle in read else []
+        for i in side:
+            if i in read:
+                continue
+            if len(known) >= 2:   # the line through the two nearest confirmed windows
+                (i1, l1), (i2, l2) = known[-2], known[-1]
+                near = l2 + (l2 - l1) / (i2 - i1) * (i - i2)
+            else:
+                near = known[-1][1] if known else 0.0
+            lag = window(i, near)
+            if lag is not None:
+                known.append((i, lag))
+    if len(read) < 3:
+        return None
+    index = sorted(read)
+    centres = np.array([starts[i] + 0.5 * width for i in index])
+    lags = np.array([read[i] for i in index])
+    coef, cov = np.polyfit(centres, lags, 1, cov=True) if len(lags) > 3 else (np.polyfit(centres, lags, 1), None)
+    if cov is not None and abs(coef[0]) < DRIFT_SIGNIFICANCE * np.sqrt(max(cov[0, 0], 0.0)):
+        return None
+    return float(coef[0]), int(centres[-1] - centres[0] + width), float(np.mean(centres))
 
 
 def _dedrift(rec: SensorRecord, rate: float, start: int, centre: float) -> SensorRecord:

@@ -39,7 +39,7 @@ import numpy as np
 from momentid.core.series import UNITS, Experiment, RunData, run_name_problem
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError, SensorDataError
-from momentid.io.align import SensorReport, align_sensors
+from momentid.io.align import SensorReport, align_sensors, common_delays
 from momentid.io.formats import ExportFormat, Layout, get_format
 from momentid.io.formats.base import repair_missing
 from momentid.io.formats.csv_run import csv_error, read_csv_run
@@ -186,16 +186,34 @@ def _read_run_file(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
                    channels=channels, values=values, meta={"source_file": str(path), "notes": notes})
 
 
-def _read_run(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
-    """One run: a run file as it is, or the sensor files aligned (:func:`align_sensors`)."""
-    added = np.array(spec.added_mass)
+def _read_runs(desc: _Description, storeys: int, sources: dict):
+    """Every run, in order: a run file as it is, or the sensor files aligned (:func:`align_sensors`),
+    twice when the runs agree on a delay of a floor sensor's data behind its stamps
+    (:func:`common_delays`): the second time with that delay applied in every run.  ``sources`` gets
+    each sensor-file run's records (to realign it once relabelled)."""
+    fmt = desc.fmt
     if fmt.layout is Layout.RUN_FILE:
-        return _read_run_file(spec, fmt, storeys)
+        for spec in desc.runs:
+            yield _read_run_file(spec, fmt, storeys)
+        return
     channels = ("zdd", *(f"a{i + 1}" for i in range(storeys)))
-    records = [fmt.read_sensor(f) for f in spec.files]
+    read, first = [], []
+    for spec in desc.runs:   # errors of an early run before a later run is read, as one reads them
+        records = [fmt.read_sensor(f) for f in spec.files]
+        read.append(records)
+        sources[spec.name] = (spec, records, channels)
+        first.append(align_sensors(records, channels))
+    delays = common_delays(first, [spec.name for spec in desc.runs])
+    for spec, records, aligned in zip(desc.runs, read, first):
+        if delays:
+            aligned = align_sensors(records, channels, delays)
+        yield _aligned_run(spec, fmt, channels, aligned)
+
+
+def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) -> RunData:
+    """The run of sensor files aligned as ``aligned``, checked (clipping, resonances near Nyquist)."""
     from momentid.estimation.checks import check_clipping  # estimation imports io: here, not at the top
 
-    aligned = align_sensors(records, channels)
     for j, (ch, f) in enumerate(zip(channels, spec.files)):  # before the placement check reads the shapes
         check_clipping(f"{f}: run {spec.name!r}", ch, aligned.values[:, j])
     notes = list(aligned.notes)
@@ -207,7 +225,7 @@ def _read_run(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
                      f"(a mode beyond it folds back)")
     meta = {"format": fmt.name, "source_files": [str(f) for f in spec.files],
             "sensors": [r.to_dict() for r in aligned.reports], "notes": notes}
-    return RunData(name=spec.name, added_mass=added, time=aligned.time, channels=channels,
+    return RunData(name=spec.name, added_mass=np.array(spec.added_mass), time=aligned.time, channels=channels,
                    values=aligned.values, meta=meta)
 
 
@@ -254,15 +272,15 @@ def import_folder(path, *, relabel: bool = True) -> Experiment:
     d = desc.model.storeys
     structure = desc.model if isinstance(desc.model, Structure) else None
     runs: list[RunData] = []
-    for spec in desc.runs:
-        run = _read_run(spec, desc.fmt, d)
+    sources: dict = {}
+    for spec, run in zip(desc.runs, _read_runs(desc, d, sources)):
         if runs:
             _agree(runs[0], run, desc.runs[0].files[0], spec.files[0])
             _not_repeated(runs, run, spec.files[0])
         elif structure is not None:
             check_model_rate(structure, run.sample_rate, str(spec.files[0]))
         runs.append(run)
-    runs = _placement(runs, desc, folder / EXPERIMENT_FILE, relabel)
+    runs = _placement(runs, desc, folder / EXPERIMENT_FILE, relabel, sources)
     groups = [g for g in ("zdd", "z", "zd", "a", "q", "v")
               if any(c.rstrip("0123456789") == g for c in runs[0].channels)]
     scenario = {
@@ -278,8 +296,12 @@ def import_folder(path, *, relabel: bool = True) -> Experiment:
                       source=str(folder), statement=desc.statement)
 
 
-def _placement(runs: list[RunData], desc: _Description, toml: Path, relabel: bool) -> list[RunData]:
-    """The runs with the sensor-placement check's fixes applied and its findings noted (or refused)."""
+def _placement(runs: list[RunData], desc: _Description, toml: Path, relabel: bool,
+               sources: dict) -> list[RunData]:
+    """The runs with the sensor-placement check's fixes applied and its findings noted (or refused).
+
+    A relabelled run of sensor files is aligned again from its files in their new roles: the clocks,
+    axes and signs were read against the listed table's sensor, which may not be the table's."""
     files = {r.name: tuple(r.meta["source_files"]) for r in runs if "source_files" in r.meta}
     out = {r.name: r for r in runs}
     for finding in check_placement(runs, desc.statement.masses, files):
@@ -287,6 +309,13 @@ def _placement(runs: list[RunData], desc: _Description, toml: Path, relabel: boo
         if not finding.fixable:
             out[finding.run] = dataclasses.replace(run, meta=dict(run.meta, notes=[*run.meta.get("notes", ()),
                                                                                    finding.message]))
+        elif relabel and finding.permutation is not None and finding.run in sources:
+            spec, records, channels = sources[finding.run]
+            perm = finding.permutation
+            moved = _RunSpec(spec.name, tuple(spec.files[p] for p in perm), spec.added_mass)
+            again = _aligned_run(moved, desc.fmt, channels, align_sensors([records[p] for p in perm], channels))
+            note = f"{finding.message}; the files aligned again in these roles: relabelled"
+            out[finding.run] = dataclasses.replace(again, meta=dict(again.meta, notes=[*again.meta["notes"], note]))
         elif relabel:
             out[finding.run] = corrected(run, finding)
         else:

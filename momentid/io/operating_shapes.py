@@ -241,7 +241,9 @@ def run_spectra(values: np.ndarray, rate: float) -> RunSpectra | None:
     first = None
     for res, p in zip(resonances, peaks):
         in_phase = np.min(res.shape * signs) >= -IN_PHASE
-        moving = res.moving() >= 2 if c > 2 else np.argmax(power[p]) == 1  # the floor of a 1-storey rig
+        # a 1-storey rig: one of its two sensors (the floor, whichever file it is listed as) moves most; the
+        # placement check then puts the table where the mode is stillest (a swapped table and floor)
+        moving = res.moving() >= 2 if c > 2 else np.max(power[p]) > 0
         if res.power_ratio >= MIN_POWER_RATIO and in_phase and moving:
             first = res
             break

@@ -102,6 +102,50 @@ def _drift_read(ppm: float):
     return check
 
 
+def _on(sensor: int, edit):
+    """``edit`` (written for floor 3) applied to ``sensor`` (0: the table) instead."""
+    def moved(k, header, rows):
+        if k == sensor:
+            edit(3, header, rows)
+    return moved
+
+
+def _drifts(expected: dict, within: float = 0.05):
+    """Each sensor's note gives its drift (ppm) within ``within`` of ``expected`` (channel -> ppm; the
+    others: no drift).  5 %: the windowed lag, read again after each resampling, lands within 3 % of
+    1700-5000 ppm on this trial; a sensor corrected by a constant shift instead reads no drift at all."""
+    def check(experiment):
+        notes = {s["channel"]: " ".join(s["notes"]) for s in experiment.runs[0].meta["sensors"]}
+        for ch in ("a1", "a2", "a3"):
+            found = re.search(r"drifts from the table's by ([-+]\d+) ppm", notes[ch])
+            want = expected.get(ch)
+            if (want is None) != (found is None) or (want and abs(float(found.group(1)) / want - 1) > within):
+                raise AssertionError(f"expected drifts {expected} ppm, read: {notes}")
+    return check
+
+
+def _stamps_slow(ppm: float):
+    """Floor 3's device samples ``ppm`` slower and its stamps say so (8347 us for 1680 ppm)."""
+    data = _clock_fast(ppm)
+
+    def edit(k, header, rows):
+        if k != 3:
+            return
+        data(k, header, rows)
+        cells = [row.split(",") for row in rows]
+        t0 = int(cells[0][1])
+        for c in cells:
+            c[1] = str(int(round(t0 + (int(c[1]) - t0) * (1 + ppm * 1e-6))))
+        rows[:] = [",".join(c) for c in cells]
+    return edit
+
+
+def _starts_late(k, header, rows):
+    """Floor 3's file starts 30 s late (switched on late): 3600 rows fewer at its start."""
+    if k == 3:
+        del rows[:3600]
+
+
 def _decimal_commas(k, header, rows):
     """Floor 2's export written in a locale with decimal commas: cells separated by ';'."""
     if k == 2:
@@ -154,6 +198,21 @@ CASES = [
     # A saturated floor sensor: import used to read its clipped shape as floors 2 and 3 swapped, and relabel.
     Case(Group.IMU, "shipped-floor-clipped", Outcome.ERROR, _importing(_clipped),
          ("f3.csv", "channel a3 is clipped", "consecutive samples at")),
+    # Issue 32: drifts of 1700-5000 ppm with agreeing stamps were read as a constant shift ("aligned from the
+    # data", a lag running from +2.2 to -1.1 samples); a drifting table sensor was corrected on one floor only.
+    Case(Group.IMU, "shipped-clock-drift-1700ppm", Outcome.RECOVERY,
+         _importing(_clock_fast(1700), check=_drifts({"a3": -1700})), ("resampled onto the table's clock",)),
+    Case(Group.IMU, "shipped-clock-drift-minus-5000ppm", Outcome.RECOVERY,
+         _importing(_clock_fast(-5000), check=_drifts({"a3": 5000})), ("resampled onto the table's clock",)),
+    Case(Group.IMU, "shipped-table-clock-drift-1711ppm", Outcome.RECOVERY,
+         _importing(_on(0, _clock_fast(1711)), check=_drifts({"a1": 1711, "a2": 1711, "a3": 1711})),
+         ("resampled onto the table's clock",)),
+    # A device whose stamps give its own rate (8347 us against 8333 us) was refused as "sensors at different rates".
+    Case(Group.IMU, "shipped-stamps-give-own-rate", Outcome.RECOVERY,
+         _importing(_stamps_slow(1680), check=_drifts({})), ("8347.", "+1680 ppm", "resampled onto the table's clock")),
+    # A floor file that starts 30 s late got an invented drift of -284 ppm and ended 1.8 samples off.
+    Case(Group.IMU, "shipped-floor-starts-late", Outcome.RECOVERY,
+         _importing(_starts_late, check=_drifts({})), ("kept the",)),
     # No masses stated (they are optional) and floors 1 and 2 listed swapped: the relabelling used to crash
     # with "object of type 'NoneType' has no len()" (issue 32).
     Case(Group.IMU, "shipped-swapped-without-masses", Outcome.RECOVERY,

@@ -480,7 +480,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", help="MCAP recording (momentid import, or momentid run)")
     p.add_argument("-o", "--output", metavar="DIR", help="the twin's folder (default: out/<recording>_twin); "
                                                          "written whole or not at all")
-    p.add_argument("--runs", metavar="NAMES", help="comma-separated trials to calibrate on (default: all); every "
+    p.add_argument("--runs", metavar="NAMES", help="comma-separated trials to calibrate on (default: all but a trial of "
+                                                   "another rig state, with a note); every "
                                                    "trial is replayed, the others with the calibrated runs' mean sensors")
     p.add_argument("--json", action="store_true", help="print twin.json to stdout")
     p.add_argument("--no-plots", action="store_true", help="write twin.xml and twin.json only")

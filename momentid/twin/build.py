@@ -23,7 +23,7 @@ from momentid.twin.parameters import TwinParameters, from_identification
 from momentid.twin.replay import Replay, replay_run
 from momentid.twin.spec import Timing, model_matrices, timing, twin_spec
 
-__all__ = ["Twin", "build_twin", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
+__all__ = ["Twin", "build_twin", "default_runs", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
 
 #: Trials a twin is calibrated on at least: one trial cannot tell the rig from that trial.
 MIN_TRIALS = 2
@@ -59,6 +59,8 @@ class Twin:
         The recording.
     warnings : tuple of str
         The identification's warnings the twin accepts (sensor gains it carries).
+    left_out : tuple of str
+        One note per trial the default calibration left out as another rig state (:func:`default_runs`).
     """
 
     parameters: TwinParameters
@@ -69,10 +71,11 @@ class Twin:
     replays: tuple
     source: str
     warnings: tuple = ()
+    left_out: tuple = ()
 
     @property
     def notes(self) -> tuple:
-        return tuple(self.parameters.notes) + tuple(self.identification.notes)
+        return tuple(self.left_out) + tuple(self.parameters.notes) + tuple(self.identification.notes)
 
     def replay(self, run: str) -> Replay:
         """The replay of trial ``run``."""
@@ -237,8 +240,9 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
         Runs with ``zdd`` and ``a1..ad`` (m/s^2): accelerometers only, or a simulated or added-mass
         recording (identified with :func:`momentid.estimation.identification.identify`).
     runs : sequence of str, optional
-        The trials to calibrate on (all by default).  Every trial is replayed; those left out with
-        the calibrated runs' mean sensors.
+        The trials to calibrate on; by default every trial but those of another rig state
+        (:func:`default_runs`, with a note).  Every trial is replayed; those left out with the
+        calibrated runs' mean sensors.
 
     Returns
     -------
@@ -253,6 +257,9 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     from momentid.diagnosis.workers import run_forked
     from momentid.estimation.identification import identify
 
+    left_out: tuple = ()
+    if runs is None:
+        runs, left_out = default_runs(experiment)
     names = check_recording(experiment, runs)
     cannot = f"{experiment.source}: the identification of {', '.join(names)} cannot calibrate a twin: "
     try:
@@ -271,7 +278,37 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     # each calibrated run's sensors with the bias its replay fitted
     params = replace(params, sensors={r.run: r.sensors for r in replays if r.calibrated})
     return Twin(parameters=params, identification=result, timing=t, xml=xml, modes=check_xml(xml),
-                replays=replays, source=experiment.source, warnings=tuple(accepted) + misfit_warning(replays))
+                replays=replays, source=experiment.source, warnings=tuple(accepted) + misfit_warning(replays),
+                left_out=left_out)
+
+
+def default_runs(experiment: Experiment) -> tuple:
+    """The trials a twin is calibrated on by default, and a note per trial left out.
+
+    Every trial, but those the rig-state check (:func:`momentid.diagnosis.rig_state.check_state`, on
+    each trial's own modal fit) sets apart as another rig state: a twin of two rig states is the
+    twin of neither.  Naming such a trial in ``runs`` calibrates on it all the same.
+
+    Returns
+    -------
+    tuple
+        ``(names or None, notes)``: None (all trials) when no trial is set apart or the check cannot
+        run (fewer than ``MIN_OTHERS + 1`` trials, added masses, a trial its own fit refuses).
+    """
+    from momentid.diagnosis.rig_state import MIN_OTHERS, check_state
+    from momentid.estimation.scaled import identify_per_run
+
+    if len(experiment.runs) < MIN_OTHERS + 1 or any(np.any(r.added_mass) for r in experiment.runs):
+        return None, ()
+    try:
+        state = check_state(identify_per_run(experiment))
+    except IdentificationError:
+        return None, ()
+    if not state.outliers:
+        return None, ()
+    notes = tuple(f"{state.sentence(run)} (name it in --runs to calibrate on it all the same)"
+                  for run in state.outliers)
+    return [r.name for r in experiment.runs if state.belongs(r.name)], notes
 
 
 def misfit_warning(replays) -> tuple:

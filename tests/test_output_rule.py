@@ -392,3 +392,13 @@ def test_view_twin_refuses_the_twin_of_another_recording(tmp_path, rig, twin_fol
     rec = write_experiment(tmp_path / "heavier.mcap", dataclasses.replace(experiment, statement=heavier))
     error = _refused(capsys, ["view", str(rec), "--twin", str(twin_folder), "--save", str(tmp_path / "v.rrd")])
     assert "floor masses" in error and "states [0.6, 0.4]" in error, error
+
+
+# ------------------------------------------------------------------- smaller: units of the modal JSON
+
+def test_modal_json_says_the_unit_of_every_matrix(rig):
+    """The modal `identify --json` gave K, C, M and M^-1 K with no unit in the key or a units table."""
+    payload = mi.identify(rig[0]).to_dict()
+    assert payload["units"]["K"] == "N/m" and payload["units"]["C"] == "N s/m" and payload["units"]["M"] == "kg"
+    assert payload["units"]["M^-1 K"] == "1/s^2" and payload["units"]["M^-1 C"] == "1/s"
+    assert all(key in payload for key in payload["units"])   # a unit for a key the payload has

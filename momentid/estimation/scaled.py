@@ -164,6 +164,7 @@ class ModalIdentification:
             "damping_ratio_subspace": None if self.damping_ratio_subspace is None else
             [None if np.isnan(z) else float(z) for z in self.damping_ratio_subspace],
             "damping_is_answer": None if self.damping_is_answer is None else [bool(a) for a in self.damping_is_answer],
+            "units": MODAL_UNITS,
         }
 
     def table(self, warnings: bool = True) -> str:
@@ -418,6 +419,14 @@ def identify_per_run(experiment: Experiment, runs=None) -> tuple:
 
     names = [r.name for r in experiment.select(runs)]
     return tuple(run_forked(lambda name: identify_modal(experiment, runs=[name]), names))
+
+
+#: The unit of each quantity of :meth:`ModalIdentification.to_dict` (SI; their standard errors in
+#: ``std`` share them).
+MODAL_UNITS = {"frequency_hz": "Hz", "damping_ratio": "1 (fraction of critical)", "mode_shapes": "1 (floor 1..top)",
+               "M": "kg", "K": "N/m", "C": "N s/m", "masses": "kg", "M^-1 K": "1/s^2", "M^-1 C": "1/s",
+               "sensor_gain": "1 (x the table sensor)", "sensor_offset_s": "s", "amplitude_m_s2": "m/s^2",
+               "residual_rms": "m/s^2", "f_max_hz": "Hz"}
 
 
 def weighted_line(x, y, s):

@@ -478,8 +478,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "trial, a trial without table sensor, or an identification the data contradict. "
                                    "See docs/twin.md.")
     p.add_argument("recording", help="MCAP recording (momentid import, or momentid run)")
-    p.add_argument("-o", "--output", metavar="DIR", help="the twin's folder (default: out/<recording>_twin); "
-                                                         "written whole or not at all")
+    p.add_argument("-o", "--output", metavar="DIR", help="the twin's folder (default: out/<recording>_twin); only "
+                                                         "the twin's files are written, each whole, the folder's "
+                                                         "other files left alone")
     p.add_argument("--runs", metavar="NAMES", help="comma-separated trials to calibrate on (default: all but a trial of "
                                                    "another rig state, with a note); every "
                                                    "trial is replayed, the others with the calibrated runs' mean sensors")

@@ -39,7 +39,8 @@ import numpy as np
 from momentid.core.series import UNITS, Experiment, RunData, run_name_problem
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError, SensorDataError
-from momentid.io.align import SensorReport, align_sensors, common_delays
+from momentid.io.align import SensorReport, align_sensors
+from momentid.io.delays import common_delays
 from momentid.io.formats import ExportFormat, Layout, get_format
 from momentid.io.formats.base import repair_missing
 from momentid.io.formats.csv_run import csv_error, read_csv_run

@@ -440,7 +440,7 @@ def test_which_warnings_refuse_a_twin(twin):
     assert refusals(replace(result, warnings=(gain,))) == ([], [gain])
     poor = "mode 2 at 10.31 Hz is poorly determined (frequency +- 0.2 Hz, damping ratio 0.008 +- 0.006)"
     assert refusals(replace(result, warnings=(gain, poor))) == ([poor], [gain])
-    unstable = replace(result, damping_ratio=np.array([0.01, -0.001]))
+    unstable = replace(result, damping_ratio_equivalent=np.array([0.01, -0.001]))   # the linear fit the twin replays
     assert "unstable" in refusals(unstable)[0][0]
     loose = replace(result, sensor_gain=np.array([[1.0, 1.0], [1.0, 0.3]]))
     assert "expected 0.5-2" in refusals(loose)[0][0]

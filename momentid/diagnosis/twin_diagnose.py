@@ -230,9 +230,9 @@ def _reference(per_run, training, held: str, start: resim.RigModel, tr) -> dict:
         return {"mechanism": "amplitude_dependent_viscous_damping", "not_fitted": "training amplitudes too alike"}
     _, _, residues = twin_fit.twin_modes(start)
     coef = {}
-    for key in ("frequency", "damping_ratio"):
-        coef[key] = [weighted_line(x, np.array([getattr(r, key)[m] for r in train]),
-                                   np.maximum(np.array([getattr(r, key + "_std")[m] for r in train]), 1e-12))[0]
+    for key, name in (("frequency", "frequency"), ("damping_ratio", "linear_damping_ratio")):
+        coef[key] = [weighted_line(x, np.array([getattr(r, name)[m] for r in train]),
+                                   np.maximum(np.array([getattr(r, name + "_std")[m] for r in train]), 1e-12))[0]
                      for m in range(residues.shape[0])]
     f = np.array([c[0] + c[1] * amplitude[held] for c in coef["frequency"]])
     zeta = np.clip([c[0] + c[1] * amplitude[held] for c in coef["damping_ratio"]], 1e-5, None)

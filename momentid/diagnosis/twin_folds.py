@@ -88,7 +88,7 @@ def linear_start(experiment: Experiment, names) -> resim.RigModel:
     if ident.K is None:
         raise IdentificationError(f"{experiment.source}: no floor masses stated: the twin needs them "
                                   f"(experiment.toml [structure] masses)")
-    return resim.RigModel(np.asarray(ident.masses, float), ident.K, np.clip(ident.damping_ratio, 1e-4, None))
+    return resim.RigModel(np.asarray(ident.masses, float), ident.K, np.clip(ident.linear_damping_ratio, 1e-4, None))
 
 
 def hold_out(experiment: Experiment, held: str, training, *, substeps: int | None = None,

@@ -174,7 +174,7 @@ def _modal_refusals(result) -> tuple[list, list]:
     from momentid.diagnosis.plausibility import GAIN_RANGE
 
     reasons = [f"mode {i + 1} at {f:.4g} Hz is unstable (damping ratio {z:.3g})"
-               for i, (f, z) in enumerate(zip(result.frequency, result.damping_ratio)) if not z > 0]
+               for i, (f, z) in enumerate(zip(result.frequency, result.linear_damping_ratio)) if not z > 0]
     gain = np.asarray(result.sensor_gain)
     for r, run in enumerate(result.runs):
         bad = [j for j in range(gain.shape[1]) if not GAIN_RANGE[0] <= gain[r, j] <= GAIN_RANGE[1]]

@@ -7,6 +7,7 @@ an interrupted run exits 130.  Run ``momentid COMMAND --help`` for details.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
@@ -60,7 +61,9 @@ def _refuse_implausible(experiment, result) -> None:
                                   + "; ".join(reasons) + "; `momentid diagnose` locates a mismatch")
 
 
-def _report(experiment, args) -> int:
+def _report(experiment, args, out: Path | None = None) -> int:
+    """Identify ``experiment``, print the result (``--json``: one JSON object) and, with ``out`` (``identify
+    -o``), write its folder (:func:`momentid.report.files.write_identification`)."""
     from momentid.estimation.comparison import compare
     from momentid.estimation.identification import identify
     from momentid.estimation.scaled import ModalIdentification
@@ -76,6 +79,7 @@ def _report(experiment, args) -> int:
         raise
     _refuse_implausible(experiment, result)
 
+    comparison = None
     if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
         payload, text = result.to_dict(), result.table(warnings=False)   # warnings: on stderr, once
     elif experiment.structure is not None:
@@ -92,8 +96,20 @@ def _report(experiment, args) -> int:
         print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
     else:
         print(text)
+    if out is not None:
+        _write_identification(out, result, experiment, payload, args, comparison=comparison)
     _warn(result.warnings)
     return 0
+
+
+def _write_identification(out: Path, result, experiment, payload: dict, args, **extra) -> None:
+    """``identify -o DIR``: the folder, and one line naming what it holds (stderr with ``--json``)."""
+    from momentid.report.files import write_identification
+    from momentid.report.page import provenance
+
+    made = provenance(getattr(args, "argv", None), [args.recording])
+    names = write_identification(out, result, experiment, payload, made, **extra)
+    print(f"\nreport written to {out}/ ({', '.join(names)})", file=sys.stderr if args.json else sys.stdout)
 
 
 def _cmd_run(args) -> int:
@@ -123,28 +139,32 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_identify(args) -> int:
+    from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
     if args.stream:
         return _identify_stream(args)
+    out = output_folder(args.output) if args.output else None
     experiment = read_recording(args.recording)
-    runs = run_names(args.runs)
-    if args.per_run:
+    with exclusive(out) if out is not None else contextlib.nullcontext():   # one writer per folder
+        if not args.per_run:
+            return _report(experiment, args, out)
         from momentid.estimation.scaled import amplitude_trend, identify_per_run
 
-        results = identify_per_run(experiment, runs)
+        results = identify_per_run(experiment, run_names(args.runs))
         trend = amplitude_trend(results) if len(results) > 1 else None
+        payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
         if args.json:
-            payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
             print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
         else:
             print("\n\n".join(r.table(warnings=False) for r in results))   # warnings: on stderr, once
             if trend is not None:
                 print("\n" + trend.table())
+        if out is not None:
+            _write_identification(out, tuple(results), experiment, payload, args, trend=trend)
         for r in results:
             _warn(r.warnings, r.runs[0])
         return 0
-    return _report(experiment, args)
 
 
 def _identify_stream(args) -> int:
@@ -157,7 +177,7 @@ def _identify_stream(args) -> int:
     # rather than silently compute something else.
     ignored = [f"--estimator {args.estimator}" if args.estimator not in ("auto", "equation") else "",
                "--runs" if args.runs else "", "--time" if args.time else "",
-               "--per-run" if args.per_run else ""]
+               "--per-run" if args.per_run else "", "-o (its transfer functions)" if args.output else ""]
     ignored = [o for o in ignored if o]
     if ignored:
         raise IdentificationError(f"{args.recording}: --stream computes the equation form over every sample of every "
@@ -238,8 +258,18 @@ def _cmd_sweep(args) -> int:
     return 0
 
 
+def _report_page(out: Path, page, args) -> str:
+    """Write ``out/report.html``, ``page(provenance)``'s HTML; returns its name."""
+    from momentid.report.files import REPORT_HTML
+    from momentid.report.page import provenance, write_text_atomic
+
+    write_text_atomic(out / REPORT_HTML, page(provenance(getattr(args, "argv", None), [args.recording])))
+    return REPORT_HTML
+
+
 def _cmd_diagnose(args) -> int:
     from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.report.files import diagnosis_html_page
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
@@ -248,6 +278,7 @@ def _cmd_diagnose(args) -> int:
     with exclusive(out):   # one writer per report folder, refused before minutes of work
         diag = diagnose(experiment, hold_out=args.hold_out)
         written = write_report(diag, out)  # experiment.notes went to stderr as read_recording's RecoveryWarning
+        written += (_report_page(out, lambda made: diagnosis_html_page(diag, made, args.recording), args),)
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
@@ -259,13 +290,16 @@ def _cmd_diagnose(args) -> int:
 def _cmd_twin(args) -> int:
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
+    from momentid.report.files import twin_html_page
     from momentid.twin import build_twin, write_twin
 
     out = output_folder(args.output) if args.output else Path("out") / f"{Path(args.recording).stem}_twin"
     experiment = read_recording(args.recording)
     with exclusive(out):   # one writer per twin folder, refused before the twin is built
         twin = build_twin(experiment, args.runs.split(",") if args.runs else None)
-        names = write_twin(twin, experiment, out, plots=not args.no_plots)
+        page = None if args.no_plots else (
+            lambda folder: [_report_page(folder, lambda made: twin_html_page(twin, experiment, made), args)])
+        names = write_twin(twin, experiment, out, plots=not args.no_plots, extra=page)
     if args.json:
         print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
     else:
@@ -385,6 +419,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--per-run", action="store_true",
                    help="runs without added mass: one modal fit per run, and how mode 1's frequency and "
                         "damping change with the response amplitude across runs (a linear rig shows no trend)")
+    p.add_argument("-o", "--output", metavar="DIR",
+                   help="also write DIR/report.html (one self-contained page: the answer, tables, figures, "
+                        "provenance), DIR/modes.uff and DIR/frf.uff (UFF datasets 55 and 58: the modes and the "
+                        "measured table-to-floor transfer functions) and DIR/identification.json (what --json "
+                        "prints); see docs/reports.md")
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("import", help="turn a lab's raw exports (CSV per run, Xsens DOT IMU files) into a recording",
@@ -508,6 +547,7 @@ def main(argv=None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)   # --help and usage errors print too
+        args.argv = list(sys.argv[1:] if argv is None else argv)    # the exact command (report provenance)
         if args.command is None:
             parser.print_help()
             return 2

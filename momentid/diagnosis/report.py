@@ -16,7 +16,7 @@ from momentid.diagnosis.modal_discovery import ModalDiscovery, plot_modal_discov
 from momentid.diagnosis.result import AddedMassEvidence, Diagnosis, TwinEvidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
-from momentid.mechanisms.place import Place
+from momentid.mechanisms.place import Place, location_words
 
 __all__ = ["summary", "write_report"]
 
@@ -50,19 +50,19 @@ def summary(diag: Diagnosis) -> str:
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.outside_library is not None:
         out = selection.outside_library
-        lines.append(f"Unexplained by the library at {json.dumps(loc)}: its best model, "
-                     f"{out.mechanism.replace('_', ' ')} at {json.dumps(out.location)}, leaves training NRMSE "
+        lines.append(f"Unexplained by the library at {location_words(loc)}: its best model, "
+                     f"{out.mechanism.replace('_', ' ')} at {location_words(out.location)}, leaves training NRMSE "
                      f"{100 * out.named:.2f} % (noise alone {100 * out.noise:.2f} %); the force below, outside the "
                      f"library, {100 * out.discovered:.2f} %.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.partial is not None:
         part = selection.partial
-        lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "
-                     f"{part.candidate.mechanism.replace('_', ' ')} at {json.dumps(part.candidate.location)}, removes "
+        lines.append(f"Unexplained mismatch at {location_words(loc)}: the best candidate, "
+                     f"{part.candidate.mechanism.replace('_', ' ')} at {location_words(part.candidate.location)}, removes "
                      f"only {100 * max(selection.explained, 0):.0f} % of the training runs' misfit above noise "
                      f"(NRMSE {100 * selection.linear:.2f} % -> {100 * selection.augmented:.2f} %, noise alone "
                      f"{100 * selection.noise:.2f} %); the model is left linear.")
     elif diag.verdict is Verdict.UNEXPLAINED:
-        lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
+        lines.append(f"Unexplained mismatch at {location_words(loc)} (largest at {worst}); no candidate mechanism "
                      f"explains at least {int(EXPLAINED * 100)} % of it.")
     else:
         if len(diag.mechanisms) > 1:
@@ -174,7 +174,7 @@ def _plots(diag: Diagnosis, folder: Path) -> None:
     axes[0, 1].legend(fontsize=7)
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("time (s)")
-    fig.suptitle(f"{diag.mechanism} {json.dumps(diag.location)}: held-out NRMSE "
+    fig.suptitle(f"{diag.mechanism.replace('_', ' ')} at {location_words(diag.location)}: held-out NRMSE "
                  f"{100 * diag.nrmse_before:.2f} % -> {100 * diag.nrmse_after:.2f} %")
     fig.tight_layout()
     fig.savefig(folder / "replay.png", dpi=90)

@@ -41,7 +41,7 @@ def _check_out(out: Path) -> None:
                               f"folder, or a previous twin's (which is replaced whole)")
 
 
-def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
+def _write_files(twin, experiment, folder: Path, plots: bool, extra=None) -> list:
     from momentid.diagnosis.workers import run_forked
     from momentid.twin import plots as plotting
 
@@ -58,10 +58,12 @@ def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
             return plotting.plot_replay(replay, folder / plotting.replay_file(replay.run)).name
 
         names += run_forked(plot, list(twin.replays) + [None])
+    if extra is not None:
+        names += extra(folder)
     return names
 
 
-def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
+def write_twin(twin, experiment, out, *, plots: bool = True, extra=None) -> list:
     """Write ``twin.xml``, ``twin.json`` and the plots into the folder ``out``, atomically.
 
     Parameters
@@ -74,6 +76,9 @@ def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
         The folder; created, or replaced when it holds a previous twin.
     plots : bool
         Write the PNG plots too.
+    extra : callable, optional
+        ``extra(folder)`` writes more files into the folder being built (the report page of
+        :mod:`momentid.report`, which this layer does not import) and returns their names.
 
     Returns
     -------
@@ -90,17 +95,17 @@ def write_twin(twin, experiment, out, *, plots: bool = True) -> list:
     out = Path(out)
     _check_out(out)
     with exclusive(out):    # one writer per folder (a new one is made here, and removed on failure)
-        return _replace(twin, experiment, out, plots)
+        return _replace(twin, experiment, out, plots, extra)
 
 
-def _replace(twin, experiment, out: Path, plots: bool) -> list:
+def _replace(twin, experiment, out: Path, plots: bool, extra=None) -> list:
     """Build the folder beside ``out`` and rename it into place (see :func:`write_twin`)."""
     parent = out.absolute().parent
     parent.mkdir(parents=True, exist_ok=True)
     building = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".partial", dir=parent))
     old = None
     try:
-        names = _write_files(twin, experiment, building, plots)
+        names = _write_files(twin, experiment, building, plots, extra)
         os.chmod(building, 0o755)                    # mkdtemp makes it private; a result folder is not
         if out.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=parent))

@@ -6,7 +6,9 @@ port are needed, only Debian's ``chromium`` package (``.ci/run`` installs it).
 
 Used by tests/test_report.py; run as a script it saves a screenshot of a page::
 
-    python tests/browser.py out/diag/report.html docs/images/report_diagnosis.png
+    python tests/browser.py out/diag/report.html docs/images/report_diagnosis.png [HEIGHT]
+
+(the page's top ``HEIGHT`` CSS pixels, 1200 wide; the whole page without it).
 """
 
 from __future__ import annotations
@@ -100,8 +102,9 @@ class _Pipe:
             self.buffer += chunk
 
 
-def open_page(path, *, width: int = 1200, screenshot: bool = False) -> Load:
-    """Load the file ``path`` in headless Chromium, ``width`` CSS pixels wide, and return what it did."""
+def open_page(path, *, width: int = 1200, screenshot: bool = False, height: int | None = None) -> Load:
+    """Load the file ``path`` in headless Chromium, ``width`` CSS pixels wide, and return what it did
+    (``screenshot``: with a PNG of the whole page, or of its top ``height`` pixels)."""
     exe = chromium()
     if exe is None:
         raise FileNotFoundError("chromium is not installed (apt-get install -y chromium)")
@@ -127,8 +130,8 @@ def open_page(path, *, width: int = 1200, screenshot: bool = False) -> Load:
         session = pipe.send("Target.attachToTarget", {"targetId": page["targetId"], "flatten": True})["sessionId"]
         for domain in ("Page", "Runtime", "Log", "Network"):
             pipe.send(f"{domain}.enable", session=session)
-        pipe.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": 900, "deviceScaleFactor": 1,
-                                                         "mobile": False}, session=session)
+        pipe.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": height or 900,
+                                                         "deviceScaleFactor": 1, "mobile": False}, session=session)
         pipe.send("Page.navigate", {"url": Path(path).resolve().as_uri()}, session=session)
         pipe.wait(lambda m: m.get("method") == "Page.loadEventFired")
         sizes = pipe.send("Runtime.evaluate", {
@@ -137,7 +140,7 @@ def open_page(path, *, width: int = 1200, screenshot: bool = False) -> Load:
             "returnByValue": True}, session=session)
         load.figures = [tuple(x) for x in json.loads(sizes["result"]["value"])]
         if screenshot:
-            shot = pipe.send("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": True},
+            shot = pipe.send("Page.captureScreenshot", {"format": "png", "captureBeyondViewport": height is None},
                              session=session)
             load.screenshot = base64.b64decode(shot["data"])
         pipe.send("Runtime.evaluate", {"expression": "1"}, session=session)   # events so far are in
@@ -169,9 +172,9 @@ def open_page(path, *, width: int = 1200, screenshot: bool = False) -> Load:
 
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        sys.exit("usage: python tests/browser.py PAGE.html SCREENSHOT.png")
-    result = open_page(sys.argv[1], screenshot=True)
+    if len(sys.argv) not in (3, 4):
+        sys.exit("usage: python tests/browser.py PAGE.html SCREENSHOT.png [HEIGHT]")
+    result = open_page(sys.argv[1], screenshot=True, height=int(sys.argv[3]) if len(sys.argv) == 4 else None)
     Path(sys.argv[2]).write_bytes(result.screenshot)
     print(f"{sys.argv[1]}: {len(result.figures)} figures, {len(result.errors)} errors, "
           f"{len(result.requests)} requests -> {sys.argv[2]}")

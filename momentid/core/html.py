@@ -12,7 +12,7 @@ import html
 import math
 from collections.abc import Iterable, Sequence
 
-__all__ = ["Raw", "escape", "table", "matrix_table", "word_lines", "warnings_list", "summary", "pm", "percent_pm",
+__all__ = ["Raw", "escape", "count", "channel_words", "table", "matrix_table", "word_lines", "warnings_list", "summary", "pm", "percent_pm",
            "SUMMARY_CSS", "REFUSED"]
 
 #: How a damping ratio that is not an answer is marked (the words of the text table).
@@ -50,6 +50,20 @@ def escape(value) -> str:
     if isinstance(value, Raw):
         return str(value)
     return html.escape(str(value), quote=True)
+
+
+def count(n: int, word: str) -> str:
+    """``1 storey``, ``3 storeys``: ``n`` and ``word``, plural (with an ``s``) unless ``n`` is 1."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def channel_words(channel: str) -> str:
+    """A recorded channel in words: ``a2`` -> ``floor 2 sensor``, ``q2`` -> ``floor 2 displacement``,
+    ``zdd`` -> ``table sensor``; any other name as it is."""
+    if channel == "zdd":
+        return "table sensor"
+    kind = {"a": "sensor", "q": "displacement", "v": "velocity"}.get(channel[:1])
+    return f"floor {channel[1:]} {kind}" if kind and channel[1:].isdigit() else channel
 
 
 def pm(value: float, std: float | None, digits: int = 4) -> str:

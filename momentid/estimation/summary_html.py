@@ -25,7 +25,7 @@ def refused_modes(result) -> list[int]:
 
 
 def _runs(runs) -> str:
-    return f"{len(runs)} run{'s' if len(runs) != 1 else ''} ({', '.join(runs)})"
+    return f"{html.count(len(runs), 'run')} ({', '.join(runs)})"
 
 
 def modal_headline(result) -> str:
@@ -33,7 +33,7 @@ def modal_headline(result) -> str:
     d = result.storeys
     scale = ("K and C from the stated floor masses" if result.K is not None
              else "mass-normalised (no floor masses stated)")
-    words = f"{d} mode{'s' if d != 1 else ''} of {_runs(result.runs)} without added mass; {scale}"
+    words = f"{html.count(d, 'mode')} of {_runs(result.runs)} without added mass; {scale}"
     refused = refused_modes(result)
     if refused:
         words += (f"; the damping ratio of mode{'s' if len(refused) > 1 else ''} "
@@ -66,9 +66,10 @@ def modal_html(result) -> str:
     if result.extra_modes:
         body += html.table(["", "frequency (Hz)", "damping ratio (%)", "seen by"],
                            [["extra", pm(m.frequency, m.frequency_std), percent_pm(m.damping_ratio, m.damping_ratio_std),
-                             ", ".join(m.seen_by) or "no sensor beyond 3 standard errors"] for m in result.extra_modes],
-                           caption=f"Resonances beyond the {result.storeys} storey modes (fitted so that they do "
-                                   f"not distort them)")
+                             ", ".join(map(html.channel_words, m.seen_by)) or "no sensor beyond 3 standard errors"]
+                            for m in result.extra_modes],
+                           caption=f"Resonances beyond the {html.count(result.storeys, 'storey mode')} "
+                                   f"(fitted so that they do not distort them)", words=[3])
     return html.summary(modal_headline(result), body + html.warnings_list(result.warnings))
 
 

@@ -99,12 +99,6 @@ def _per_sensor(diag) -> dict:
     return out
 
 
-def _sensor_words(channel: str) -> str:
-    """``a2`` -> ``floor 2 sensor``, ``q2`` -> ``floor 2 displacement``."""
-    kind = {"a": "sensor", "q": "displacement"}.get(channel[:1])
-    return f"floor {channel[1:]} {kind}" if kind and channel[1:].isdigit() else channel
-
-
 def _mechanism_rows(diag) -> list:
     rows = []
     for n in diag.mechanisms:
@@ -209,7 +203,7 @@ def diagnosis_page(diag, made: Provenance, source: str = "") -> Page:
     if diag.curves:
         page.section("Per sensor", lambda: html.table(
             ["sensor", *_model_labels(diag).values()],
-            [[_sensor_words(s), *(f"{100 * v:.2f}" for v in row.values())] for s, row in _per_sensor(diag).items()],
+            [[html.channel_words(s), *(f"{100 * v:.2f}" for v in row.values())] for s, row in _per_sensor(diag).items()],
             caption="Held-out NRMSE (%) of each floor sensor"))
     rows = _mechanism_rows(diag)
     if rows:

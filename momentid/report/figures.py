@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
+from momentid.core.html import channel_words
 from momentid.twin.plots import pyplot
 
 __all__ = ["svg", "TrendPoint", "trend_points", "amplitude_figure", "comparison_figure", "mismatch_figure",
@@ -205,8 +206,7 @@ def mismatch_figure(time, measured, models: dict, channel_nrmse: dict, band=None
     for k, label in enumerate(labels):
         left.bar(np.arange(len(sensors)) + (k - (len(labels) - 1) / 2) * width,
                  [100 * channel_nrmse[s][label] for s in sensors], width, label=label)
-    left.set_xticks(np.arange(len(sensors)), [f"floor {s[1:]} {'sensor' if s[:1] == 'a' else 'displacement'}"
-                                               for s in sensors], fontsize=8)
+    left.set_xticks(np.arange(len(sensors)), [channel_words(s) for s in sensors], fontsize=8)
     left.set_ylabel("held-out NRMSE (%)")
     left.legend(fontsize=7)
     left.grid(alpha=0.3, axis="y")

@@ -124,7 +124,8 @@ def identification_page(result, experiment, made: Provenance, *, comparison=None
         result, results = results[0], None
     runs = [r.runs[0] for r in results] if results is not None else list(result.runs)
     page = Page(f"Identification of {experiment.name}",
-                f"{experiment.source}: {experiment.storeys} storeys, {len(runs)} runs ({', '.join(runs)}).", made)
+                f"{experiment.source}: {html.count(experiment.storeys, 'storey')}, {html.count(len(runs), 'run')} "
+                f"({', '.join(runs)}).", made)
     if results is not None:
         if trend is not None:
             page.answer(trend._repr_html_())

@@ -31,7 +31,7 @@ def twin_page(twin, experiment, made: Provenance) -> Page:
     p = twin.parameters
     d = p.storeys
     page = Page(f"Twin of {experiment.name}", f"{twin.source}: the calibrated MuJoCo twin (twin.xml), "
-                                              f"{d} storeys, {len(twin.replays)} trials replayed.", made)
+                                              f"{html.count(d, 'storey')}, {len(twin.replays)} trials replayed.", made)
     page.answer(twin._repr_html_())
     unit = "normalised by the mean floor mass" if p.mass_normalised else "SI"
     page.table("Stiffness and damping", html.matrix_table(p.K, caption="K (N/m)")

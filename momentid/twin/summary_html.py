@@ -15,7 +15,7 @@ def twin_headline(twin) -> str:
     masses = ("mass-normalised (no floor masses stated)" if p.mass_normalised
               else f"floor masses {', '.join(f'{m:g}' for m in p.masses)} kg")
     worst = max(twin.replays, key=lambda r: r.nrmse / max(r.noise_nrmse, 1e-12))
-    return (f"MuJoCo twin of {twin.source}: {p.storeys} storey{'s' if p.storeys != 1 else ''}, {masses}; calibrated "
+    return (f"MuJoCo twin of {twin.source}: {html.count(p.storeys, 'storey')}, {masses}; calibrated "
             f"on {', '.join(p.runs)}; replay NRMSE {min(r.nrmse for r in twin.replays) * 100:.1f}-"
             f"{max(r.nrmse for r in twin.replays) * 100:.1f} % (the furthest from its noise: {worst.run}, "
             f"{worst.nrmse / max(worst.noise_nrmse, 1e-12):.1f} x the noise alone).")

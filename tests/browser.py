@@ -27,9 +27,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 #: The flags that run Chromium here: no sandbox (root in a container), no GPU, nothing fetched behind the
-#: page's back (no QUIC, background networking, component updates or sync), a fresh profile each time.
+#: page's back (no QUIC, background networking, component updates or sync), a fresh profile each time,
+#: no scroll bar in a screenshot.
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync")
+         "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars")
 #: Seconds a page may take to load (a 1 MB report loads in well under one here).
 TIMEOUT = 60.0
 #: What a figure is, on a report page.

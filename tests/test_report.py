@@ -152,6 +152,9 @@ def test_reports_open_in_chromium(identified, recording, tmp_path):
     write_experiment(rec, _lab(run("r1", 0.3, 1), run("r2", 0.6, 2), masses=False))
     assert main(["diagnose", str(rec), "-o", str(tmp_path / "diag")]) == 0
     load = _opens_cleanly(tmp_path / "diag" / "report.html")
+    before = (tmp_path / "diag" / "report.html").read_bytes()
+    assert main(["diagnose", str(rec), "-o", str(tmp_path / "diag")]) == 0
+    assert (tmp_path / "diag" / "report.html").read_bytes() == before        # the same bytes again
     assert len(load.figures) == 3                          # overlay, comparison, where the misfit sits
     page = (tmp_path / "diag" / "report.html").read_text(encoding="utf-8")
     answer = page[_sections(page)[0]:_sections(page)[1]]

@@ -220,6 +220,24 @@ def test_refused_damping_is_said_on_the_page():
     assert '<li class="warning"><strong>WARNING</strong>' in block
 
 
+def test_added_mass_identification_page(simulated, tmp_path):
+    """The default scenario (three runs, two with added mass): M, C, K against the analytic model, the
+    UFF modes mass-normalised."""
+    rec = tmp_path / "default.mcap"
+    write_experiment(rec, simulated("default"))
+    assert main(["identify", str(rec), "-o", str(tmp_path / "id")]) == 0
+    page = (tmp_path / "id" / "report.html").read_text(encoding="utf-8")
+    assert "Against the recording&#x27;s analytic model" in page and "K (N/m, ± one standard error)" in page
+    _opens_cleanly(tmp_path / "id" / "report.html")
+    result = mi.identify(mi.read_recording(rec))
+    modes = [s for s in pyuff.UFF(str(tmp_path / "id" / "modes.uff")).read_sets() if s["type"] == 55]
+    shapes = result.modes().shapes
+    for i, m in enumerate(modes):
+        assert m["modal_m"] == 1.0                                       # phi^T M phi = 1
+        # E13.5: six significant digits of each entry, and the largest sets the absolute scale
+        assert np.allclose(m["r1"], shapes[:, i], rtol=5e-6, atol=5e-6 * np.max(np.abs(shapes[:, i])))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("rig, twin_runs", [("flexible_3storey", None),
                                             ("stiff_1storey", "el_centro_1,northridge_1,northridge_2")])

@@ -76,9 +76,9 @@ def _added_mass(page: Page, result, experiment, comparison) -> None:
 
     page.answer(result._repr_html_())
     std = result.std() or {}
-    for name, unit in (("M", "kg"), ("C", "N s/m"), ("K", "N/m")):
-        page.table(f"{name} ({unit})", html.matrix_table(getattr(result, name), std.get(name),
-                                                         caption=f"{name} ({unit}, ± one standard error)"))
+    page.table("Mass, damping and stiffness", "".join(
+        html.matrix_table(getattr(result, name), std.get(name), caption=f"{name} ({unit}, ± one standard error)")
+        for name, unit in (("M", "kg"), ("C", "N s/m"), ("K", "N/m"))))
     if comparison is not None:
         page.table("Against the recording's analytic model", html.table(
             ["parameter", "unit", "identified", "analytic", "relative error", "z-score"],

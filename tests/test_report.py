@@ -22,7 +22,7 @@ from momentid.cli import main
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
 from momentid.estimation.noise import quiet_lead_in
-from momentid.estimation.transfer import measured_transfer
+from momentid.estimation.frf import measured_transfer
 from momentid.io.recording import write_experiment
 
 import browser

@@ -11,7 +11,7 @@ heights when the recording states them); every value is along +X, the shaking ax
   modal mass is given when floor masses are stated); an added-mass identification's are
   mass-normalised (modal mass 1 kg).
 - ``frf.uff``: per run and floor sensor, the measured table-to-floor transfer function (H1 after the
-  run's quiet lead-in, :func:`momentid.estimation.transfer.measured_transfer`; dataset 58, function
+  run's quiet lead-in, :func:`momentid.estimation.frf.measured_transfer`; dataset 58, function
   type 4, complex) and its coherence (function type 6).
 """
 
@@ -21,7 +21,7 @@ import numpy as np
 
 from momentid.core.html import REFUSED
 from momentid.estimation.noise import quiet_lead_in
-from momentid.estimation.transfer import measured_transfer
+from momentid.estimation.frf import measured_transfer
 from momentid.io import uff
 
 __all__ = ["modes_uff", "frf_uff", "transfers"]
@@ -95,7 +95,7 @@ def modes_uff(results, experiment) -> str:
 
 def transfers(experiment, runs) -> list:
     """The measured transfer functions of ``runs`` (names) of ``experiment``, each after its quiet
-    lead-in (:class:`~momentid.estimation.transfer.MeasuredTransfer`, in order)."""
+    lead-in (:class:`~momentid.estimation.frf.MeasuredTransfer`, in order)."""
     out = []
     for name in runs:
         run = experiment.run(name)

@@ -3,7 +3,7 @@
 * ``replay_<trial>.png``: per floor sensor, the recorded and the twin's readings over the scored part
   of the trial (left) and over the :data:`ZOOM_S` seconds around the largest recorded response (right);
 * ``transfer.png``: per floor sensor, the magnitude of the table-to-floor transfer function, estimated
-  from each calibration trial (H1, :func:`momentid.estimation.transfer.measured_transfer`, where the
+  from each calibration trial (H1, :func:`momentid.estimation.frf.measured_transfer`, where the
   coherence reaches :data:`MIN_COHERENCE`) against the twin's (:func:`momentid.twin.replay.transfer`).
 
 The ``*_figure`` functions return the matplotlib figure (the report page draws them as SVG); the
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from momentid.estimation.noise import quiet_lead_in
-from momentid.estimation.transfer import MIN_COHERENCE, SEGMENT, measured_transfer
+from momentid.estimation.frf import MIN_COHERENCE, SEGMENT, measured_transfer
 from momentid.twin.replay import Replay, transfer
 
 __all__ = ["plot_replay", "plot_transfer", "replay_figure", "transfer_figure", "overlay_figure", "replay_file",

@@ -19,7 +19,7 @@ import pyuff
 
 import momentid as mi
 from momentid.cli import main
-from momentid.core.series import Experiment, RunData
+from momentid.core.series import Experiment
 from momentid.core.structure import LabStatement
 from momentid.estimation.noise import quiet_lead_in
 from momentid.estimation.frf import measured_transfer

@@ -18,7 +18,7 @@ Subpackages, each importable on its own:
 - :mod:`momentid.lab`: scenarios, excitation, the MuJoCo rig, simulation, sensor models;
 - :mod:`momentid.estimation`: identification, reconstruction, errors-in-variables, design, comparison;
 - :mod:`momentid.diagnosis`: missing physics, where the mismatch is, sensor consistency;
-- :mod:`momentid.report`: the rerun viewer;
+- :mod:`momentid.report`: the rerun viewer, ``report.html`` and the UFF files;
 
 plus :mod:`momentid.sweep` (campaigns), :mod:`momentid.cli` and :mod:`momentid.errors`.
 The names below are the ones most scripts need.

@@ -14,7 +14,8 @@ from pathlib import Path
 
 from momentid.errors import MomentidError
 
-__all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout"]
+__all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout", "report_page",
+           "write_identification_folder"]
 
 
 def output_path(out: str | None, name: str, *, force: bool = False) -> Path:
@@ -78,3 +79,22 @@ def only_json_on_stdout(active: bool):
         sys.stdout = old
         os.dup2(saved, 1)
         os.close(saved)
+
+
+def write_identification_folder(out: Path, result, experiment, payload: dict, args, **extra) -> None:
+    """``identify -o DIR``: the folder, and one line naming what it holds (stderr with ``--json``)."""
+    from momentid.report.files import write_identification
+    from momentid.report.page import provenance
+
+    made = provenance(getattr(args, "argv", None), [args.recording])
+    names = write_identification(out, result, experiment, payload, made, **extra)
+    print(f"\nreport written to {out}/ ({', '.join(names)})", file=sys.stderr if args.json else sys.stdout)
+
+
+def report_page(out: Path, page, args) -> str:
+    """Write ``out/report.html``, ``page(provenance)``'s HTML; returns its name."""
+    from momentid.report.files import REPORT_HTML
+    from momentid.report.page import provenance, write_text_atomic
+
+    write_text_atomic(out / REPORT_HTML, page(provenance(getattr(args, "argv", None), [args.recording])))
+    return REPORT_HTML

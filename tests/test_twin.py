@@ -262,7 +262,7 @@ def test_cli_writes_the_folder(tmp_path, experiment, twin, capsys, monkeypatch):
     text = capsys.readouterr().out
     assert "small" in text and "large" in text and "NRMSE" in text and "twin written to" in text
     names = sorted(p.name for p in out.iterdir())
-    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "transfer.png", "twin.json", "twin.xml"]
+    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "report.html", "transfer.png", "twin.json", "twin.xml"]
     model = mujoco.MjModel.from_xml_path(str(out / "twin.xml"))
     assert model.nsensor > 0
     data = json.loads((out / "twin.json").read_text())
@@ -547,6 +547,6 @@ def test_two_twins_writing_the_same_folder(tmp_path, experiment, capsys):
     assert first.returncode == 0, first_err
     # (a second that succeeds started after the first had finished building and writing)
     assert second == 2 and err.count("\n") == 1 and err.startswith("error: ") and str(out) in err, err
-    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "replay_large.png", "replay_small.png",
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "replay_large.png", "replay_small.png", "report.html",
                                                      "transfer.png", "twin.json", "twin.xml"]
     assert read_twin(out).runs == ("small", "large")

@@ -34,7 +34,6 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -48,6 +47,7 @@ from momentid.diagnosis.verdict import Named, Verdict
 from momentid.diagnosis.workers import run_forked
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.peaks import response_amplitude
+from momentid.mechanisms.place import location_words
 
 __all__ = ["diagnose_modal", "summary", "AMPLITUDE_DEPENDENCE", "LATE_SAMPLES"]
 
@@ -253,13 +253,13 @@ def _summary_lines(verdict, location, held, before, after, noise, explained, tre
                      f"{EXCESS:g} x the noise level.")
     elif verdict is Verdict.MECHANISM:
         lines.append(f"Verdict: amplitude dependence (modes shift with the response amplitude); the held-out misfit "
-                     f"left is largest at {json.dumps(location)}.")
+                     f"left is largest at {location_words(location)}.")
         if after > EXCESS * noise:
             lines.append(f"WARNING: amplitude dependence explains only part of the mismatch: the held-out NRMSE is "
                          f"still {100 * after:.2f} % ({after / noise:.1f} x noise); the rest is unexplained.")
     else:
-        lines.append(f"Verdict: unexplained mismatch at {json.dumps(location)} (worst floor sensor, and the band "
-                     f"around that mode holding that share of its residual power).")
+        lines.append(f"Verdict: unexplained mismatch at {location_words(location)} (the worst floor sensor, and the "
+                     f"band around that mode holding that share of its residual power).")
     lines += [f"Finding: {f}" for f in findings]
     return lines
 

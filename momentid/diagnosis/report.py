@@ -17,7 +17,7 @@ from momentid.diagnosis.result import AddedMassEvidence, Diagnosis, TwinEvidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
 from momentid.io.outputs import OwnedFolder
-from momentid.mechanisms.place import Place
+from momentid.mechanisms.place import Place, location_words
 
 __all__ = ["summary", "write_report", "report_folder", "REPORT_FILES"]
 
@@ -51,19 +51,19 @@ def summary(diag: Diagnosis) -> str:
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.outside_library is not None:
         out = selection.outside_library
-        lines.append(f"Unexplained by the library at {json.dumps(loc)}: its best model, "
-                     f"{out.mechanism.replace('_', ' ')} at {json.dumps(out.location)}, leaves training NRMSE "
+        lines.append(f"Unexplained by the library at {location_words(loc)}: its best model, "
+                     f"{out.mechanism.replace('_', ' ')} at {location_words(out.location)}, leaves training NRMSE "
                      f"{100 * out.named:.2f} % (noise alone {100 * out.noise:.2f} %); the force below, outside the "
                      f"library, {100 * out.discovered:.2f} %.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.partial is not None:
         part = selection.partial
-        lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "
-                     f"{part.candidate.mechanism.replace('_', ' ')} at {json.dumps(part.candidate.location)}, removes "
+        lines.append(f"Unexplained mismatch at {location_words(loc)}: the best candidate, "
+                     f"{part.candidate.mechanism.replace('_', ' ')} at {location_words(part.candidate.location)}, removes "
                      f"only {100 * max(selection.explained, 0):.0f} % of the training runs' misfit above noise "
                      f"(NRMSE {100 * selection.linear:.2f} % -> {100 * selection.augmented:.2f} %, noise alone "
                      f"{100 * selection.noise:.2f} %); the model is left linear.")
     elif diag.verdict is Verdict.UNEXPLAINED:
-        lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
+        lines.append(f"Unexplained mismatch at {location_words(loc)} (largest at {worst}); no candidate mechanism "
                      f"explains at least {int(EXPLAINED * 100)} % of it.")
     else:
         if len(diag.mechanisms) > 1:
@@ -87,7 +87,7 @@ def summary(diag: Diagnosis) -> str:
 
 #: Every file a report folder may hold (checked against the folder before the diagnosis runs).
 REPORT_FILES = ("report.json", "summary.txt", "twin.xml", "model_augmented.xml", "replay.png", "diagnosis.rrd",
-                "locate.png", "discovered.png")
+                "locate.png", "discovered.png", "report.html")
 
 
 def report_folder(folder, *, force: bool = False) -> OwnedFolder:
@@ -95,7 +95,7 @@ def report_folder(folder, *, force: bool = False) -> OwnedFolder:
     return OwnedFolder(folder, "diagnose", force=force)
 
 
-def write_report(diag: Diagnosis, folder, *, force: bool = False) -> tuple[str, ...]:
+def write_report(diag: Diagnosis, folder, *, force: bool = False, extra=None) -> tuple[str, ...]:
     """Write the report folder; returns the names of the files written, in this order:
     ``report.json``, ``summary.txt``, ``twin.xml`` (the linear twin, on the twin path),
     ``model_augmented.xml`` (when there is an augmented model), ``replay.png`` (recorded vs. linear vs.
@@ -106,8 +106,12 @@ def write_report(diag: Diagnosis, folder, *, force: bool = False) -> tuple[str, 
     built before any is put in place; files of these names that ``momentid diagnose`` did not write
     (the user's, a twin's) are refused unless ``force``; this command's files of an earlier report
     that the new one does not write (a stale ``discovered.png``) are removed; other files are left
-    alone."""
-    return tuple(report_folder(folder, force=force).write(lambda staging: _write_files(diag, staging)))
+    alone.  ``extra(staging)`` writes more files beside them (the report page of :mod:`momentid.report`,
+    which this layer does not import) and returns their names."""
+    def files(staging):
+        return _write_files(diag, staging) + (list(extra(staging)) if extra is not None else [])
+
+    return tuple(report_folder(folder, force=force).write(files))
 
 
 def _write_files(diag: Diagnosis, folder: Path) -> list[str]:
@@ -193,7 +197,7 @@ def _plots(diag: Diagnosis, folder: Path) -> None:
     axes[0, 1].legend(fontsize=7)
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("time (s)")
-    fig.suptitle(f"{diag.mechanism} {json.dumps(diag.location)}: held-out NRMSE "
+    fig.suptitle(f"{diag.mechanism.replace('_', ' ')} at {location_words(diag.location)}: held-out NRMSE "
                  f"{100 * diag.nrmse_before:.2f} % -> {100 * diag.nrmse_after:.2f} %")
     fig.tight_layout()
     fig.savefig(folder / "replay.png", dpi=90)

@@ -140,6 +140,9 @@ class TwinEvidence:
         Wall-clock seconds per stage, and the CPU seconds of the whole.
     fold : Fold
         The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin_folds.Fold`).
+    per_run : tuple of ModalIdentification
+        Each trial's own modal identification (the rig-state check's and the amplitude reference's
+        points), in recording order.
     """
 
     training: tuple[str, ...]
@@ -151,6 +154,7 @@ class TwinEvidence:
     twin_xml: str
     seconds: dict = field(default_factory=dict)
     fold: object = field(default=None, repr=False, compare=False)
+    per_run: tuple = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"training": list(self.training), "reference": self.reference, "rig_state": self.state.to_dict(),
@@ -221,6 +225,12 @@ class Diagnosis:
         """The report's text (:func:`momentid.diagnosis.report.summary`)."""
         from momentid.diagnosis.report import summary
         return summary(self)
+
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.diagnosis.summary_html.diagnosis_html`)."""
+        from momentid.diagnosis.summary_html import diagnosis_html
+        return diagnosis_html(self)
 
     def to_dict(self) -> dict:
         return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,

@@ -133,7 +133,7 @@ def diagnose_twin(experiment: Experiment, *, hold_out: str | None = None) -> Dia
                             excluded=tuple(state.sentence(r) for r in state.outliers), channel_nrmse=per,
                             fits=fits, reference=reference,
                             twin_xml=twin.xml if twin is not None else _xml(fold.linear.model, tr.dt),
-                            seconds=seconds, fold=fold)
+                            seconds=seconds, fold=fold, per_run=tuple(per_run))
     return Diagnosis(verdict=verdict, mechanism=named[0].mechanism if named else verdict.value, location=location,
                      parameters={}, std={}, mechanisms=named, held_out=held, nrmse_before=float(before),
                      nrmse_after=fold.nrmse_after, noise_nrmse=fold.noise_nrmse, evidence=evidence,

@@ -197,6 +197,12 @@ class ModalIdentification:
             "units": MODAL_UNITS,
         }
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.estimation.summary_html.modal_html`)."""
+        from momentid.estimation.summary_html import modal_html
+        return modal_html(self)
+
     def table(self, warnings: bool = True) -> str:
         """Plain-text report: modes with standard errors and the subspace estimate's damping, extra
         modes, matrices, sensors, notes and (``warnings=True``) warnings.  The CLI prints the warnings
@@ -451,10 +457,18 @@ class AmplitudeTrend:
         lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
                      f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} +- {100 * self.damping_slope_std:.2g} "
                      f"% per m/s^2"
-                     f" ({self._verdict()})")
+                     f" ({self.verdict()})")
         return "\n".join(lines)
 
-    def _verdict(self) -> str:
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.estimation.summary_html.trend_html`)."""
+        from momentid.estimation.summary_html import trend_html
+        return trend_html(self)
+
+    def verdict(self) -> str:
+        """The trend in words: ``not linear: larger responses are softer ...`` or ``no trend beyond two
+        standard errors``."""
         softer = self.frequency_slope < -2 * self.frequency_slope_std
         damped = self.damping_slope > 2 * self.damping_slope_std
         if softer or damped:

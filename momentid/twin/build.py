@@ -109,6 +109,12 @@ class Twin:
             "notes": list(self.notes), "warnings": list(self.warnings),
         }
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.twin.summary_html.twin_html`)."""
+        from momentid.twin.summary_html import twin_html
+        return twin_html(self)
+
     def summary(self) -> str:
         """Plain-text report: the rig, its modes, every trial's NRMSE."""
         p = self.parameters

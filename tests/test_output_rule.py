@@ -92,6 +92,25 @@ def test_reusing_a_twin_folder_keeps_the_users_files(tmp_path, rig, built):
     assert (out / "twin.xml").read_text() == built.xml
 
 
+def test_a_folder_from_before_the_manifest_says_how_to_proceed(tmp_path, rig, built, capsys):
+    """A twin folder written before momentid kept .momentid.json (or files of the user's under the
+    command's names) is refused in one line saying exactly that, and that --force proceeds; forced
+    once, the folder keeps the list and the next run needs no --force."""
+    experiment, rec = rig
+    out = tmp_path / "twin"
+    mi.twin.write_twin(built, experiment, out, plots=False)
+    (out / MANIFEST).unlink()                                  # as an older momentid left it
+    before = _files(out)
+    error = _refused(capsys, ["twin", str(rec), "-o", str(out), "--no-plots"])
+    assert error.startswith(f"error: -o {out}: the folder holds ") and "(and " in error, error
+    assert f"and no {MANIFEST}, the list of the files momentid wrote there" in error, error
+    assert "expected a new folder, or --force to overwrite these files once you know they are not yours" in error
+    assert _files(out) == before
+    assert main(["twin", str(rec), "-o", str(out), "--no-plots", "--force"]) == 0
+    assert (out / MANIFEST).is_file()
+    assert main(["twin", str(rec), "-o", str(out), "--no-plots"]) == 0
+
+
 def test_plot_names_never_collide(tmp_path, rig, built):
     """Data loss 3: trials "trial 1", "trial_1" and "trial.1" all wrote replay_trial_1.png."""
     experiment, _ = rig

@@ -184,11 +184,17 @@ class OwnedFolder:
         if not foreign or self.force:
             return
         name = foreign[0]
+        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
+        if not (self.path / MANIFEST).exists():    # written before momentid kept one, or by hand
+            raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
+                               f"and no {MANIFEST}, the list of the files momentid wrote there (a folder written "
+                               f"by momentid before it kept that list, or files of yours: it cannot tell which)",
+                               f"a new folder, or --force to overwrite these files once you know they are not "
+                               f"yours (the folder keeps the list from then on)")
         owner = manifest.get(name, {}).get("command")
         whose = (f"`momentid {owner}` wrote it" if owner and owner != self.command
                  else "it was changed since momentid wrote it" if owner
                  else "momentid did not write it")
-        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
         raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
                            f"but {whose}", f"a new or empty folder, or one this command wrote before "
                                            f"(--force overwrites such files)")

@@ -18,8 +18,8 @@ from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_in
 from momentid.core.series import json_safe
 from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
-from momentid.cli_output import (only_json_on_stdout, output_folder, output_path, replaced, report_page,
-                                 write_identification_folder)
+from momentid.cli_output import (identification_output, only_json_on_stdout, output_folder, output_path, replaced,
+                                 report_page, write_identification_folder)
 from momentid.cli_values import finite_time, positive_float, positive_int, run_names
 from momentid.io.outputs import check_file, drop_link
 
@@ -137,7 +137,7 @@ def _cmd_identify(args) -> int:
 
     if args.stream:
         return _identify_stream(args)
-    out = output_folder(args.output) if args.output else None
+    out = identification_output(args)   # checked before the work
     experiment = read_recording(args.recording)
     with exclusive(out) if out is not None else contextlib.nullcontext():   # one writer per folder
         if not args.per_run:
@@ -421,7 +421,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write DIR/report.html (one self-contained page: the answer, tables, figures, "
                         "provenance), DIR/modes.uff and DIR/frf.uff (UFF datasets 55 and 58: the modes and the "
                         "measured table-to-floor transfer functions) and DIR/identification.json (what --json "
-                        "prints); see docs/reports.md")
+                        "prints), beside any other files in DIR; see docs/reports.md")
+    _add_force(p)
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("import", help="turn a lab's raw exports (CSV per run, Xsens DOT IMU files) into a recording",

@@ -15,7 +15,7 @@ from pathlib import Path
 from momentid.errors import MomentidError
 
 __all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout", "report_page",
-           "write_identification_folder"]
+           "identification_output", "write_identification_folder"]
 
 
 def output_path(out: str | None, name: str, *, force: bool = False) -> Path:
@@ -81,13 +81,25 @@ def only_json_on_stdout(active: bool):
         os.close(saved)
 
 
+def identification_output(args) -> Path | None:
+    """``identify -o DIR``: the folder, checked under the one output rule before the work
+    (:func:`momentid.report.files.identification_folder`); None without ``-o``."""
+    from momentid.report.files import IDENTIFICATION_FILES, identification_folder
+
+    if not args.output:
+        return None
+    out = output_folder(args.output)
+    identification_folder(out, force=args.force).check(IDENTIFICATION_FILES)
+    return out
+
+
 def write_identification_folder(out: Path, result, experiment, payload: dict, args, **extra) -> None:
     """``identify -o DIR``: the folder, and one line naming what it holds (stderr with ``--json``)."""
     from momentid.report.files import write_identification
     from momentid.report.page import provenance
 
     made = provenance(getattr(args, "argv", None), [args.recording])
-    names = write_identification(out, result, experiment, payload, made, **extra)
+    names = write_identification(out, result, experiment, payload, made, force=args.force, **extra)
     print(f"\nreport written to {out}/ ({', '.join(names)})", file=sys.stderr if args.json else sys.stdout)
 
 

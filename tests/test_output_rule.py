@@ -252,6 +252,60 @@ def test_reused_report_folder_loses_its_stale_plots(tmp_path, diagnosis):
     assert listed == set(second)
 
 
+# ------------------------------------------------------------------------------------- identify -o
+
+IDENTIFY_FILES = ["frf.uff", "identification.json", "modes.uff", "report.html"]
+
+
+def test_identify_never_overwrites_a_users_report(tmp_path, rig, capsys, monkeypatch):
+    """`identify -o DIR` wrote report.html, modes.uff, frf.uff and identification.json over a user's files
+    of those names: now refused before the work (without --force), beside the user's other files."""
+    import momentid.estimation.identification as identification
+
+    _, rec = rig
+    out = tmp_path / "thesis"
+    out.mkdir()
+    (out / "report.html").write_text("<p>my report</p>")
+    (out / "thesis.tex").write_text("\\chapter{Results}")
+    before = _files(out)
+    with monkeypatch.context() as m:    # refused before the identification starts
+        m.setattr(identification, "identify", lambda *a, **k: pytest.fail("identified before the refusal"))
+        error = _refused(capsys, ["identify", str(rec), "-o", str(out)])
+    assert f"-o {out}: the folder holds report.html, which `momentid identify` would overwrite" in error, error
+    assert "--force" in error and _files(out) == before
+    assert main(["identify", str(rec), "-o", str(out), "--force"]) == 0
+    assert sorted(set(os.listdir(out)) - {"thesis.tex", MANIFEST}) == IDENTIFY_FILES
+    assert (out / "thesis.tex").read_text() == "\\chapter{Results}"
+    listed = set(json.loads((out / MANIFEST).read_text())["files"])
+    assert listed == set(IDENTIFY_FILES)
+
+
+def test_identify_reuses_its_folder_and_drops_its_stale_files(tmp_path, rig, capsys, monkeypatch):
+    """A second `identify -o` into its own folder needs no --force; a file it no longer writes (a
+    modes.uff that cannot be written now) goes, a user's file stays; a diagnosis's report.html is not
+    the identification's to replace."""
+    import momentid.report.exports as exports
+    from momentid.errors import MomentidError
+
+    _, rec = rig
+    out = tmp_path / "id"
+    assert main(["identify", str(rec), "-o", str(out)]) == 0
+    (out / "notes.md").write_text("mode 2 looks odd")
+
+    def fails(*args, **kwargs):
+        raise MomentidError("a mode shape that is not finite")
+    monkeypatch.setattr(exports, "modes_uff", fails)
+    capsys.readouterr()
+    assert main(["identify", str(rec), "-o", str(out)]) == 0
+    assert f"warning: {out / 'modes.uff'} not written" in capsys.readouterr().err
+    assert not (out / "modes.uff").exists() and (out / "notes.md").read_text() == "mode 2 looks odd"
+    assert set(json.loads((out / MANIFEST).read_text())["files"]) == set(IDENTIFY_FILES) - {"modes.uff"}
+    report = tmp_path / "report"
+    OwnedFolder(report, "diagnose").write(lambda staging: [(staging / "report.html").write_text("x") and "report.html"])
+    error = _refused(capsys, ["identify", str(rec), "-o", str(report)])
+    assert "report.html" in error and "`momentid diagnose` wrote it" in error, error
+
+
 # ----------------------------------------------------------------------------- run names, properties
 
 def test_run_names_that_break_reports_are_refused(tmp_path, capsys):

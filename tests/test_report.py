@@ -82,7 +82,8 @@ def _opens_cleanly(path: Path) -> browser.Load:
 
 def test_identify_writes_its_folder(identified, recording):
     out, printed = identified
-    assert sorted(p.name for p in out.iterdir()) == ["frf.uff", "identification.json", "modes.uff", "report.html"]
+    assert sorted(p.name for p in out.iterdir()) == [".momentid.json", "frf.uff", "identification.json", "modes.uff",
+                                                     "report.html"]           # the manifest: the one output rule
     assert json.loads((out / "identification.json").read_text()) == printed     # what --json prints
     page = (out / "report.html").read_text(encoding="utf-8")
     answer, tables, figures, made = _sections(page)

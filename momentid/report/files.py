@@ -3,8 +3,8 @@ identification ``modes.uff``, ``frf.uff`` and ``identification.json``).
 
 Writing a report never fails the command: :func:`report_html` puts a page together section by
 section (a table or figure that cannot be made becomes a note in the page, :class:`~momentid.report.page.Page`),
-and should the page itself fail, a page saying why takes its place.  Each file is written through a
-temporary file renamed into place (:func:`~momentid.report.page.write_text_atomic`).
+and should the page itself fail, a page saying why takes its place.  The identification's folder follows
+the one output rule (:class:`~momentid.io.outputs.OwnedFolder`), like the twin's and the diagnosis's.
 """
 
 from __future__ import annotations
@@ -16,12 +16,15 @@ from pathlib import Path
 
 from momentid.core.series import json_safe
 from momentid.errors import MomentidError
+from momentid.io.outputs import OwnedFolder
 from momentid.report.page import Page, Provenance, missing_note, write_text_atomic
 
 __all__ = ["report_html", "identification_html_page", "twin_html_page", "diagnosis_html_page", "write_identification",
-           "REPORT_HTML", "MODES_UFF", "FRF_UFF", "IDENTIFICATION_JSON"]
+           "identification_folder", "REPORT_HTML", "MODES_UFF", "FRF_UFF", "IDENTIFICATION_JSON", "IDENTIFICATION_FILES"]
 
 REPORT_HTML, MODES_UFF, FRF_UFF, IDENTIFICATION_JSON = "report.html", "modes.uff", "frf.uff", "identification.json"
+#: Every file an identification folder may hold (checked against the folder before the identification).
+IDENTIFICATION_FILES = (IDENTIFICATION_JSON, REPORT_HTML, MODES_UFF, FRF_UFF)
 
 
 def report_html(build: Callable[[], Page], title: str, made: Provenance) -> str:
@@ -53,44 +56,64 @@ def diagnosis_html_page(diag, made: Provenance, source: str) -> str:
     return report_html(lambda: diagnosis_page(diag, made, source), f"Diagnosis of {source}", made)
 
 
+def identification_folder(folder, *, force: bool = False) -> OwnedFolder:
+    """The folder of ``identify -o`` under the one output rule (:mod:`momentid.io.outputs`)."""
+    return OwnedFolder(folder, "identify", force=force)
+
+
 def write_identification(folder, result, experiment, payload: dict, made: Provenance, *, comparison=None,
-                         trend=None) -> list:
+                         trend=None, force: bool = False) -> list:
     """Write an identification's folder: ``identification.json`` (``payload``, what ``--json`` prints),
     ``report.html``, ``modes.uff`` and ``frf.uff`` (:mod:`momentid.report.exports`).
+
+    The folder follows the one output rule (:class:`~momentid.io.outputs.OwnedFolder`): every file is
+    built before any is put in place; files of these names that ``momentid identify`` did not write
+    (the user's ``report.html``, a diagnosis's) are refused unless ``force``; this command's files of an
+    earlier identification that this one does not write (a ``modes.uff`` it cannot write now) are
+    removed; other files are left alone.
 
     Parameters
     ----------
     folder : str or Path
-        Created when missing; files of other names in it are left alone.
+        Created when missing.
     result : ModalIdentification, Identification or tuple of ModalIdentification (one per run)
     experiment : Experiment
     payload : dict
     made : Provenance
     comparison : Comparison, optional
     trend : AmplitudeTrend, optional
+    force : bool
+        Overwrite files of these names that ``momentid identify`` did not write.
 
     Returns
     -------
     list of str
         The file names written.  A UFF file that cannot be written (a value that is not finite, runs
         without the table and floor sensors) is left out with a ``warning:`` line on stderr.
+
+    Raises
+    ------
+    OutputRefusedError
+        See :meth:`~momentid.io.outputs.OwnedFolder.write`.
     """
     from momentid.report.exports import frf_uff, modes_uff
 
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(folder / IDENTIFICATION_JSON, json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
-    written = [IDENTIFICATION_JSON]
-    write_text_atomic(folder / REPORT_HTML, identification_html_page(result, experiment, made, comparison=comparison,
-                                                                     trend=trend))
-    written.append(REPORT_HTML)
     runs = [r.runs[0] for r in result] if isinstance(result, tuple) else list(result.runs)
-    for name, build in ((MODES_UFF, lambda: modes_uff(result, experiment)), (FRF_UFF, lambda: frf_uff(experiment, runs))):
-        try:
-            text = build()
-        except MomentidError as exc:
-            print(f"warning: {folder / name} not written: {exc}", file=sys.stderr)
-            continue
-        write_text_atomic(folder / name, text)
-        written.append(name)
-    return written
+
+    def build(staging: Path) -> list:
+        write_text_atomic(staging / IDENTIFICATION_JSON, json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
+        write_text_atomic(staging / REPORT_HTML, identification_html_page(result, experiment, made,
+                                                                         comparison=comparison, trend=trend))
+        written = [IDENTIFICATION_JSON, REPORT_HTML]
+        for name, make in ((MODES_UFF, lambda: modes_uff(result, experiment)), (FRF_UFF, lambda: frf_uff(experiment, runs))):
+            try:
+                text = make()
+            except MomentidError as exc:
+                print(f"warning: {folder / name} not written: {exc}", file=sys.stderr)
+                continue
+            write_text_atomic(staging / name, text)
+            written.append(name)
+        return written
+
+    return identification_folder(folder, force=force).write(build)

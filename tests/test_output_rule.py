@@ -162,6 +162,67 @@ def test_import_follows_no_symlink_onto_another_file(tmp_path, capsys):
     assert len(mi.read_recording(link).runs) == 2
 
 
+def test_a_failed_reimport_keeps_the_previous_recording(tmp_path, capsys, monkeypatch):
+    """`import -o rec.mcap` over an earlier recording wrote the new one in its place from the first byte:
+    a failure half-way (a full disk, Ctrl-C) lost the earlier recording.  Now the new one is written
+    beside it and renamed into place once complete; the completed runs of a failed one stay readable
+    beside the kept file."""
+    import momentid.io.recording as recording
+    from bad_input.csv_import import lab_folder
+    from bad_input.faults import fill_disk_at
+
+    lab = lab_folder(tmp_path)
+    out, partial = tmp_path / "rec.mcap", tmp_path / "rec.mcap.partial"
+    assert main(["import", str(lab), "-o", str(out)]) == 0
+    before = out.read_bytes()
+    with monkeypatch.context() as m:     # a disk that takes the header and run r1 of the new file, not r2
+        fill_disk_at(m, recording, len(before) // 2 + 200)
+        error = _refused(capsys, ["import", str(lab), "-o", str(out)])
+    assert f"{out}: cannot write run 'r2'" in error and "the file there is kept" in error, error
+    assert f"the 1 completed run(s) (r1) are in {partial}" in error, error
+    assert out.read_bytes() == before
+    with pytest.warns(mi.errors.RecoveryWarning):
+        assert [r.name for r in mi.read_recording(partial).runs] == ["r1"]
+    with monkeypatch.context() as m:     # Ctrl-C after run r1
+        write_run = recording.RecordingWriter.write_run
+        m.setattr(recording.RecordingWriter, "write_run", lambda self, run, **k: (
+            write_run(self, run, **k) if run.name == "r1" else (_ for _ in ()).throw(KeyboardInterrupt())))
+        assert main(["import", str(lab), "-o", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert f"note: {out}: not replaced, the file there is kept; the 1 completed run(s) of the new recording (r1) " \
+           f"are in {partial}" in err and "error: interrupted" in err, err
+    assert out.read_bytes() == before
+    assert main(["import", str(lab), "-o", str(out)]) == 0          # complete: renamed into place
+    assert "an existing file, replaced by this recording" in capsys.readouterr().err
+    assert not partial.exists() and len(mi.read_recording(out).runs) == 2
+
+
+def test_a_writer_killed_beside_a_recording_keeps_both(tmp_path):
+    """SIGKILL while a new recording is written over an earlier one: the earlier one is whole, and the
+    new one's completed runs read back from the partial file beside it, with a note."""
+    import subprocess
+    import sys
+
+    from bad_input.recording import tiny_experiment
+
+    out = tmp_path / "rec.mcap"
+    write_experiment(out, tiny_experiment(1))
+    before = out.read_bytes()
+    script = ("import os, signal, sys; sys.path.insert(0, 'tests')\n"
+              "from bad_input.recording import tiny_experiment\n"
+              "from momentid.io.recording import RecordingWriter\n"
+              "e = tiny_experiment(3)\n"
+              f"w = RecordingWriter({str(out)!r}, structure=e.structure, scenario=e.scenario)\n"
+              "w.write_run(e.runs[0]); w.write_run(e.runs[1])\n"
+              "os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode == -9
+    assert out.read_bytes() == before
+    with pytest.warns(mi.errors.RecoveryWarning):
+        kept = mi.read_recording(tmp_path / "rec.mcap.partial")
+    assert [r.name for r in kept.runs] == ["r1", "r2"] and not kept.complete
+
+
 def test_run_and_import_refuse_a_file_that_is_not_a_recording(tmp_path, capsys):
     from bad_input.csv_import import lab_folder
 

@@ -18,8 +18,8 @@ from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_in
 from momentid.core.series import json_safe
 from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
-from momentid.cli_output import (identification_output, only_json_on_stdout, output_folder, output_path, replaced,
-                                 report_page, write_identification_folder)
+from momentid.cli_output import (identification_output, only_json_on_stdout, output_folder, output_path,
+                                 refuse_empty_paths, replaced, report_page, write_identification_folder)
 from momentid.cli_values import finite_time, positive_float, positive_int, run_names
 from momentid.io.outputs import check_file, drop_link
 
@@ -41,8 +41,6 @@ _EPILOG = """examples:
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A warning as one line on stderr: ``note:`` for data recovered from a damaged input, else
     ``warning:``; never the source line of the code that warned."""
-    from momentid.errors import RecoveryWarning
-
     kind = "note" if issubclass(category, RecoveryWarning) else "warning"
     print(f"{kind}: {message}", file=sys.stderr)
 
@@ -578,6 +576,7 @@ def _run_command(args) -> int:
               mujoco_warnings_counted_not_printed()):
             warnings.showwarning = _one_line_warning
             warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
+            refuse_empty_paths(args)
             return args.func(args)
     except BrokenPipeError:
         raise   # an OSError, but no error of the command: main() keeps it quiet

@@ -15,7 +15,21 @@ from pathlib import Path
 from momentid.errors import MomentidError
 
 __all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout", "report_page",
-           "identification_output", "write_identification_folder"]
+           "identification_output", "write_identification_folder", "refuse_empty_paths"]
+
+
+#: Options that name a path to write; an empty value is refused (:func:`refuse_empty_paths`).
+PATH_OPTIONS = (("output", "-o"), ("save", "--save"))
+
+
+def refuse_empty_paths(args) -> None:
+    """Refuse an empty output path (``-o ""``, ``--save ""``: an unset shell variable, say), which would
+    mean the current folder, the default one, or no output at all depending on the command."""
+    for key, option in PATH_OPTIONS:
+        value = getattr(args, key, None)
+        if value is not None and not value.strip():
+            raise OutputError(repr(value), f"an empty path (an unset shell variable?); expected a file or folder "
+                                           f"path, or no {option} for the command's default", option=option)
 
 
 def output_path(out: str | None, name: str, *, force: bool = False) -> Path:
@@ -40,9 +54,9 @@ def replaced(out: Path, existed: bool) -> None:
 
 
 class OutputError(MomentidError):
-    def __init__(self, out: str, expected: str):
+    def __init__(self, out: str, expected: str, option: str = "-o"):
         self.out = out
-        super().__init__(f"-o {out}: {expected}")
+        super().__init__(f"{option} {out}: {expected}")
 
 
 def output_folder(out) -> Path:

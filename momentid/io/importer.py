@@ -31,6 +31,7 @@ file (and the row and column where there is one).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -148,7 +149,7 @@ def _description(folder: Path) -> _Description:
         problem = run_name_problem(name)
         if problem:
             raise tab.error("name" if tab.has("name") else "file",
-                            f"a run name of one printable line; {name!r} has {problem}")
+                            f"a run name of one printable line without '/', '\\', '..' or ','; {name!r} has {problem}")
         tab.finish()
         if name in (r.name for r in runs):
             raise tab.error("name" if tab.has("name") else "file",
@@ -208,14 +209,30 @@ def _read_runs(desc: _Description, storeys: int, sources: _Sources):
             yield _read_run_file(spec, fmt, storeys)
         return
     channels = ("zdd", *(f"a{i + 1}" for i in range(storeys)))
+    seen: dict = {}
     for spec in desc.runs:   # errors of an early run before a later run is read, as one reads them
         records = [fmt.read_sensor(f) for f in spec.files]
+        for k, record in enumerate(records):
+            _not_copied(record, spec.name, "table" if k == 0 else f"floor {k}", seen)
         sources.runs[spec.name] = (spec, records, channels, align_sensors(records, channels))
     sources.delays = common_delays([s[3] for s in sources.runs.values()], list(sources.runs))
     for spec, records, _, aligned in sources.runs.values():
         if sources.delays:
             aligned = align_sensors(records, channels, sources.delays)
         yield _aligned_run(spec, fmt, channels, aligned)
+
+
+def _not_copied(record, run: str, role: str, seen: dict) -> None:
+    """Refuse a sensor file whose samples a file of another run holds too (a copy saved under another
+    name): aligned against sensors it never shook with, it fails to align and blames its clock, or
+    passes for evidence it is not.  ``seen`` maps each file's sample digest to its file, run and role.
+    (Two files of one run with the same samples are refused by :func:`align_sensors`.)"""
+    digest = hashlib.sha256(np.ascontiguousarray(record.time).tobytes() + np.ascontiguousarray(record.acc).tobytes())
+    path, other, other_role = seen.setdefault(digest.hexdigest(), (record.path, run, role))
+    if other != run:
+        raise SensorDataError(f"{record.path}: holds the same samples as {path} (run {other!r}, {other_role}); "
+                              f"expected each run's own recordings (a file of another run copied under this "
+                              f"run's name?)")
 
 
 def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) -> RunData:
@@ -319,7 +336,8 @@ def _placement(runs: list[RunData], desc: _Description, toml: Path, relabel: boo
         if fixable is not None:
             raise SensorDataError(f"{toml}: {fixable.message}; refused (without --refuse-mislabelled the import "
                                   f"relabels the sensors and notes it)")
-    moved = {f.run: f.permutation for f in findings if f.fixable and f.permutation is not None and f.run in sources.runs}
+    moved = {f.run: f.permutation for f in findings
+             if f.fixable and f.permutation is not None and f.run in sources.runs}
     out = {r.name: r for r in runs}
     out.update(_realigned(sources, desc.fmt, moved) if moved else {})
     for finding in findings:

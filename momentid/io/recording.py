@@ -252,7 +252,8 @@ class RecordingWriter:
                                  f"(used: {', '.join(self._runs) or 'none'})")
         problem = run_name_problem(run.name)
         if problem:
-            raise RecordingError(f"{where}: the run name has {problem}; expected a name of one printable line")
+            raise RecordingError(f"{where}: the run name has {problem}; expected a name of one printable line "
+                                 "without '/', '\\', '..' or ','")
         if not isinstance(block_size, int) or block_size < 1:
             raise RecordingError(f"{where}: block_size = {block_size!r}; expected an int >= 1")
         channels = tuple(run.channels)

@@ -20,7 +20,8 @@ from momentid.io.outputs import OwnedFolder
 from momentid.report.page import Page, Provenance, missing_note, write_text_atomic
 
 __all__ = ["report_html", "identification_html_page", "twin_html_page", "diagnosis_html_page", "write_identification",
-           "identification_folder", "REPORT_HTML", "MODES_UFF", "FRF_UFF", "IDENTIFICATION_JSON", "IDENTIFICATION_FILES"]
+           "identification_folder", "REPORT_HTML", "MODES_UFF", "FRF_UFF", "IDENTIFICATION_JSON",
+           "IDENTIFICATION_FILES"]
 
 REPORT_HTML, MODES_UFF, FRF_UFF, IDENTIFICATION_JSON = "report.html", "modes.uff", "frf.uff", "identification.json"
 #: Every file an identification folder may hold (checked against the folder before the identification).
@@ -102,11 +103,13 @@ def write_identification(folder, result, experiment, payload: dict, made: Proven
     runs = [r.runs[0] for r in result] if isinstance(result, tuple) else list(result.runs)
 
     def build(staging: Path) -> list:
-        write_text_atomic(staging / IDENTIFICATION_JSON, json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n")
+        text = json.dumps(json_safe(payload), indent=2, allow_nan=False) + "\n"
+        write_text_atomic(staging / IDENTIFICATION_JSON, text)
         write_text_atomic(staging / REPORT_HTML, identification_html_page(result, experiment, made,
                                                                          comparison=comparison, trend=trend))
         written = [IDENTIFICATION_JSON, REPORT_HTML]
-        for name, make in ((MODES_UFF, lambda: modes_uff(result, experiment)), (FRF_UFF, lambda: frf_uff(experiment, runs))):
+        for name, make in ((MODES_UFF, lambda: modes_uff(result, experiment)),
+                           (FRF_UFF, lambda: frf_uff(experiment, runs))):
             try:
                 text = make()
             except MomentidError as exc:

@@ -110,7 +110,8 @@ def _mode_damping(read: _Reader, entry: dict):
         interval=tuple(interval), dof=int(np.nan_to_num(read.number("dof", entry, 0))), source=source,
         amplitude_dependent=bool(entry.get("amplitude_dependent", False)),
         slope=read.number("slope_per_m_s2_power", entry, 0.0), exponent=read.number("exponent", entry, 0.0),
-        frequency=read.number("frequency_hz", entry), frequency_slope=read.number("frequency_slope_hz_per_m_s2", entry, 0.0),
+        frequency=read.number("frequency_hz", entry),
+        frequency_slope=read.number("frequency_slope_hz_per_m_s2", entry, 0.0),
         amplitude_range=tuple(amplitudes), equivalent=read.number("equivalent_linear_damping_ratio", entry),
         cycles=read.number("cycles", entry), refusal=entry.get("refusal") or "")
 

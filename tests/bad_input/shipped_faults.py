@@ -234,7 +234,7 @@ CASES = [
     # Issue 32: harmless export variants were refused ("repeats the stamp of row 509", "the row has 12
     # fields, expected 11"); they read exactly as the shipped file, with a note.
     Case(Group.IMU, "shipped-duplicated-row", Outcome.RECOVERY, _importing(_duplicated_row, check=_same_as_clean),
-         ("row 510 repeats an earlier row exactly", "dropped")),
+         ("row 510: repeat(s) an earlier row exactly", "dropped")),
     Case(Group.IMU, "shipped-trailing-commas", Outcome.RECOVERY, _importing(_trailing_commas, check=_same_as_clean),
          ("every data row (rows 9-7316) ends in a comma", "ignored")),
     # A clock step with the packet counter running on used to be named "6 samples lost".

@@ -27,8 +27,8 @@ sample (lost, or an empty cell) is then interpolated linearly when at most
 :data:`~momentid.io.formats.base.MAX_REPAIR_GAP` are missing in a row, with a
 note naming the rows; a longer gap is an error naming them.  An export in g
 (gravity reads ~1) is converted to m/s^2 with a note.  Variants that change no
-sample are undone with a note: a trailing comma (header or data rows) and a
-row that repeats an earlier row exactly.
+sample are undone with a note: a trailing comma (header or data rows), empty
+lines, a last row cut short and a row that repeats an earlier row exactly.
 """
 
 from __future__ import annotations
@@ -141,7 +141,8 @@ def _parse(path: Path, rows: list[str], names: tuple[str, ...], numbers: np.ndar
 
 def _harmless_variants(names: tuple[str, ...], rows: list[str], first_row: int):
     """Export variants that change no sample, undone with a note: a trailing comma (an empty cell
-    beyond the header's columns, on the header or on data rows) and a row that repeats an earlier row
+    beyond the header's columns, on the header or on data rows), empty lines, a last row cut short (an
+    export that ends mid-row: the sample is lost, as at any end) and a row that repeats an earlier row
     exactly (every cell; genuine rows never do: each has its own stamp and packet count).
 
     Returns
@@ -164,16 +165,24 @@ def _harmless_variants(names: tuple[str, ...], rows: list[str], first_row: int):
         which = (f"every data row (rows {first_row}-{first_row + len(rows) - 1}) ends" if len(trailing) == len(rows)
                  else f"{_row_list(first_row + np.array(trailing))} end")
         notes.append(f"{which} in a comma (an empty cell beyond the header's {len(names)} columns): ignored")
-    seen, keep = set(), []
-    for i, row in enumerate(rows):
-        if row not in seen:
-            seen.add(row)
-            keep.append(i)
+    blank = [i for i, row in enumerate(rows) if not row.strip()]
+    filled = [i for i, row in enumerate(rows) if row.strip()]
+    cut = filled[-1:] if filled and rows[filled[-1]].count(",") < width else []
+    seen, repeated = set(), []
+    for i in filled:
+        if rows[i] in seen:
+            repeated.append(i)
+        seen.add(rows[i])
     numbers = first_row + np.arange(len(rows))
-    if len(keep) < len(rows):
-        repeated = np.setdiff1d(numbers, numbers[keep])
-        notes.append(f"{_row_list(repeated)} repeat{'s' if repeated.size == 1 else ''} an earlier row exactly "
-                     f"(every cell; a duplicated export line): dropped")
+    for dropped, why in ((blank, "empty: skipped"),
+                         (cut, f"cut short ({rows[cut[0]].count(',') + 1 if cut else 0} of {len(names)} cells: the "
+                               f"export ends mid-row): dropped"),
+                         (repeated, "repeat(s) an earlier row exactly (every cell; a duplicated export line): "
+                                    "dropped")):
+        if dropped:
+            notes.append(f"{_row_list(numbers[dropped])}: {why}")
+    if blank or cut or repeated:
+        keep = np.setdiff1d(np.arange(len(rows)), blank + cut + repeated)
         rows, numbers = [rows[i] for i in keep], numbers[keep]
     return names, rows, numbers, notes
 

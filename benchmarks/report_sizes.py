@@ -4,9 +4,9 @@
 
 Imports both shipped rigs (``data/mini_shake_table/flexible_3storey`` and ``stiff_1storey``) and
 simulates ``scenarios/hidden/damper_storey3.toml``, then runs the commands that write a
-``report.html``: ``identify -o``, ``identify --per-run -o``, ``twin -o`` and ``diagnose -o``.  The
-stiff rig's El Centro 2 trial is left out where it is refused (its floor sensor's clock offset), and
-its twin is calibrated on its earthquake trials.  Records each page's size, its figures, and the UFF
+``report.html``: ``identify -o``, ``identify --per-run -o``, ``twin -o`` and ``diagnose -o`` (of every
+trial of each rig).  The stiff rig's El Centro 2 trial is left out of its identifications, where it is
+refused (its floor sensor's clock offset), and its twin is calibrated on its earthquake trials.  Records each page's size, its figures, and the UFF
 files' sizes; a command that refuses is recorded with its one-line error.  Writes
 ``benchmarks/results/report_sizes.json`` and ``report_sizes.md``.
 """
@@ -14,6 +14,7 @@ files' sizes; a command that refuses is recorded with its one-line error.  Write
 from __future__ import annotations
 
 import argparse
+import re
 import tempfile
 from pathlib import Path
 
@@ -72,7 +73,7 @@ def markdown(rows: list) -> list:
              "|---|---|---:|---:|---:|---:|"]
     for r in rows:
         if r["error"]:
-            reason = r["error"].removeprefix("error: ").split(": expected")[0]
+            reason = re.sub(r"^\S+\.mcap: ", "", r["error"].removeprefix("error: ")).split(": expected")[0]
             lines.append(f"| {r['rig']} | `{r['command']}` | refused: {reason} | | | |")
             continue
         kb = {name: f"{size / 1000:.0f}" for name, size in r["files_bytes"].items()}

@@ -54,8 +54,12 @@ NOISE_FREE = 1e-10
 #: windows' errors are Newey-West and random-effects estimates, not exact: at two a linear rig's beats
 #: and leakage read as a trend now and then).
 STRONG_SIGMAS = 4.0
-#: A damping ratio whose standard error exceeds this share of itself is not an answer.
-MAX_RELATIVE_STD = 0.35
+#: ... and between this many and that, the hint sends the answer to the windows' value at zero amplitude
+#: (an extrapolation, its error as wide as it is) instead of the linear fit's.
+HINT_SIGMAS = 3.0
+#: A damping ratio whose standard error exceeds this share of itself is not an answer (its 95 % interval
+#: then reaches zero: the data do not tell the damping from none).
+MAX_RELATIVE_STD = 0.5
 #: Fewest degrees of freedom (independent stretches less the parameters) of an answer's error.
 MIN_DOF = 2
 #: Windows of the forced-response estimate hold this many cycles of mode 1 ...
@@ -260,20 +264,25 @@ def resolve_damping(runs, selection, *, sigma) -> tuple:
         # a record the linear fit explains must show a strong amplitude dependence (of the damping, or of
         # the frequency: a joint that slips softens too) before it is believed
         needed = STRONG_SIGMAS if linear else ringdown.SLOPE_SIGMAS
-        changes = ((decay is not None and decay.evidence > needed) or
-                   (said is not None and max(said.evidence, abs(_frequency_trend(windows[k])[1])) > needed))
+        evidence = max(decay.evidence if decay is not None else 0.0,
+                       max(said.evidence, abs(_frequency_trend(windows[k])[1])) if said is not None else 0.0)
+        changes = evidence > needed
         if decay is not None and (changes or not linear):
             out.append(replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
                                        decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
                                        decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
                                evidence=decay.evidence))
-        elif exact or (linear and not changes):
+        elif exact or (linear and evidence <= HINT_SIGMAS):
             # a linear structure at these amplitudes: the linear fit's damping with its own error
             out.append(_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), Source.LINEAR, False,
                                0.0, 0.0, float(freq[i]), 0.0, said.amplitude_range if said else (0.0, 0.0),
                                float(zeta[i]), seconds * freq[i]))
         elif periodic := _periodic_refusal(runs, float(freq[i])):
             out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
+        elif linear:
+            # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
+            # amplitude, with the error of that extrapolation
+            out.append(_windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i], trend=True))
         else:
             out.append(said)
     return tuple(out)
@@ -312,9 +321,10 @@ def _unknown(equivalent: float, f0: float) -> ModeDamping:
     return _answer(equivalent, np.inf, 1, Source.FORCED, False, 0.0, 0.0, f0, 0.0, (0.0, 0.0), equivalent, 0.0)
 
 
-def _windows_say(windows, equivalent: float, f0: float, cycles: float) -> ModeDamping:
+def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bool = False) -> ModeDamping:
     """The forced-response answer from the windows: their damping ratios' trend in amplitude when they
-    show one (its value at zero amplitude), else their random-effects mean; refused when the mode's
+    show one or ``trend`` asks for it (its value at zero amplitude), else their random-effects mean;
+    refused when the mode's
     frequency moves across the windows by more than :data:`DRIFT_LIMIT` of its half-power half-width (a
     linear fit reads that spread as damping)."""
     if len(windows) < 2:
@@ -322,7 +332,7 @@ def _windows_say(windows, equivalent: float, f0: float, cycles: float) -> ModeDa
     z, s, f, sf, amp = (np.array(x) for x in zip(*windows))
     b, cov = _meta(z, s, np.column_stack([np.ones_like(amp), amp]))
     evidence = float(b[1] / np.sqrt(cov[1, 1])) if z.size > 3 and cov[1, 1] > 0 else 0.0     # growing only
-    dependent = evidence > ringdown.SLOPE_SIGMAS
+    dependent = evidence > ringdown.SLOPE_SIGMAS or (trend and z.size > 3)
     if not dependent:
         b, cov = _meta(z, s, np.ones((z.size, 1)))
     answer = _answer(float(b[0]), float(np.sqrt(cov[0, 0])), z.size - b.size, Source.FORCED, dependent,

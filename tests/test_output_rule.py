@@ -197,6 +197,25 @@ def test_a_failed_reimport_keeps_the_previous_recording(tmp_path, capsys, monkey
     assert not partial.exists() and len(mi.read_recording(out).runs) == 2
 
 
+def test_a_users_file_at_the_temporary_name_is_refused_unless_forced(tmp_path, capsys):
+    """An output is written to `<name>.partial` first: a user's file of that name is refused (view --save
+    used to truncate it and rename it over the output); --force removes it; what a killed writer of the
+    same kind left there is written over."""
+    from bad_input.csv_import import lab_folder
+
+    lab = lab_folder(tmp_path)
+    out, partial = tmp_path / "rec.mcap", tmp_path / "rec.mcap.partial"
+    partial.write_text("years of work")
+    error = _refused(capsys, ["import", str(lab), "-o", str(out)])
+    assert f"-o {out}: {partial} beside it is not an MCAP recording" in error and "--force removes it" in error
+    assert partial.read_text() == "years of work" and not out.exists()
+    assert main(["import", str(lab), "-o", str(out), "--force"]) == 0
+    assert not partial.exists() and len(mi.read_recording(out).runs) == 2
+    partial.write_bytes(out.read_bytes()[:100])                      # a writer killed in the header
+    assert main(["import", str(lab), "-o", str(out)]) == 0
+    assert not partial.exists() and len(mi.read_recording(out).runs) == 2
+
+
 def test_a_writer_killed_beside_a_recording_keeps_both(tmp_path):
     """SIGKILL while a new recording is written over an earlier one: the earlier one is whole, and the
     new one's completed runs read back from the partial file beside it, with a note."""

@@ -73,6 +73,13 @@ def test_a_sine_table_rich_in_harmonics_is_periodic_and_an_earthquake_is_not():
     sine = sum(np.sin(2 * np.pi * 2.0 * k * t + rng.uniform(0, 6)) / k for k in range(1, 25))
     assert periodic_fundamental(sine + rng.normal(0, 0.01, t.size), FS) == pytest.approx(2.0, rel=0.01)
     assert periodic_fundamental(rng.normal(0, 1, t.size), FS) is None
+    # an earthquake-like table motion, its power below 3 Hz in a 20 s record: a comb of 0.3-0.5 Hz covers
+    # most of those bins and holds most of the power, but no more than the bins it covers (was refused)
+    from scipy import signal
+
+    slow = signal.sosfiltfilt(signal.butter(4, [0.2, 3.0], "bandpass", fs=60.0, output="sos"),
+                              rng.normal(0, 1, 1200))
+    assert periodic_fundamental(slow, 60.0) is None
 
 
 def test_a_record_without_a_lead_in_takes_its_noise_from_its_own_scatter():
@@ -97,3 +104,35 @@ def test_a_record_without_a_lead_in_takes_its_noise_from_its_own_scatter():
     estimate = estimate_noise(run, f_max=33.0)       # the fit's band: 3 x 33 Hz is above Nyquist
     assert estimate.source is NoiseSource.LOCAL_POLYNOMIAL
     assert "local polynomial" in estimate.detail
+
+
+class _Run(dict):
+    def __init__(self, sample_rate, **channels):
+        super().__init__(channels)
+        self.sample_rate = sample_rate
+
+
+def _one_mode(f_hz):
+    from types import SimpleNamespace
+
+    model = SimpleNamespace(omega=lambda theta: np.array([2 * np.pi * f_hz]), residues=lambda theta: np.ones((1, 1)))
+    return SimpleNamespace(model=model, fit=SimpleNamespace(theta=None), storey=[0])
+
+
+def test_a_mode_in_the_noise_or_at_the_nyquist_limit_gives_no_damping():
+    # 20 s at 100 Hz, 0.01 m/s^2 of white noise on table and floor: a 15 Hz response of 0.1 m/s^2 amplitude
+    # stands ~20x above the noise in its +-10 % band; one of 0.002 m/s^2 stands below it (the threshold is
+    # 3x: these sit an order of magnitude either side, so the noise's draw cannot flip them)
+    from momentid.estimation.damping import _weak_refusal
+
+    rng = np.random.default_rng(3)
+    t = np.arange(2000) / 100.0
+    sigma = [{"zdd": 0.01, "a1": 0.01}]
+
+    def run(amplitude, f_hz=15.0):
+        return _Run(100.0, zdd=rng.normal(0, 0.01, t.size),
+                    a1=amplitude * np.sin(2 * np.pi * f_hz * t) + rng.normal(0, 0.01, t.size))
+
+    assert _weak_refusal([run(0.1)], _one_mode(15.0), sigma, 0) == ""
+    assert "barely above the sensor noise" in _weak_refusal([run(0.002)], _one_mode(15.0), sigma, 0)
+    assert "Nyquist" in _weak_refusal([run(0.1, 49.9)], _one_mode(49.9), sigma, 0)

@@ -66,3 +66,49 @@ def test_damping_is_right_or_refused_with_its_reason():
         # the equivalent linear damping is the old answer, 3-15x the peer's: never called the damping
         assert r.damping_ratio_equivalent[0] > 2 * hi, (name, r.damping_ratio_equivalent)
     assert answered >= 3
+
+
+# ----------------------------------------------------------------------------- windows without a lead-in
+
+def _window(run, start: int, seconds: float = 20.0):
+    from momentid.core.series import RunData
+
+    n = int(seconds * run.sample_rate)
+    s = slice(start, start + n)
+    return RunData(name=run.name, added_mass=run.added_mass, time=run.time[s] - run.time[s][0], channels=run.channels,
+                   values=run.values[s])
+
+
+def _windows_agree_or_are_refused(experiment, results, names):
+    """A 20 s window cut just after each trial's quiet lead-in (a record that starts shaking at once)
+    identifies, says where its noise level came from, and its damping agrees with the whole trial's
+    within their stated errors (two standard errors of the difference: a 95 % check), or is refused."""
+    import dataclasses
+
+    from momentid.estimation.noise import quiet_lead_in
+
+    for name in names:
+        run = experiment.run(name)
+        start = quiet_lead_in(run) + int(0.5 * run.sample_rate)
+        window = dataclasses.replace(experiment, runs=(_window(run, start),))
+        r = mi.identify(window)
+        assert r.noise[0], name                              # where the noise level came from, said
+        whole = results[name]
+        for w, t in zip(r.damping, whole.damping):
+            if w.is_answer and t.is_answer:
+                gap = abs(w.damping_ratio - t.damping_ratio)
+                assert gap <= 2 * np.hypot(w.damping_ratio_std, t.damping_ratio_std), (name, w, t)
+            else:
+                assert w.is_answer or w.refusal, (name, w)
+
+
+def test_windows_of_the_stiff_rig_agree_or_are_refused():
+    experiment, results = per_run()
+    _windows_agree_or_are_refused(experiment, results, list(results))
+
+
+def test_windows_of_the_flexible_rig_agree_or_are_refused():
+    from test_real_identify import SRIM, real_per_run
+
+    experiment, results = real_per_run()
+    _windows_agree_or_are_refused(experiment, dict(zip(SRIM, results)), list(SRIM))

@@ -253,12 +253,20 @@ def resolve_damping(runs, selection, *, sigma) -> tuple:
     """
     model, fit = selection.model, selection.fit
     freq, zeta = model.omega(fit.theta) / (2 * np.pi), model.zeta(fit.theta)
-    linear, exact = _explains(runs, fit, sigma, model.d)
+    base_linear, exact = _explains(runs, fit, sigma, model.d)
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
     seconds = sum(run.n_samples / run.sample_rate for run in runs)
     windows = None if exact else _forced(runs, selection, sigma, list(selection.storey))
     out = []
     for k, i in enumerate(selection.storey):
+        weak = "" if exact else _weak_refusal(runs, selection, sigma, i)
+        if weak:
+            out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=weak))
+            continue
+        periodic = _periodic_refusal(runs, float(freq[i]))
+        # a record forced only at a periodic table's harmonics beside the mode (a constant amplitude: no
+        # trend can show; the harmonics read the detuning, not the damping) does not prove the rig linear
+        linear = base_linear and not periodic
         decay = None if exact else _free_decays(runs, selection, sigma, i)
         said = None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
         # a record the linear fit explains must show a strong amplitude dependence (of the damping, or of
@@ -277,7 +285,7 @@ def resolve_damping(runs, selection, *, sigma) -> tuple:
             out.append(_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), Source.LINEAR, False,
                                0.0, 0.0, float(freq[i]), 0.0, said.amplitude_range if said else (0.0, 0.0),
                                float(zeta[i]), seconds * freq[i]))
-        elif periodic := _periodic_refusal(runs, float(freq[i])):
+        elif periodic:
             out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
         elif linear:
             # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
@@ -295,6 +303,40 @@ def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
     noise = np.mean([np.mean([sg[f"a{j + 1}"] ** 2 for j in range(d)]) for sg in sigma])
     exact = fit.scale * noise <= NOISE_FREE * floors
     return exact or fit.scale <= LINEAR_MISFIT ** 2, exact
+
+
+#: A mode's response in its band must stand this many times above the sensors' noise there (RMS) before
+#: its damping is read: below, the 'mode' is the noise's own ripple, or a pole the fit put anywhere.
+MIN_SIGNAL_TO_NOISE = 3.0
+
+
+def _weak_refusal(runs, selection, sigma, i: int) -> str:
+    """Why mode ``i``'s damping cannot be read at all ('' when it can): in no run does its relative
+    acceleration on its strongest floor, band-passed around it, stand :data:`MIN_SIGNAL_TO_NOISE` times
+    above the white sensor noise in that band (or the mode sits at the sampling's Nyquist limit)."""
+    model, theta = selection.model, selection.fit.theta
+    freq, R = model.omega(theta) / (2 * np.pi), model.residues(theta)
+    j = int(np.argmax(np.abs(R[i])))
+    best = None
+    for r, run in enumerate(runs):
+        fs = run.sample_rate
+        band = ringdown.band_for(freq[i], [freq[k] for k in selection.storey], fs)
+        if not band[0] < band[1] or not freq[i] < 0.49 * fs:
+            continue
+        env, _, _ = ringdown.envelope(run["zdd"] - run[f"a{j + 1}"], band, fs)
+        rms = float(np.sqrt(np.mean(env ** 2) / 2))
+        noise = float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"]) * np.sqrt(2 * (band[1] - band[0]) / fs))
+        if best is None or rms / max(noise, 1e-300) > best[0]:
+            best = (rms / max(noise, 1e-300), rms, noise, band)
+    if best is None:
+        return (f"the mode at {freq[i]:.4g} Hz lies at the sampling's Nyquist limit: it is not a mode the "
+                f"sensors can resolve")
+    ratio, rms, noise, band = best
+    if ratio >= MIN_SIGNAL_TO_NOISE:
+        return ""
+    return (f"the mode at {freq[i]:.4g} Hz stands barely above the sensor noise: its response in "
+            f"{band[0]:.3g}-{band[1]:.3g} Hz is {rms:.2g} m/s^2 RMS, {ratio:.2g}x the noise there ({noise:.2g} m/s^2; "
+            f"at least {MIN_SIGNAL_TO_NOISE:g}x is needed to read a damping)")
 
 
 def _free_decays(runs, selection, sigma, i: int):
@@ -333,10 +375,20 @@ def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bo
     b, cov = _meta(z, s, np.column_stack([np.ones_like(amp), amp]))
     evidence = float(b[1] / np.sqrt(cov[1, 1])) if z.size > 3 and cov[1, 1] > 0 else 0.0     # growing only
     dependent = evidence > ringdown.SLOPE_SIGMAS or (trend and z.size > 3)
+    exponent = 1.0 if dependent else 0.0
     if not dependent:
         b, cov = _meta(z, s, np.ones((z.size, 1)))
-    answer = _answer(float(b[0]), float(np.sqrt(cov[0, 0])), z.size - b.size, Source.FORCED, dependent,
-                     float(b[1]) if dependent else 0.0, 1.0 if dependent else 0.0, f0, 0.0,
+        zeta0, var0 = float(b[0]), float(cov[0, 0])
+    else:
+        # the laws zeta0 + zeta1 A^p of the free decays (joint micro-slip: p = 1/2 to 1): their mean value
+        # at zero amplitude, its variance their mean variance plus the variance between them (windows that
+        # never reach small amplitudes leave the laws' extrapolations apart, and the answer as uncertain)
+        fits = [_meta(z, s, np.column_stack([np.ones_like(amp), amp ** p])) for p in ringdown.POWERS]
+        at_zero = np.array([float(bp[0]) for bp, _ in fits])
+        zeta0 = float(np.mean(at_zero))
+        var0 = float(np.mean([cp[0, 0] for _, cp in fits]) + (np.var(at_zero, ddof=1) if at_zero.size > 1 else 0.0))
+    answer = _answer(zeta0, float(np.sqrt(max(var0, 0.0))), z.size - b.size, Source.FORCED, dependent,
+                     float(b[1]) if dependent else 0.0, exponent, f0, 0.0,
                      tuple(np.percentile(amp, [10, 90])), equivalent, cycles)
     slope, _ = _frequency_trend(windows)
     refusal = _drift_refusal(windows, equivalent) or answer.refusal
@@ -418,8 +470,18 @@ def _refusal(z: float, sd: float, dof: int, f0: float, source: str) -> str:
 
 
 #: A table motion is periodic when lines at the multiples of one fundamental (within
-#: :data:`LINE_BINS` bins) hold this share of its power.
-PERIODIC_SHARE = 0.8
+#: :data:`LINE_BINS` bins) hold this share of its power (a sine test beside its servo's noise) ...
+PERIODIC_SHARE = 0.5
+#: ... and it forces a mode only at its harmonics when they hold this share of the table's power within
+#: :data:`NEAR_LINES` (relative) of the mode.
+LOCAL_LINE_SHARE = 0.5
+NEAR_LINES = 0.2
+#: Combs whose shares differ by less than this hold the same lines (a denser one adds only noise bins).
+COMB_SLACK = 0.05
+#: ... and the power per bin on the lines is this many times the power per bin off them: a dense comb (a
+#: low fundamental in a short record) covers most bins, and any broadband motion fills it (a broadband
+#: table gives about 1, a sine test 10-100).
+CONCENTRATION = 4.0
 LINE_BINS = 2
 #: Fundamentals (Hz) tried: the table's strongest lines and their halves and thirds, down to this.
 MIN_FUNDAMENTAL = 0.3
@@ -429,7 +491,8 @@ def periodic_fundamental(table: np.ndarray, sample_rate: float):
     """The fundamental (Hz) of a periodic table motion (a sine test and its harmonics), or None.
 
     The table's power (Hann window) is periodic when lines at the multiples of one frequency hold
-    :data:`PERIODIC_SHARE` of it; the fundamentals tried are the five strongest lines and their halves
+    :data:`PERIODIC_SHARE` of it, at :data:`CONCENTRATION` times the power per bin off them; the
+    fundamentals tried are the five strongest lines and their halves
     and thirds.
     """
     u = np.asarray(table, float) - np.mean(table)
@@ -450,13 +513,20 @@ def periodic_fundamental(table: np.ndarray, sample_rate: float):
             lines = np.zeros(freq.size, bool)
             for h in np.arange(1, int(freq[-1] / f0) + 1):
                 lines |= np.abs(freq - h * f0) <= LINE_BINS * df
-            if float(np.sum(power[lines & keep])) / total >= PERIODIC_SHARE:
-                found.append(float(f0))
-    return max(found) if found else None          # the sparsest comb that holds the power
+            share = float(np.sum(power[lines & keep])) / total
+            covered = float(np.count_nonzero(lines & keep)) / float(np.count_nonzero(keep))
+            if share >= PERIODIC_SHARE and share * (1 - covered) >= CONCENTRATION * covered * (1 - share):
+                found.append((share, float(f0)))
+    if not found:
+        return None
+    best = max(share for share, _ in found)
+    # the sparsest comb that holds as much of the power (a denser one holds its lines and more noise)
+    return max(f0 for share, f0 in found if share >= best - COMB_SLACK)
 
 
 def _periodic_refusal(runs, f_mode: float) -> str:
-    """Why a mode forced only by a periodic table cannot give its damping ('' when the table is not periodic)."""
+    """Why a mode forced only by a periodic table cannot give its damping ('' when the table is not periodic,
+    or its broadband motion beside the mode is as strong as its harmonics there)."""
     for run in runs:
         f0 = periodic_fundamental(run["zdd"], run.sample_rate)
         if f0 is None:
@@ -466,13 +536,18 @@ def _periodic_refusal(runs, f_mode: float) -> str:
         power = np.abs(np.fft.rfft((run["zdd"] - np.mean(run["zdd"])) * np.hanning(n))) ** 2
         freq = np.fft.rfftfreq(n, 1.0 / run.sample_rate)
         df = freq[1]
+        near = np.abs(freq / f_mode - 1) <= NEAR_LINES
+        lines = np.abs(freq / f0 - np.round(freq / f0)) * f0 <= LINE_BINS * df
+        if float(np.sum(power[near & lines])) < LOCAL_LINE_SHARE * float(np.sum(power[near])):
+            continue                       # beside the mode the table's broadband motion drives it too
         at = [float(np.max(power[np.abs(freq - h * f0) <= LINE_BINS * df])) for h in (k, k + 1)
               if h >= 1 and h * f0 < freq[-1] - LINE_BINS * df]
         between = (freq > k * f0 + 3 * df) & (freq < (k + 1) * f0 - 3 * df)
         level = float(np.median(power[between])) if between.any() else 0.0
         ratio = min(at) / max(level, 1e-300) if at else np.inf
         return (f"the table's motion in run {run.name!r} is periodic at {f0:.4g} Hz and never leaves the mode at "
-                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} Hz), "
+                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and "
+                f"{(k + 1) * f0:.4g} Hz), "
                 f"and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
                 f"the detuning, not the damping")
     return ""

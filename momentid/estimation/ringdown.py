@@ -204,20 +204,25 @@ def ring_downs(run_name: str, table: np.ndarray, relative: np.ndarray, sample_ra
     """
     fs = sample_rate
     E, phase, inst = envelope(relative, band, fs)
-    e, _, _ = envelope(table, band, fs)
-    share = (band[1] - band[0]) / (fs / 2)
+    # the table's motion is read over twice the band: a strong line just outside the band-pass (a sine
+    # test's harmonic) leaks into the mode's envelope through its skirts, and is forcing too
+    wide = (max(frequency - 2 * (frequency - band[0]), 0.05 * frequency), min(frequency + 2 * (band[1] - frequency),
+                                                                               0.49 * fs))
+    e, _, _ = envelope(table, wide, fs)
+    share = (wide[1] - wide[0]) / (fs / 2)
     # white noise of variance sigma^2 leaves sigma^2 x share in the band, and twice that in |analytic|^2
-    noise_t, noise_r = 2 * sigma_table ** 2 * share, 2 * sigma_relative ** 2 * share
+    noise_t, noise_r = 2 * sigma_table ** 2 * share, 2 * sigma_relative ** 2 * share * (band[1] - band[0]) / (
+        wide[1] - wide[0])
     width = max(int(round(max(SMOOTH_CYCLES / frequency, SMOOTH_CONSTANTS / (np.pi * (band[1] - band[0]))) * fs)), 1)
     kernel = np.ones(width) / width
     # the table's power beyond its noise, less two standard deviations of the noise's own scatter over the
     # window (about width x B independent values): a stretch is forced only when the forcing is real
-    independent = max(width / fs * (band[1] - band[0]), 1.0)
+    independent = max(width / fs * (wide[1] - wide[0]), 1.0)
     e2 = np.convolve(e ** 2, kernel, "same") - noise_t * (1 + 2 / np.sqrt(independent))
     E2 = np.maximum(np.convolve(E ** 2, kernel, "same") - noise_r, 1e-300)
     # Steady random forcing: the band's power 2 S0 dw drives E[x''^2] = pi S0 w / (2 zeta): their ratio is
     # (8 h / pi) zeta for a band of half-width h (relative); E holds residue x x''.
-    half = 0.5 * (band[1] - band[0]) / frequency
+    half = 0.5 * (wide[1] - wide[0]) / frequency
     supplied = e2 * residue ** 2 / ((8 * half / np.pi) * E2)
     near = np.abs(np.convolve(inst, kernel, "same") / frequency - 1) < NEAR_MODE
     ok = (supplied < FREE_FORCING * max(zeta, 1e-4)) & (E2 > (MIN_SNR ** 2 - 1) * noise_r) & near
@@ -288,7 +293,8 @@ def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMA
     micro-slip adds damping as ``E^(chi + 1)``, ``chi`` in (-1, 0]) are fitted.  The laws whose ``zeta1``
     is positive beyond ``slope_sigmas`` (Newey-West) standard errors are the evidence of an
     amplitude-dependent damping (a damping that falls with amplitude is not believed: on a linear rig
-    that is what leakage of the band-pass and beats with another mode fake); ``zeta0`` is then their mean, and its variance their mean variance plus the variance between
+    that is what leakage of the band-pass and beats with another mode fake); ``zeta0`` is then their mean,
+    and its variance their mean variance plus the variance between
     them (a ring-down that never reaches small amplitudes leaves the laws' extrapolations apart, and
     ``zeta0`` as uncertain).  When none is, the damping is constant.
 
@@ -311,6 +317,9 @@ def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMA
     const = _fit(rings, 0.0, np.array([z_start] + ln_e0))
     cov = _newey_west(const.jac, const.fun, pieces, correlation_samples)
     zeta0, var0, slopes, evidence = float(const.x[0]), float(cov[0, 0]), [], 0.0
+    E = np.concatenate([r.envelope for r in rings])
+    reach = float(np.percentile(E, 10))           # the smallest amplitude the decays hold well
+    unknown_slope = np.inf                         # what the linear law leaves open at zero amplitude
     if max(float(np.ptp(np.log(r.envelope))) for r in rings) > MIN_LOG_SPAN:
         for p in POWERS:
             scale = float(np.exp(p * np.mean(ln_e0)))
@@ -319,14 +328,19 @@ def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMA
             sd = float(np.sqrt(max(c[1, 1], 0.0)))
             if fit.success and sd > 0:          # a damping that grows with amplitude: joints slipping more
                 evidence = max(evidence, float(fit.x[1]) / sd)
+                if p == 1.0:
+                    unknown_slope = sd * reach
             if fit.success and sd > 0 and fit.x[1] > slope_sigmas * sd:
                 slopes.append((p, fit.x, c))
+    if not slopes:
+        # a constant damping at small amplitude is an extrapolation from the amplitudes the decays reach:
+        # as uncertain as a damping growing linearly with amplitude, within its own error, would leave it
+        var0 += min(unknown_slope, abs(zeta0)) ** 2
     if slopes:
         z = np.array([x[0] for _, x, _ in slopes])
         zeta0 = float(np.mean(z))
         var0 = float(np.mean([c[0, 0] for _, _, c in slopes]) + (np.var(z, ddof=1) if z.size > 1 else 0.0))
         p, x, c = min(slopes, key=lambda q: abs(q[1][0] - zeta0))
-    E = np.concatenate([r.envelope for r in rings])
     f = np.concatenate([r.frequency for r in rings])
     A = np.column_stack([np.ones_like(E), E])
     coef, *_ = np.linalg.lstsq(A, f, rcond=None)
@@ -335,7 +349,8 @@ def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMA
         zeta0=zeta0, zeta0_std=float(np.sqrt(max(var0, 0.0))),
         slope=float(x[1]) if slopes else 0.0, slope_std=float(np.sqrt(max(c[1, 1], 0.0))) if slopes else 0.0,
         exponent=float(p) if slopes else 0.0, amplitude_dependent=bool(slopes),
-        dof=max(stretches - (2 if slopes else 1), 1), evidence=evidence, frequency0=float(coef[0]), frequency_slope=float(coef[1]),
+        dof=max(stretches - (2 if slopes else 1), 1), evidence=evidence, frequency0=float(coef[0]),
+        frequency_slope=float(coef[1]),
         frequency_slope_std=float(np.sqrt(max(fcov[1, 1], 0.0))),
         amplitude_range=tuple(float(x) for x in np.percentile(E, [10, 90])),
         cycles=float(sum(r.cycles for r in rings)))

@@ -50,7 +50,7 @@ def cli(argv) -> str | None:
 
 def stages(rec: Path, runs: str, out: Path) -> dict:
     """Wall seconds of the twin's stages, called one by one."""
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     from momentid.estimation.identification import identify
     from momentid.io.recording import read_recording
     from momentid.twin import build, files, parameters, replay, spec

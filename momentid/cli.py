@@ -53,7 +53,7 @@ def _os_error(exc: OSError) -> str:
 
 def _refuse_implausible(experiment, result) -> None:
     """No answer is printed that the data contradict (units, swapped columns, masses in grams)."""
-    from momentid.diagnosis.plausibility import implausible
+    from momentid.estimation.plausibility import implausible
 
     reasons = implausible(experiment, result)
     if reasons:

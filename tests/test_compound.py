@@ -20,7 +20,7 @@ from momentid.diagnosis.compound import STEP_SHORTLIST, shortlist
 from momentid.diagnosis.pipeline import diagnose
 from momentid.diagnosis.screening import Candidate, Domain
 from momentid.diagnosis.selection import SHORTLIST_FLOOR
-from momentid.diagnosis.workers import run_forked
+from momentid.core.processes import run_forked
 from momentid.diagnosis.report import write_report
 from momentid.mechanisms.place import Place, Target
 

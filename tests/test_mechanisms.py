@@ -184,7 +184,7 @@ def new_kind_file(tmp_path, monkeypatch):
     monkeypatch.setattr(mechanisms, "__path__", [*mechanisms.__path__, str(folder)])
     assert "table_dashpot" not in registry.REGISTRY
     try:
-        registry.load()
+        registry.load(mechanisms)
         yield registry.get("table_dashpot")
     finally:
         registry.REGISTRY.pop("table_dashpot", None)

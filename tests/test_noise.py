@@ -16,7 +16,7 @@ from momentid.core.series import Experiment
 from momentid.estimation.design import cramer_rao
 from momentid.estimation.identified import damping_models
 from momentid.lab.scenario import Instrument, Sensors, parse_scenario
-from momentid.estimation.checks import check_run
+from momentid.io.run_checks import check_run
 from momentid.lab.sensors import measure
 
 from conftest import SCENARIOS, load

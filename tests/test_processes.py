@@ -157,7 +157,7 @@ def test_a_background_job_not_asked_for_is_killed_when_the_block_ends():
 def _borrower(task: str):
     """``short``: its pid.  ``long``: the pids of two jobs it runs with run_forked, retried until a
     core of the pool is idle (the short task's worker, with no task left) and helpers ran them."""
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     if task == "short":
         return [os.getpid()]
     deadline = time.monotonic() + 60
@@ -171,7 +171,7 @@ def _borrower(task: str):
 
 def test_a_worker_borrows_the_core_of_a_worker_with_no_task_left():
     from momentid.core import processes
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     short, long = run_forked(_borrower, ["short", "long"])
     # The long task's jobs ran in helpers of its own (not in itself, not in the short task's worker)
     # once the short task's worker was idle; without a lent core they would run in the worker itself

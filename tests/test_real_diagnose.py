@@ -20,7 +20,8 @@ from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
 from momentid.diagnosis.pipeline import diagnose
 from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE, diagnose_modal
-from momentid.diagnosis.result import Diagnosis, ModalEvidence
+from momentid.diagnosis.modal_words import ModalEvidence
+from momentid.diagnosis.result import Diagnosis
 from momentid.diagnosis.verdict import Verdict
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.estimation.linear import discretize, outputs, simulate_linear

@@ -12,9 +12,10 @@ import pytest
 
 from momentid.cli import main
 from momentid.diagnosis.pipeline import diagnose
-from momentid.diagnosis.rig_state import OFF_TREND_SIGMAS, check_state
+from momentid.estimation.rig_state import OFF_TREND_SIGMAS, check_state
 from momentid.diagnosis.thresholds import EXCESS
-from momentid.diagnosis.result import Diagnosis, TwinEvidence
+from momentid.diagnosis.result import Diagnosis
+from momentid.diagnosis.twin_words import TwinEvidence
 from momentid.diagnosis.twin_diagnose import default_hold_out
 from momentid.diagnosis.verdict import Verdict
 from momentid.io.recording import write_experiment

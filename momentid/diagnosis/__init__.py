@@ -11,11 +11,11 @@
   :mod:`~momentid.diagnosis.selection`: the candidates re-simulated, the best sized and accepted or
   not (6); :mod:`~momentid.diagnosis.compound`: further mechanisms (6b);
 - :mod:`~momentid.diagnosis.result` and :mod:`~momentid.diagnosis.verdict`: the :class:`Diagnosis`
-  every recording gets, its :class:`Verdict`; :mod:`~momentid.diagnosis.report`: its summary and
-  report folder (7);
-- :mod:`~momentid.diagnosis.twin_diagnose` (with :mod:`~momentid.diagnosis.rig_state`,
-  :mod:`~momentid.diagnosis.twin_fit`, :mod:`~momentid.diagnosis.twin_folds` and
-  :mod:`~momentid.diagnosis.twin_words`): recordings without added mass, with stated floor masses and
+  every recording gets, its :class:`Verdict`; each path's evidence in words
+  (:mod:`~momentid.diagnosis.added_mass_words`, :mod:`~momentid.diagnosis.modal_words`,
+  :mod:`~momentid.diagnosis.twin_words`); :mod:`~momentid.diagnosis.report`: the report folder (7);
+- :mod:`~momentid.diagnosis.twin_diagnose` (with :mod:`~momentid.estimation.rig_state`,
+  :mod:`~momentid.diagnosis.twin_fit` and :mod:`~momentid.diagnosis.twin_folds`): recordings without added mass, with stated floor masses and
   three trials or more, on the rig's MuJoCo twin (the same result);
 - :mod:`~momentid.diagnosis.real`: the other recordings without added mass (the modal path, the same
   result);

@@ -15,7 +15,7 @@ earns its place:
   and the model with it must remove at least ``EARNS`` of the training replays' misfit above noise
   that the model without it leaves.  The loop stops when none does, when the replays are at the
   noise level, or at ``MAX_MECHANISMS``.  The trials of a step run on two processes
-  (:mod:`~momentid.diagnosis.workers`) and return their results as values.  (What a step screens:
+  (:mod:`~momentid.core.processes`) and return their results as values.  (What a step screens:
   :mod:`~momentid.diagnosis.compound_screening`.)  Then every mechanism named is **re-tested** by
   the same rule with the others in the model: the model without it, its other sizes searched again,
   must leave ``EARNS`` more of the misfit; the weakest that does not is dropped (:func:`_retest`);
@@ -55,7 +55,7 @@ from momentid.diagnosis.selection import Finding, Step, explained_share
 from momentid.diagnosis.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Named, Verdict
-from momentid.diagnosis.workers import run_forked
+from momentid.core.processes import run_forked
 from momentid.mechanisms.base import Refit
 from momentid.mechanisms.place import Place
 

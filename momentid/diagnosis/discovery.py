@@ -33,7 +33,7 @@ from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks,
 from momentid.diagnosis.selection import Finding, OutsideLibrary, explained_share
 from momentid.diagnosis.thresholds import EXCESS
 from momentid.diagnosis.verdict import Verdict
-from momentid.diagnosis.workers import run_forked
+from momentid.core.processes import run_forked
 from momentid.errors import ModelError, SimulationError
 from momentid.mechanisms.data_driven import TERMS
 from momentid.mechanisms.place import Place, Target
@@ -105,6 +105,10 @@ class Discovery:
     @property
     def location(self) -> dict:
         return self.place.location
+
+    def draw(self, path) -> None:
+        """``discovered.png`` at ``path``: :func:`plot_discovered`."""
+        plot_discovered(self, path)
 
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),

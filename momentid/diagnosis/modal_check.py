@@ -104,7 +104,7 @@ def fit_runs(experiment: Experiment, names) -> RunsFit:
     IdentificationError
         No noise source, fewer resonances than storeys, a singular fit.
     """
-    from momentid.estimation.checks import check_run
+    from momentid.io.run_checks import check_run
 
     runs = tuple(check_run(experiment.run(n), experiment.source)[0] for n in names)
     d = experiment.storeys

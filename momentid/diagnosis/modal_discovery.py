@@ -115,6 +115,10 @@ class ModalDiscovery:
     checks: dict
     plot: dict = field(repr=False)
 
+    def draw(self, path) -> None:
+        """``discovered.png`` at ``path``: :func:`plot_modal_discovered`."""
+        plot_modal_discovered(self, path)
+
     def to_dict(self) -> dict:
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
                 "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,

@@ -48,7 +48,8 @@ from momentid.diagnosis.discovery import as_unexplained, challenge, discover
 from momentid.diagnosis.refit import noise_carrier, noise_ratios
 from momentid.diagnosis.replay import replay_check
 from momentid.diagnosis.report import write_report
-from momentid.diagnosis.result import AddedMassEvidence, Diagnosis
+from momentid.diagnosis.added_mass_words import AddedMassEvidence
+from momentid.diagnosis.result import Diagnosis
 from momentid.diagnosis.stages import Stages, run_stages
 from momentid.errors import MomentidError
 

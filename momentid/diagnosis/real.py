@@ -1,7 +1,7 @@
 """Diagnosis of recordings without added mass: a held-out check of the modal model and a verdict.
 
 Its result is the :class:`~momentid.diagnosis.result.Diagnosis` of every recording, with a
-:class:`~momentid.diagnosis.result.ModalEvidence`; :func:`summary` words it.
+:class:`~momentid.diagnosis.modal_words.ModalEvidence`, which words it.
 
 :func:`diagnose_modal` is what :func:`momentid.diagnosis.pipeline.diagnose` runs when no run adds
 mass (real labs: accelerometers only, no added-mass runs).  Stages:
@@ -34,22 +34,22 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis.modal_discovery import MIN_GAIN, ModalDiscovery, discover_modal
-from momentid.diagnosis.result import Diagnosis, ModalEvidence
-from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
+from momentid.diagnosis.modal_discovery import discover_modal
+from momentid.diagnosis.modal_words import ModalEvidence
+from momentid.diagnosis.result import Diagnosis
+from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
 from momentid.diagnosis.verdict import Named, Verdict
-from momentid.diagnosis.workers import run_forked
+from momentid.core.processes import run_forked
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.peaks import response_amplitude
 
-__all__ = ["diagnose_modal", "summary", "AMPLITUDE_DEPENDENCE", "LATE_SAMPLES"]
+__all__ = ["diagnose_modal", "AMPLITUDE_DEPENDENCE", "LATE_SAMPLES"]
 
 #: Verdict name of the amplitude-dependence mechanism (modes that shift with the response amplitude).
 AMPLITUDE_DEPENDENCE = "amplitude_dependence"
@@ -131,7 +131,7 @@ def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Di
     Returns
     -------
     Diagnosis
-        With a :class:`~momentid.diagnosis.result.ModalEvidence`: the per-channel misfit, the
+        With a :class:`~momentid.diagnosis.modal_words.ModalEvidence`: the per-channel misfit, the
         training runs' pooled modal model, the amplitude model tried, the sensor findings.
 
     Raises
@@ -145,7 +145,7 @@ def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Di
 
 
 def _fits(experiment: Experiment, train):
-    """One modal fit per training run, on the machine's cores (:func:`~momentid.diagnosis.workers.run_forked`)."""
+    """One modal fit per training run, on the machine's cores (:func:`~momentid.core.processes.run_forked`)."""
     return run_forked(lambda name: mc.fit_runs(experiment, [name]), list(train))
 
 
@@ -168,7 +168,7 @@ def _verdict(before: float, after: float, noise: float, tested: bool) -> Verdict
     """``none`` within :data:`EXCESS` x noise; the candidate if it removes :data:`EXPLAINED` of the rest."""
     if before <= EXCESS * noise:
         return Verdict.NONE
-    return Verdict.MECHANISM if tested and _explained(before, after, noise) >= EXPLAINED else Verdict.UNEXPLAINED
+    return Verdict.MECHANISM if tested and removed_share(before, after, noise) >= EXPLAINED else Verdict.UNEXPLAINED
 
 
 def _diagnose(experiment: Experiment, hold_out: str | None) -> Diagnosis:
@@ -186,7 +186,7 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> Diagnosis:
                                     if held not in train else (None, None, {}))
     after_full = before_full if after_full is None else after_full
     before, after = mc.nrmse(measured, before_full[start:]), mc.nrmse(measured, after_full[start:])
-    candidate["explained"] = _explained(before, after, noise)
+    candidate["explained"] = removed_share(before, after, noise)
     verdict = _verdict(before, after, noise, trend is not None)
     best = after_full if verdict is Verdict.MECHANISM else before_full
     location = {} if verdict is Verdict.NONE else _location(measured, best[start:], linear, dt, float(run.time[start]))
@@ -212,72 +212,3 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> Diagnosis:
     return Diagnosis(verdict=verdict, mechanism=mechanism, location=location, parameters=parameters, std=std,
                      mechanisms=named, held_out=held_name, nrmse_before=before, nrmse_after=after, noise_nrmse=noise,
                      evidence=evidence, discovered=discovered, curves=curves)
-
-
-def _explained(before: float, after: float, noise: float) -> float:
-    """Share of the held-out misfit power above noise that the candidate removes (<= 1)."""
-    excess = before ** 2 - noise ** 2
-    return float((before ** 2 - after ** 2) / excess) if excess > 0 else 0.0
-
-
-def summary(diag: Diagnosis) -> str:
-    """The report's text of a diagnosis without added mass: the linear modal model's held-out misfit
-    against noise, the amplitude model and the verdict, the sensor findings, and the open search."""
-    evidence = diag.evidence
-    lines = _summary_lines(diag.verdict, diag.location, diag.held_out, diag.nrmse_before, diag.nrmse_after,
-                           diag.noise_nrmse, evidence.candidate["explained"], evidence.trend, evidence.amplitude,
-                           evidence.findings)
-    if evidence.searched:
-        lines.append(_open_search_line(diag.discovered))
-    return "\n".join(lines)
-
-
-def _summary_lines(verdict, location, held, before, after, noise, explained, trend, amplitude, findings) -> list[str]:
-    lines = [f"Held-out run {held}: floor-acceleration NRMSE of the linear modal model {100 * before:.2f} % "
-             f"({before / noise:.1f} x the {100 * noise:.2f} % noise alone leaves)."]
-    if trend is not None:
-        slopes = ", ".join(f"mode {i + 1} {f:+.3g} +- {fs:.2g} Hz and {100 * z:+.3g} +- {100 * zs:.2g} % damping"
-                           for i, (f, fs, z, zs) in enumerate(zip(trend.frequency_coef[:, 1], trend.frequency_slope_std,
-                                                                  trend.damping_coef[:, 1], trend.damping_slope_std)))
-        lines.append(f"Amplitude dependence fitted on the training runs (per m/s^2 of response): {slopes}; "
-                     f"held-out NRMSE {100 * before:.2f} % -> {100 * after:.2f} % "
-                     f"({100 * explained:.0f} % of the misfit above noise removed, {100 * EXPLAINED:.0f} % needed).")
-        if not trend.amplitude_range[0] <= amplitude <= trend.amplitude_range[1]:
-            lines.append(f"WARNING: the held-out run's response amplitude ({amplitude:.3g} m/s^2) is outside the training "
-                         f"runs' ({trend.amplitude_range[0]:.3g}-{trend.amplitude_range[1]:.3g} m/s^2): the amplitude "
-                         f"model extrapolates.")
-    else:
-        lines.append("Amplitude dependence not tested: it needs at least two training runs of different amplitudes.")
-    if verdict is Verdict.NONE:
-        lines.append(f"No missing physics: the linear modal model explains the held-out run to within "
-                     f"{EXCESS:g} x the noise level.")
-    elif verdict is Verdict.MECHANISM:
-        lines.append(f"Verdict: amplitude dependence (modes shift with the response amplitude); the held-out misfit "
-                     f"left is largest at {json.dumps(location)}.")
-        if after > EXCESS * noise:
-            lines.append(f"WARNING: amplitude dependence explains only part of the mismatch: the held-out NRMSE is "
-                         f"still {100 * after:.2f} % ({after / noise:.1f} x noise); the rest is unexplained.")
-    else:
-        lines.append(f"Verdict: unexplained mismatch at {json.dumps(location)} (worst floor sensor, and the band "
-                     f"around that mode holding that share of its residual power).")
-    lines += [f"Finding: {f}" for f in findings]
-    return lines
-
-
-def _open_search_line(discovered: ModalDiscovery | None) -> str:
-    """One line: what the open search found on the misfit's mode, and whether it beats the linear model."""
-    if discovered is None:
-        return (f"Open search: on no mode does a term of the function library earn its place (lower the "
-                f"leave-one-run-out equation error by {100 * MIN_GAIN:.0f} %, a dissipative term staying "
-                f"dissipative): nothing beyond the linear model.")
-    training = discovered.checks["training_nrmse"]
-    numbers = (f"held-out NRMSE {100 * discovered.nrmse_before:.2f} % -> {100 * discovered.nrmse_after:.2f} % "
-               f"(the linear model refitted on the training runs the same way: "
-               f"{100 * discovered.checks['held_out_nrmse_linear_refitted']:.2f} %; training runs "
-               f"{100 * training['linear']:.2f} % -> {100 * training['law']:.2f} %, refitted linear "
-               f"{100 * training['linear (refitted)']:.2f} %)")
-    if discovered.beats_linear:
-        return (f"Open search: {discovered.description}; {numbers}: it beats the linear model on the held-out run "
-                f"(a data-driven law, not a named mechanism; the verdict is unchanged).")
-    return (f"Open search: {discovered.description}; {numbers}: it does NOT beat the linear model on the held-out "
-            f"run (the verdict is unchanged).")

@@ -26,7 +26,7 @@ from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.replay import Entry, identified_structure, joint_replay, records
 from momentid.diagnosis.residuals import LinearModel, band_signals, nrmse, replay_noise
-from momentid.diagnosis.workers import run_forked
+from momentid.core.processes import run_forked
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
 from momentid.estimation.reconstruct import Prefilter, band_filter
@@ -221,7 +221,7 @@ class Refitter:
     corrected identifications (each a function of its inputs), and the errors-in-variables refit of
     each set of forces, by kind and place (a force's signal per unit of its coefficient does not
     depend on its size: the first refit of a set of forces is the one every later step uses).  Work
-    done in another process comes back as values (:mod:`~momentid.diagnosis.workers`) and is
+    done in another process comes back as values (:mod:`~momentid.core.processes`) and is
     recorded with :meth:`remember` / :meth:`remember_refit`.
     """
 

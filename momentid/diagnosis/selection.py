@@ -21,7 +21,7 @@ from momentid.diagnosis.screening import (Candidate, DampingPattern, Domain, Rep
 from momentid.diagnosis.sensor_check import SensorCheck
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
-from momentid.diagnosis.workers import run_forked
+from momentid.core.processes import run_forked
 from momentid.mechanisms.base import MechanismKind, Refit
 from momentid.mechanisms.place import Place, Target
 

@@ -4,7 +4,7 @@ What :func:`diagnose_twin` does with a recording of trials without added mass an
 masses:
 
 1. **Rig state.** Every trial is identified on its own (:func:`~momentid.estimation.scaled.identify_per_run`)
-   and :func:`~momentid.diagnosis.rig_state.check_state` says which trials do not belong with the
+   and :func:`~momentid.estimation.rig_state.check_state` says which trials do not belong with the
    others (their modes lie off the others' trend: another day, sensors re-mounted).  Those are said,
    left out of the fit, and never called missing physics.
 2. **Hold-out.** ``hold_out`` when given (any trial, one of another state too); else the last trial
@@ -29,7 +29,7 @@ masses:
    ``UNEXPLAINED``, located in words (floor sensor, mode band).
 
 The result is the :class:`~momentid.diagnosis.result.Diagnosis` of every recording, with a
-:class:`~momentid.diagnosis.result.TwinEvidence`; :mod:`~momentid.diagnosis.twin_words` words it.
+:class:`~momentid.diagnosis.twin_words.TwinEvidence`, which words it.
 Its ``location`` is where the held-out misfit left is largest (floor sensor, mode band); the joints'
 places are their ``mechanisms`` entries'.
 """
@@ -43,9 +43,10 @@ import numpy as np
 from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
 from momentid.diagnosis import twin_fit, twin_folds
-from momentid.diagnosis.result import Diagnosis, TwinEvidence
-from momentid.diagnosis.rig_state import StateCheck, check_state
-from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
+from momentid.diagnosis.result import Diagnosis
+from momentid.estimation.rig_state import StateCheck, check_state
+from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
+from momentid.diagnosis.twin_words import TwinEvidence
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.scaled import identify_per_run, weighted_line
@@ -53,7 +54,7 @@ from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
 
-__all__ = ["diagnose_twin", "applies", "default_hold_out", "explained", "MIN_TRAINING"]
+__all__ = ["diagnose_twin", "applies", "default_hold_out", "MIN_TRAINING"]
 
 #: Training trials the twin's fits need at least: one parameter set over several amplitudes.
 MIN_TRAINING = 2
@@ -166,15 +167,9 @@ def _verdict(before: float, fold) -> Verdict:
     noise = fold.noise_nrmse
     if min(before, fold.nrmse_linear_refit) <= EXCESS * noise:
         return Verdict.NONE
-    if explained(fold.nrmse_linear_refit, fold.nrmse_after, noise) >= EXPLAINED:
+    if removed_share(fold.nrmse_linear_refit, fold.nrmse_after, noise) >= EXPLAINED:
         return Verdict.MECHANISM
     return Verdict.UNEXPLAINED
-
-
-def explained(before: float, after: float, noise: float) -> float:
-    """Share of ``before``'s misfit power above noise that ``after`` removes (<= 1)."""
-    excess = before ** 2 - noise ** 2
-    return float((before ** 2 - after ** 2) / excess) if excess > 0 else 0.0
 
 
 def _curves(experiment: Experiment, twin, fold, tr) -> dict:

@@ -29,7 +29,7 @@ from momentid.errors import IdentificationError, MomentidError
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
-from momentid.twin.parameters import pair_coefficient
+from momentid.lab.tendons import pair_coefficient
 
 __all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "sensor_jacobian", "FIT_ENERGY", "friction_start",
            "twin_modes", "joint_tendon_stiffness", "workers", "each"]
@@ -188,7 +188,7 @@ def _valid(model: resim.RigModel) -> bool:
 def joint_tendon_stiffness(K: np.ndarray, mech) -> float:
     """The stiffness (N/m) of the tendon in K between the two levels a joint mechanism ``mech`` acts across
     (its kind's :class:`~momentid.mechanisms.place.Place` ``nodes``; the tendons of
-    :func:`momentid.twin.parameters.tendon_layout`)."""
+    :func:`momentid.lab.tendons.tendon_layout`)."""
     nodes = registry.get(mech.type).place(mech.location).nodes
     return pair_coefficient(K, *nodes)
 

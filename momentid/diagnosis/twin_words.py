@@ -1,18 +1,74 @@
-"""What a twin diagnosis (:mod:`~momentid.diagnosis.twin_diagnose`) says and draws: the summary in
-words and the replay plot (:func:`momentid.diagnosis.report.write_report` writes them with ``twin.xml``
-and ``model_augmented.xml``)."""
+"""What a twin diagnosis (:mod:`~momentid.diagnosis.twin_diagnose`) shows beside its verdict, says and
+draws: its evidence, the summary in words and the replay plot (:func:`momentid.diagnosis.report.write_report`
+writes them with ``twin.xml`` and ``model_augmented.xml``)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from momentid.diagnosis.result import Diagnosis
-from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
-from momentid.diagnosis.twin_diagnose import explained
+from momentid.diagnosis.result import Diagnosis, Evidence
+from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
 from momentid.diagnosis.verdict import Verdict
 from momentid.mechanisms import registry
 
-__all__ = ["summary", "plot_replay"]
+if TYPE_CHECKING:
+    from momentid.estimation.rig_state import StateCheck
+
+__all__ = ["TwinEvidence", "summary", "plot_replay"]
+
+@dataclass(frozen=True)
+class TwinEvidence(Evidence):
+    """What a diagnosis of accelerometer-only recordings on the rig's MuJoCo twin shows beside its
+    verdict (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`).
+
+    Attributes
+    ----------
+    training : tuple of str
+        The training trials (of the held-out trial's rig state unless it was named from another).
+    state : StateCheck
+        Which trials belong to one rig state (:mod:`momentid.estimation.rig_state`).
+    excluded : tuple of str
+        One sentence per trial left out as another rig state.
+    channel_nrmse : dict
+        Per floor sensor: held-out NRMSE of the linear twin, the linear refit and the augmented twin.
+    fits : dict
+        The fitted twins (linear refit, augmented, the held-out trial's own) and their training NRMSE.
+    reference : dict
+        Amplitude-dependent viscous damping: its held-out NRMSE and slopes (a figure, not an answer).
+    twin_xml : str
+        The linear twin's MJCF (``twin.xml``; loads in stock MuJoCo).
+    seconds : dict
+        Wall-clock seconds per stage, and the CPU seconds of the whole.
+    fold : Fold
+        The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin_folds.Fold`).
+    """
+
+    training: tuple[str, ...]
+    state: StateCheck
+    excluded: tuple[str, ...]
+    channel_nrmse: dict
+    fits: dict
+    reference: dict
+    twin_xml: str
+    seconds: dict = field(default_factory=dict)
+    fold: object = field(default=None, repr=False, compare=False)
+
+    def to_dict(self) -> dict:
+        return {"training": list(self.training), "reference": self.reference, "rig_state": self.state.to_dict(),
+                "excluded": list(self.excluded), "channel_nrmse": self.channel_nrmse, "fits": self.fits,
+                "seconds": self.seconds, "path": "twin (no added mass)"}
+
+    def words(self, diag: Diagnosis) -> str:
+        return summary(diag)
+
+    def plot_replay(self, diag: Diagnosis, path: Path) -> None:
+        plot_replay(diag, path)
+
+    def models(self) -> dict[str, str]:
+        return {"twin.xml": self.twin_xml}
+
 
 _ROWS = (("nrmse_before", "linear twin (`momentid twin` on the training trials)"),
          ("nrmse_linear_refit", "linear twin refitted to the training trials by re-simulation"),
@@ -33,7 +89,7 @@ def summary(diag: Diagnosis) -> str:
         lines.append(f"  {100 * ref['nrmse']:7.2f} %  amplitude-dependent viscous damping (a reference, not an answer: "
                      f"modes set by the held-out trial's own amplitude, {ref['held_out_amplitude_m_s2']:.3g} m/s^2)")
     refit, after, noise = diag.nrmse_linear_refit, diag.nrmse_after, diag.noise_nrmse
-    share = explained(refit, after, noise)
+    share = removed_share(refit, after, noise)
     if diag.verdict is Verdict.NONE:
         lines.append(f"No missing physics: a linear twin explains the held-out trial to within {EXCESS:g} x the noise.")
     elif diag.verdict is Verdict.MECHANISM:

@@ -7,7 +7,7 @@ joint friction (:mod:`momentid.mechanisms.joint_friction`).  :class:`RigModel` h
 :func:`build_spec` writes it as MJCF in the rig's layout (:mod:`momentid.lab.rig`: a ``base`` body on
 the slide joint ``base_x`` driven by the ``table`` integrator actuator, floors on slide joints ``q<i>``
 relative to it, accelerometers ``a<i>``).  Any symmetric K and C is carried exactly by fixed tendons, laid out as
-the ``momentid twin`` builder lays them (:func:`momentid.twin.parameters.tendon_layout`: ``storey<j>``
+the ``momentid twin`` builder lays them (:func:`momentid.lab.tendons.tendon_layout`: ``storey<j>``
 between neighbouring levels, ``link<i>_<j>`` where K or C couples levels further apart); a storey's
 joint friction rides on the tendon of its place (``storey<s>``), which its kind's ``storey_tendon``
 hook changes (joint friction: it keeps ``k - stiffness``).
@@ -31,9 +31,8 @@ from mujoco import rollout as _rollout
 from momentid.core.structure import Mechanism
 from momentid.errors import ModelError, SimulationError
 from momentid.lab import rig
+from momentid.lab.tendons import put_tendon, tendon_layout
 from momentid.mechanisms import registry
-from momentid.twin.parameters import tendon_layout
-from momentid.twin.spec import put_tendon
 
 __all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE",
            "substeps_for"]
@@ -141,7 +140,7 @@ def build_spec(model: RigModel, timestep: float, name: str = "rig_twin") -> mujo
                        contype=0, conaffinity=0)
         floor.add_site(name=f"floor{i + 1}_imu")
         floors.append(floor)
-    tendons = tendon_layout(K, C)             # the twin builder's tendons (momentid.twin.parameters)
+    tendons = tendon_layout(K, C)             # the twin builder's tendons
     changed = {}
     for mech in model.friction:               # each storey kind changes its storey's tendon by its hook
         registry.validate(mech, d)

@@ -20,7 +20,7 @@ import numpy as np
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.io.structure_table import parse_structure
-from momentid.lab.plausible import check_added_mass, check_excitation, check_structure
+from momentid.io.plausible import check_added_mass, check_excitation, check_structure
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import ScenarioError
 from momentid.lab.motions import BandLimitedNoise, Chirp, Excitation, Harmonics, RecordedMotion, Tracking
@@ -471,7 +471,7 @@ def _parse_sensors(sens: Table, storeys: int, sample_rate: float) -> Sensors:
 
 def _parse_structure(tab: Table) -> Structure:
     """The scenario's ``[structure]``: a full nominal model (:func:`momentid.io.structure_table.parse_structure`)
-    within the plausible ranges of :mod:`momentid.lab.plausible`."""
+    within the plausible ranges of :mod:`momentid.io.plausible`."""
     structure = parse_structure(tab, require_model=True)
     check_structure(tab, structure)
     return structure

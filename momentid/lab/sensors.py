@@ -14,7 +14,7 @@ The simulator produces every channel exactly at the simulation rate;
 6. quantisation and clipping at full scale.
 
 The other side, inspecting recorded data before identification, is
-:func:`momentid.estimation.checks.check_run`.
+:func:`momentid.io.run_checks.check_run`.
 """
 
 from __future__ import annotations

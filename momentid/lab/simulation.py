@@ -26,7 +26,7 @@ from mujoco import rollout as _rollout
 
 from momentid import mechanisms as mechanisms_registry
 from momentid.lab import rig
-from momentid.lab.plausible import implausible
+from momentid.io.plausible import implausible
 from momentid.mechanisms.place import Target
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
@@ -322,7 +322,7 @@ def _stability_check(scenario: Scenario) -> None:
     s = scenario.structure
     wrong = implausible(s)   # a Scenario built in code, past the reader's ranges: its matrices would overflow
     if wrong is not None:
-        raise SimulationError(f"{scenario.source}: structure.{wrong} (momentid.lab.plausible)")
+        raise SimulationError(f"{scenario.source}: structure.{wrong} (momentid.io.plausible)")
     f_max = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
     w_h = 2 * math.pi * f_max * scenario.timestep
     if w_h > 1.0:   # RK4 is stable to w h ~ 2.8; past 1 it is not accurate either

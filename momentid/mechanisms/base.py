@@ -48,7 +48,7 @@ from momentid.errors import ModelError
 from momentid.mechanisms.place import Place, Target
 
 __all__ = ["GRAVITY", "Target", "Place", "Refit", "Param", "MechanismKind", "SensorFault", "Screened",
-           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts"]
+           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance"]
 
 GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
 
@@ -215,6 +215,14 @@ def one_coefficient(name: str) -> Callable[[np.ndarray, np.ndarray], tuple[dict,
     return lambda c, e: ({name: float(c[0])}, {name: float(e[0])})
 
 
+def registered_instance(cls: type) -> "MechanismKind":
+    """The registry's instance of the kind ``cls`` (what an unpickled kind becomes)."""
+    instance = cls.__dict__.get("registered")
+    if instance is None:
+        raise ModelError(f"{cls.__qualname__} is not a registered mechanism kind")
+    return instance
+
+
 class MechanismKind:
     """Base class of a mechanism kind; see the module docstring for the contract.
 
@@ -260,11 +268,13 @@ class MechanismKind:
     #: One line for the docs and ``describe``.
     summary: ClassVar[str] = ""
 
+    #: The registry's one instance of this kind (set by :func:`~momentid.mechanisms.registry.register`).
+    registered: ClassVar["MechanismKind | None"] = None
+
     def __reduce__(self):
         # One instance per kind: a kind sent to or from another process (a diagnosis's worker) is the
         # registry's instance there, so that kinds compare by identity everywhere.
-        from momentid.mechanisms.registry import get
-        return get, (self.name,)
+        return registered_instance, (type(self),)
 
     # ---------------------------------------------------------------- where
 

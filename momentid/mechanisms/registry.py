@@ -33,14 +33,12 @@ def register(cls: type[MechanismKind]) -> type[MechanismKind]:
     known = REGISTRY.get(cls.name)
     if known is not None and type(known).__qualname__ != cls.__qualname__:
         raise ModelError(f"mechanism {cls.name!r} registered twice ({type(known).__module__} and {cls.__module__})")
-    REGISTRY[cls.name] = cls()
+    REGISTRY[cls.name] = cls.registered = cls()
     return cls
 
 
-def load(package: ModuleType | None = None) -> dict[str, MechanismKind]:
-    """Import every module of ``package`` (default: :mod:`momentid.mechanisms`) so its kinds register."""
-    if package is None:
-        package = importlib.import_module("momentid.mechanisms")
+def load(package: ModuleType) -> dict[str, MechanismKind]:
+    """Import every module of ``package`` (:mod:`momentid.mechanisms` loads itself) so its kinds register."""
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name not in _INFRASTRUCTURE and not info.name.startswith("_"):
             importlib.import_module(f"{package.__name__}.{info.name}")

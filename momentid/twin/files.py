@@ -43,7 +43,7 @@ def output_folder(out, *, force: bool = False) -> OwnedFolder:
 
 
 def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     from momentid.twin import plots as plotting
 
     (folder / TWIN_XML).write_text(twin.xml)

@@ -5,7 +5,7 @@ driven by the table command, every floor a child of the table on its own slide j
 fixed tendons) and makes it the identified rig:
 
 * **K and C exactly**: the storey tendons and, where the identified matrices are not tridiagonal,
-  link tendons between farther levels (:func:`momentid.twin.parameters.tendon_layout`); the floor
+  link tendons between farther levels (:func:`momentid.lab.tendons.tendon_layout`); the floor
   joints carry no damping of their own (except ``mu dm`` of an added mass, added-mass path);
 * **extra modes**: one oscillator per mode on its own slide joint on the table
   (``extra_mode<e>``, spring ``m w^2`` and damper ``2 zeta w m`` for a body of the mean floor mass),
@@ -37,9 +37,10 @@ import numpy as np
 from momentid.core.structure import Structure
 from momentid.errors import ModelError
 from momentid.lab import rig
-from momentid.twin.parameters import SensorModel, TwinParameters, tendon_layout
+from momentid.lab.tendons import put_tendon, tendon_layout
+from momentid.twin.parameters import SensorModel, TwinParameters
 
-__all__ = ["Timing", "timing", "substeps", "latency", "twin_spec", "sensor_names", "put_tendon", "MIN_LATENCY_STEPS",
+__all__ = ["Timing", "timing", "substeps", "latency", "twin_spec", "sensor_names", "MIN_LATENCY_STEPS",
            "NUMERICAL_DAMPING_FRACTION", "FREQUENCY_ERROR", "MAX_SUBSTEPS", "LINEAR", "CUBIC"]
 
 #: Fewest steps a twin sensor reads late: MuJoCo's history holds past steps only, and its cubic
@@ -138,25 +139,6 @@ def _delayed(sensor, delay: float, step: float, interp: int) -> None:
 def _tendons(spec: mujoco.MjSpec, params: TwinParameters) -> None:
     for t in tendon_layout(params.K, params.C):
         put_tendon(spec, t)
-
-
-def put_tendon(spec: mujoco.MjSpec, t) -> None:
-    """Write one tendon of :func:`~momentid.twin.parameters.tendon_layout` into ``spec``.
-
-    A spring-damper on ``q_upper - q_lower`` (``q_upper`` alone when ``lower`` is the table) of
-    stiffness ``t.stiffness`` (N/m) and damping ``t.damping`` (N s/m), rest length 0.  The rig's own
-    storey tendon of that name is reused when ``spec`` has one (``rig.build_spec``); otherwise the
-    tendon is added.
-    """
-    tendon = spec.tendon(t.name)
-    if tendon is None:
-        tendon = spec.add_tendon(name=t.name)
-        tendon.wrap_joint(f"q{t.upper}", 1.0)
-        if t.lower > 0:
-            tendon.wrap_joint(f"q{t.lower}", -1.0)
-    tendon.stiffness = [t.stiffness, 0.0, 0.0]
-    tendon.damping = [t.damping, 0.0, 0.0]
-    tendon.springlength = [0.0, 0.0]
 
 
 def _extra_modes(spec: mujoco.MjSpec, params: TwinParameters) -> None:

@@ -98,7 +98,7 @@ class TwinOverlay:
         """The twin's rig moving and its floor sensors, for ``run``."""
         import rerun as rr
 
-        from momentid.report.viewer import TIMELINE, log_rig
+        from momentid.report.rig_drawing import TIMELINE, log_rig
 
         replay: Replay = self.replays[run.name]
         z, _ = scene.drawn(run)

@@ -105,8 +105,8 @@ def main(argv=None) -> int:
                   f"of those, held-out NRMSE at least 3x lower: {len(ratio_ok)}; false alarms on clean rigs: "
                   f"{sum(not r['correct'] for r in clean)} of {len(clean)}; physics outside the library called "
                   f"unexplained at the right place: {sum(r['correct'] for r in outside)} of {len(outside)}; "
-                  f"diagnosis time median "
-                  f"{sorted(r['seconds'] for r in rows)[len(rows) // 2]:.0f} s, max {max(r['seconds'] for r in rows):.0f} s."]
+                  f"diagnosis time median {sorted(r['seconds'] for r in rows)[len(rows) // 2]:.0f} s, "
+                  f"max {max(r['seconds'] for r in rows):.0f} s."]
     alone = []
     for i in TIMED:
         mechanism, spec, location = MATRIX[i]

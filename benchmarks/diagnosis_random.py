@@ -462,15 +462,18 @@ def table(rows: list[dict]) -> list[str]:
         if not rs:
             continue
         wall, cpu = sorted(r["seconds"] for r in rs), sorted(r["cpu_seconds"] for r in rs)
-        lines.append(f"| {cat} | {len(rs)} | {sum(r['right'] for r in rs)} ({100 * np.mean([r['right'] for r in rs]):.0f} %)"
-                     f" | {sum(r['false_alarm'] for r in rs)} | {wall[len(wall) // 2]:.0f} s / {cpu[len(cpu) // 2]:.0f} s"
+        right = [r["right"] for r in rs]
+        lines.append(f"| {cat} | {len(rs)} | {sum(right)} ({100 * np.mean(right):.0f} %)"
+                     f" | {sum(r['false_alarm'] for r in rs)}"
+                     f" | {wall[len(wall) // 2]:.0f} s / {cpu[len(cpu) // 2]:.0f} s"
                      f" | {wall[-1]:.0f} s / {cpu[-1]:.0f} s |")
     lines += ["", "| case | storeys | excitation | noise | hidden (change) | answer | right | why not | wall / CPU |",
               "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         exc = r["excitation"]["type"]
         lines.append(f"| {r['category']} {r['index']} | {r['storeys']} | {exc} | {100 * r['noise']:.2f} % | "
-                     f"{_truth_words(r)} ({100 * r['change']:.0f} %) | {_answer(r)} | {'yes' if r['right'] else 'no'} | "
+                     f"{_truth_words(r)} ({100 * r['change']:.0f} %) | {_answer(r)} | "
+                     f"{'yes' if r['right'] else 'no'} | "
                      f"{r['why']} | {r['seconds']:.0f} / {r['cpu_seconds']:.0f} s |")
     return lines
 

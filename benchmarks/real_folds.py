@@ -165,8 +165,8 @@ def _table(rows, verdict) -> list:
     lines += ["", f"Criteria: after < refit on every fold: {verdict['every_fold_better']}; mean after/refit "
               f"{verdict['mean_ratio']:.2f} (<= {MEAN_RATIO}): {verdict['mean_ratio'] <= MEAN_RATIO}; after <= "
               f"{OWN_FACTOR} x own on {verdict['own_folds']} of {len(rows)} folds (>= {OWN_FOLDS}): "
-              f"{verdict['own_folds'] >= OWN_FOLDS}; trend within {TREND_SIGMAS:g} sigma on {verdict['trend_folds']} of "
-              f"{len(rows)} folds."]
+              f"{verdict['own_folds'] >= OWN_FOLDS}; trend within {TREND_SIGMAS:g} sigma on "
+              f"{verdict['trend_folds']} of {len(rows)} folds."]
     return lines
 
 

@@ -42,7 +42,9 @@ def test_slider_elements_carry_the_stiffness_and_the_power_law():
     assert np.isclose(f[1], f[2]) and np.isclose(f[2], np.sum(k * delta))   # macro-slip: all sliders at strength
     # Micro-slip: the stiffness lost grows as x^(chi+1); between two drifts inside the elements' span the
     # discretised law follows it to the resolution of 6 geometric elements (~25 % per factor 4 of drift).
-    lost = lambda x: 1.0 - jf.backbone(params, x) / (50.0 * x)
+    def lost(x):
+        return 1.0 - jf.backbone(params, x) / (50.0 * x)
+
     slope = np.log(lost(1.6e-3) / lost(0.4e-3)) / np.log(4.0)
     assert abs(slope - 0.6) < 0.15, slope
 

@@ -91,7 +91,8 @@ def test_cubic_storey_found_on_mode_1(tmp_path):
     # Its first nonlinear term is a stiffness that grows with the motion: a positive coefficient of a
     # term odd in eta (cubic, quadratic, a gap or stop) is stiffening.
     first = [t for t in found.terms if t["term"] not in ("x", "v")][0]
-    assert first["term"] in ("x3", "x_abs_x", "dead_zone", "gap_pos", "gap_neg") and first["coefficient"] > 0, found.terms
+    stiffening = ("x3", "x_abs_x", "dead_zone", "gap_pos", "gap_neg")
+    assert first["term"] in stiffening and first["coefficient"] > 0, found.terms
     assert found.beats_linear, diag.summary
     assert found.nrmse_after <= (1 - MIN_HELD_OUT_GAIN) * found.nrmse_before
     assert "it beats the linear model" in diag.summary and diag.mechanism != "none"

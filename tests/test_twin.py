@@ -396,7 +396,8 @@ def test_shipped_twin_file_matches_its_readme():
     mujoco.mj_step(model, data, 1000)
     assert all(w.number == 0 for w in data.warning)
     modes = modal_properties(*model_matrices(model))
-    rows = re.findall(r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \|$", (ROOT / "models" / "twin" / "README.md").read_text(), re.M)
+    readme = (ROOT / "models" / "twin" / "README.md").read_text()
+    rows = re.findall(r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \|$", readme, re.M)
     assert len(rows) == 3
     for i, f, z in rows:                        # the README's 4 and 3 decimals
         assert modes.frequency[int(i) - 1] == pytest.approx(float(f), abs=5e-5)

@@ -34,12 +34,13 @@ import sys
 import threading
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from typing import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 from threadpoolctl import threadpool_limits
 
-__all__ = ["borrow", "die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
-           "quiet_broken_pipe", "run_forked", "WORKERS"]
+__all__ = ["borrow", "die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork",
+           "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt", "quiet_broken_pipe", "run_forked",
+           "WORKERS"]
 
 #: Processes fork helpers of their own above this depth: the command (depth 0), not its workers (a
 #: diagnosis trial's errors-in-variables fit parallelised inside a worker measured no faster: the

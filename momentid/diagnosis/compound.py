@@ -41,9 +41,8 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, replace
-from typing import Callable
+from collections.abc import Callable
 
-from momentid import mechanisms
 from momentid.core.series import Experiment
 from momentid.core.structure import Structure
 from momentid.diagnosis.compound_screening import (STEP_SHORTLIST, candidates, elastic, force_entries,

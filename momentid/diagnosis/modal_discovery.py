@@ -183,7 +183,8 @@ def _library(x: np.ndarray, v: np.ndarray) -> list[Column]:
     peak = float(np.max(np.abs(x)))
     shapes = [("x_abs_x", {}), ("x3", {}), ("v_abs_v", {}),
               ("sign_v", {"sign_v_scale": SIGN_SCALE * float(np.sqrt(np.mean(v ** 2)))})]
-    shapes += [(name, {f"{name}_delta": f * peak}) for name in ("dead_zone", "gap_pos", "gap_neg") for f in DELTA_FRACTIONS]
+    shapes += [(name, {f"{name}_delta": f * peak}) for name in ("dead_zone", "gap_pos", "gap_neg")
+               for f in DELTA_FRACTIONS]
     return [Column(name, shape, term_signal(name, shape, x, v, 0.0)) for name, shape in shapes]
 
 
@@ -391,7 +392,8 @@ def _refine(problem: _Problem, laws: list[list[int]], starts: list[np.ndarray]):
     state = [None] * len(laws)                               # (residual, Jacobian) at best
     first = None
     for iteration in range(ITERATIONS):
-        sets = [(law, p) for law, base in zip(laws, trial) for p in [base] + list(base + JACOBIAN_STEP * np.eye(base.size))]
+        sets = [(law, p) for law, base in zip(laws, trial)
+                for p in [base] + list(base + JACOBIAN_STEP * np.eye(base.size))]
         rows = problem.residuals(sets)
         at = 0
         for i, base in enumerate(trial):

@@ -85,9 +85,9 @@ def _summary_lines(verdict, location, held, before, after, noise, explained, tre
                      f"held-out NRMSE {100 * before:.2f} % -> {100 * after:.2f} % "
                      f"({100 * explained:.0f} % of the misfit above noise removed, {100 * EXPLAINED:.0f} % needed).")
         if not trend.amplitude_range[0] <= amplitude <= trend.amplitude_range[1]:
-            lines.append(f"WARNING: the held-out run's response amplitude ({amplitude:.3g} m/s^2) is outside the training "
-                         f"runs' ({trend.amplitude_range[0]:.3g}-{trend.amplitude_range[1]:.3g} m/s^2): the amplitude "
-                         f"model extrapolates.")
+            lines.append(f"WARNING: the held-out run's response amplitude ({amplitude:.3g} m/s^2) is outside the "
+                         f"training runs' ({trend.amplitude_range[0]:.3g}-{trend.amplitude_range[1]:.3g} m/s^2): "
+                         f"the amplitude model extrapolates.")
     else:
         lines.append("Amplitude dependence not tested: it needs at least two training runs of different amplitudes.")
     if verdict is Verdict.NONE:

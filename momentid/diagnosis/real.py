@@ -12,8 +12,9 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
 2. **Linear model**: the modal model fitted on each training run
    (:func:`~momentid.diagnosis.modal_check.fit_runs`) and pooled into one amplitude-independent model
    (:func:`~momentid.diagnosis.modal_check.pooled`: weighted mean modes, mean residues; a joint fit of
-   runs whose modes differ lets the sensor gains absorb the difference, 15 % on a simulated rig), replayed on the held-out run's measured table
-   acceleration with the training runs' mean sensor gains and clock offsets: ``nrmse_before``.
+   runs whose modes differ lets the sensor gains absorb the difference, 15 % on a simulated rig), replayed on the
+   held-out run's measured table acceleration with the training runs' mean sensor gains and clock offsets:
+   ``nrmse_before``.
 3. **Noise baseline**: what sensor noise alone leaves on the held-out run
    (:func:`~momentid.diagnosis.modal_check.noise_nrmse`; levels from the lab's statement, the quiet
    lead-in or a high band, valid at any rate).
@@ -193,9 +194,11 @@ def _diagnose(experiment: Experiment, hold_out: str | None) -> Diagnosis:
     parameters, std = ({"df_dA_hz_per_m_s2": trend.frequency_coef[:, 1].tolist(),
                         "dzeta_dA_per_m_s2": trend.damping_coef[:, 1].tolist()},
                        {"df_dA_hz_per_m_s2": trend.frequency_slope_std.tolist(),
-                        "dzeta_dA_per_m_s2": trend.damping_slope_std.tolist()}) if verdict is Verdict.MECHANISM else ({}, {})
+                        "dzeta_dA_per_m_s2": trend.damping_slope_std.tolist()}) \
+        if verdict is Verdict.MECHANISM else ({}, {})
     per = {f"a{j + 1}": {"before": float(b), "after": float(a)} for j, (b, a) in
-           enumerate(zip(mc.channel_nrmse(measured, before_full[start:]), mc.channel_nrmse(measured, after_full[start:])))}
+           enumerate(zip(mc.channel_nrmse(measured, before_full[start:]),
+                         mc.channel_nrmse(measured, after_full[start:])))}
     searched = verdict is not Verdict.NONE and held not in train and len(train) > 1
     discovered = discover_modal(experiment, linear, train, held, location, before) if searched else None
     findings = tuple(_sensor_findings(linear, dt)) + (ROCKING_LIMIT,)

@@ -83,7 +83,8 @@ def _rerun(diag: Diagnosis, path: Path) -> None:
                         static=True)
                 rec.send_columns(entity, indexes=[time], columns=rr.Scalars.columns(scalars=data[g][:, j]))
             views.append(rrb.TimeSeriesView(origin=base, name=f"{g}{j + 1} ({unit})"))
-    rec.log("/report", rr.TextDocument(diag.summary.replace("\n", "\n\n"), media_type=rr.MediaType.MARKDOWN), static=True)
+    rec.log("/report", rr.TextDocument(diag.summary.replace("\n", "\n\n"), media_type=rr.MediaType.MARKDOWN),
+            static=True)
     layout = rrb.Horizontal(rrb.Grid(*views), rrb.TextDocumentView(origin="/report", name="diagnosis"),
                             column_shares=[3, 1])
     rec.save(str(path), default_blueprint=rrb.Blueprint(layout))

@@ -378,7 +378,8 @@ def _attachment_replay(kind, result, run, d, j, f_a, zeta):
     m_a = dm[j]
     dm[j] = 0.0
     # floor damping as before: mu times the floor's mass with every added mass
-    M, C, K = kind.attachment_matrices(result.M + np.diag(dm), result.C + result.mu * np.diag(np.asarray(run.added_mass)),
+    M, C, K = kind.attachment_matrices(result.M + np.diag(dm),
+                                       result.C + result.mu * np.diag(np.asarray(run.added_mass)),
                                        result.K, j, m_a, f_a, zeta)
     linear = discretize(M, C, K, 1 / run.sample_rate)
     return outputs(linear, simulate_linear(linear, run["zdd"]))["a"][:, :d]
@@ -463,7 +464,8 @@ def _refine_oscillator(rss, f0: float, zeta0: float, n_eff: float):
     for a in range(2):
         for b in range(2):
             ea, eb = np.eye(2)[a] * h[a], np.eye(2)[b] * h[b]
-            H[a, b] = (cost(x + ea + eb) - cost(x + ea - eb) - cost(x - ea + eb) + cost(x - ea - eb)) / (4 * h[a] * h[b])
+            H[a, b] = ((cost(x + ea + eb) - cost(x + ea - eb) - cost(x - ea + eb) + cost(x - ea - eb))
+                       / (4 * h[a] * h[b]))
     std = {}
     try:
         cov = 2 * (q0 / max(n_eff - 2, 1)) * np.linalg.inv(H)

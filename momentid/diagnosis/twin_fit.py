@@ -31,8 +31,8 @@ from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
 from momentid.lab.tendons import pair_coefficient
 
-__all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "sensor_jacobian", "FIT_ENERGY", "friction_start",
-           "twin_modes", "joint_tendon_stiffness", "workers", "each"]
+__all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "sensor_jacobian", "FIT_ENERGY",
+           "friction_start", "twin_modes", "joint_tendon_stiffness", "workers", "each"]
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
@@ -424,5 +424,6 @@ def friction_start(linear: resim.RigModel, storeys, loss: float, slip_drift: flo
     if any(p["stiffness"] <= 0 for p in params):
         raise MomentidError(f"storeys {list(storeys)} of stiffness {K.tolist()}: a storey with no positive stiffness "
                             f"cannot carry joint friction")
-    return replace(linear, stiffness=K * (1.0 + loss), damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
+    return replace(linear, stiffness=K * (1.0 + loss),
+                   damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
                    friction=resim.friction_records(storeys, params))

@@ -149,8 +149,8 @@ def plot_replay(diag: Diagnosis, path: Path) -> Path:
     axes[-1, 0].set_xlabel("time (s)")
     where = f"\nmisfit left largest at the {diag.location['words']}" if diag.location else ""
     fig.suptitle(f"Held-out trial {diag.held_out}: {diag.mechanism.replace('_', ' ')}; NRMSE linear twin "
-                 f"{100 * diag.nrmse_before:.1f} %, refitted {100 * diag.nrmse_linear_refit:.1f} %, with joint friction "
-                 f"{100 * diag.nrmse_after:.1f} %{where}", fontsize=9)
+                 f"{100 * diag.nrmse_before:.1f} %, refitted {100 * diag.nrmse_linear_refit:.1f} %, "
+                 f"with joint friction {100 * diag.nrmse_after:.1f} %{where}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)

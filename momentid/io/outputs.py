@@ -30,7 +30,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from momentid.errors import OutputRefusedError
 from momentid.io.exclusive import exclusive
@@ -190,8 +190,8 @@ class OwnedFolder:
                  else "momentid did not write it")
         more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
         raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
-                           f"but {whose}", f"a new or empty folder, or one this command wrote before "
-                                           f"(--force overwrites such files)")
+                           f"but {whose}", "a new or empty folder, or one this command wrote before "
+                                           "(--force overwrites such files)")
 
     def check(self, names: Iterable[str] = ()) -> None:
         """Before the work: the folder can be made and written, and holds no file of ``names`` that is

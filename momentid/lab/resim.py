@@ -34,8 +34,8 @@ from momentid.lab import rig
 from momentid.lab.tendons import put_tendon, tendon_layout
 from momentid.mechanisms import registry
 
-__all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records", "TIMESTEP_PER_SAMPLE",
-           "substeps_for"]
+__all__ = ["RigModel", "build_spec", "compile_models", "simulate", "modal_damping", "friction_records",
+           "TIMESTEP_PER_SAMPLE", "substeps_for"]
 
 #: Integrator steps per recorded sample of a 120 Hz recording (4.2 ms steps, within
 #: joint_friction.MAX_TIMESTEP); :func:`substeps_for` gives any rate's.
@@ -103,7 +103,7 @@ class RigModel:
         """C (N s/m), shape (d, d)."""
         return modal_damping(self.masses, self.stiffness, self.damping_ratio)
 
-    def linear(self) -> "RigModel":
+    def linear(self) -> RigModel:
         """The same rig without its friction."""
         return replace(self, friction=())
 

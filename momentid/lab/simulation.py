@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import math
 from pathlib import Path
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import mujoco
 import numpy as np
@@ -27,15 +27,14 @@ from mujoco import rollout as _rollout
 from momentid import mechanisms as mechanisms_registry
 from momentid.lab import rig
 from momentid.io.plausible import implausible
-from momentid.mechanisms.place import Target
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
 from momentid.lab.excitation import GroundMotion, ground_motion
 from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
 from momentid.lab.sensors import measure
 
-__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay", "CallbackForces", "initial_state",
-           "table_jerk"]
+__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay", "CallbackForces",
+           "initial_state", "table_jerk"]
 
 _CHUNK_STEPS = 50_000   # steps per rollout call: bounded memory, progress between calls
 

@@ -8,8 +8,8 @@ It declares, in one place, everything the rest of the project needs to know abou
   or a sensor channel; :mod:`momentid.mechanisms.place`), **parameters** with their SI units and
   physical bounds (a scenario's ``[truth]`` record is validated against them);
 - how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
-  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.storey_elements`), or the **storey force** or **link force** (a floor
-  against the table, or two floors) the simulator applies in its control callback
+  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.storey_elements`), or the **storey force** or **link
+  force** (a floor against the table, or two floors) the simulator applies in its control callback
   (:meth:`MechanismKind.storey_force`, :meth:`MechanismKind.floor_force`), with an internal
   state the simulator integrates when the force has memory (:meth:`MechanismKind.has_state`,
   :meth:`MechanismKind.state_rate`), or the **sensor model**
@@ -38,7 +38,8 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, replace
-from typing import Callable, ClassVar
+from typing import ClassVar
+from collections.abc import Callable
 
 import numpy as np
 
@@ -215,7 +216,7 @@ def one_coefficient(name: str) -> Callable[[np.ndarray, np.ndarray], tuple[dict,
     return lambda c, e: ({name: float(c[0])}, {name: float(e[0])})
 
 
-def registered_instance(cls: type) -> "MechanismKind":
+def registered_instance(cls: type) -> MechanismKind:
     """The registry's instance of the kind ``cls`` (what an unpickled kind becomes)."""
     instance = cls.__dict__.get("registered")
     if instance is None:
@@ -269,7 +270,7 @@ class MechanismKind:
     summary: ClassVar[str] = ""
 
     #: The registry's one instance of this kind (set by :func:`~momentid.mechanisms.registry.register`).
-    registered: ClassVar["MechanismKind | None"] = None
+    registered: ClassVar[MechanismKind | None] = None
 
     def __reduce__(self):
         # One instance per kind: a kind sent to or from another process (a diagnosis's worker) is the

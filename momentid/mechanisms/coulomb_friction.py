@@ -34,7 +34,8 @@ def smooth_sign(x):
 class CoulombFriction(MechanismKind):
     name = "coulomb_friction"
     target = Target.STOREY
-    params = (Param("force", "N", "friction force, opposes the storey drift velocity", low=0.0, low_open=True, example=0.3),)
+    params = (Param("force", "N", "friction force, opposes the storey drift velocity", low=0.0, low_open=True,
+                    example=0.3),)
     fitted = params[0]
     callback = True
     refit = Refit.RESIMULATE

@@ -8,7 +8,8 @@ import numpy as np
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
 from momentid.mechanisms.registry import register
 
-__all__ = ["FlexibleAddedMass", "GRID_DAMPING_RATIO", "GRID_LOW_OVER_TOP_MODE", "GRID_HIGH_OVER_SAMPLE_RATE", "GRID_POINTS"]
+__all__ = ["FlexibleAddedMass", "GRID_DAMPING_RATIO", "GRID_LOW_OVER_TOP_MODE", "GRID_HIGH_OVER_SAMPLE_RATE",
+           "GRID_POINTS"]
 
 #: Damping ratio of the attachment oscillators on the screening grid (a lightly damped bolt-on).
 GRID_DAMPING_RATIO = 0.05

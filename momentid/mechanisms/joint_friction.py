@@ -21,8 +21,8 @@ Each slider's mass and damping make its own spring-mass oscillation fast and dam
 step (:data:`SLIDER_STEP_PHASE`, :data:`SLIDER_DAMPING_RATIO`).  MuJoCo integrates the sliders'
 springs explicitly, so a slipping element lags the ideal Jenkins element by about one step: at 2 ms
 steps and drifts of 3-4 slip drifts the joint's force is off the ideal law by 13 % of its RMS (7 % at
-1 ms, about 25 % at 4 ms; tests/test_joint_friction.py).  A twin fitted through MuJoCo is sized with this element, at its
-own step.  Use a step of at most :data:`MAX_TIMESTEP`.
+1 ms, about 25 % at 4 ms; tests/test_joint_friction.py).  A twin fitted through MuJoCo is sized with this element, at
+its own step.  Use a step of at most :data:`MAX_TIMESTEP`.
 """
 
 from __future__ import annotations

@@ -51,7 +51,7 @@ class TwinOverlay:
     replays: dict
 
     @classmethod
-    def from_folder(cls, folder, experiment: Experiment) -> "TwinOverlay":
+    def from_folder(cls, folder, experiment: Experiment) -> TwinOverlay:
         """Read the twin of ``folder`` and replay every run of ``experiment`` through it.
 
         Raises

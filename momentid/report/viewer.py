@@ -61,8 +61,9 @@ from momentid.report.rig_drawing import (BASE_COLOR, PALETTE, RIG_RATE, TIMELINE
 from momentid.report.scene import (DISPLACEMENT_HIGHPASS, Scene, auto_exaggeration, check_result,
                                    displacements_from_accelerations, load_result, prepare)
 
-__all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
-           "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
+__all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result",
+           "check_result", "prepare", "blueprint", "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig",
+           "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
 
 #: The rerun application every recording is sent as.
 APPLICATION_ID = "momentid"

@@ -23,7 +23,8 @@ from momentid.twin.parameters import TwinParameters, from_identification
 from momentid.twin.replay import Replay, replay_run
 from momentid.twin.spec import Timing, model_matrices, timing, twin_spec
 
-__all__ = ["Twin", "build_twin", "default_runs", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
+__all__ = ["Twin", "build_twin", "default_runs", "check_recording", "refusals", "check_xml", "MIN_TRIALS",
+           "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
 
 #: Trials a twin is calibrated on at least: one trial cannot tell the rig from that trial.
 MIN_TRIALS = 2

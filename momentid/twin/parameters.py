@@ -21,8 +21,8 @@ from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
 from momentid.lab.tendons import Tendon, pair_coefficient, tendon_layout
 
-__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient", "from_identification",
-           "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
+__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient",
+           "from_identification", "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
 
 #: Storey height (m) drawn when neither the recording's model nor the lab states one (drawing only).
 DEFAULT_STOREY_HEIGHT = 0.3
@@ -51,11 +51,11 @@ class SensorModel:
     bias: np.ndarray
 
     @classmethod
-    def ideal(cls, d: int) -> "SensorModel":
+    def ideal(cls, d: int) -> SensorModel:
         """Gain 1, no clock offset, no bias on ``d`` floors."""
         return cls(np.ones(d), np.zeros(d), np.zeros(d))
 
-    def with_bias(self, bias) -> "SensorModel":
+    def with_bias(self, bias) -> SensorModel:
         """The same sensors with ``bias`` (m/s^2, shape (d,))."""
         return SensorModel(self.gain, self.clock_offset, np.asarray(bias, float))
 

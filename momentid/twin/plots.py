@@ -18,7 +18,8 @@ import scipy.signal
 
 from momentid.twin.replay import Replay, transfer
 
-__all__ = ["plot_replay", "plot_transfer", "replay_file", "replay_files", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
+__all__ = ["plot_replay", "plot_transfer", "replay_file", "replay_files", "pyplot", "envelope", "ENVELOPE_BINS",
+           "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
 
 #: Stretches a whole-trial panel is drawn as (minimum and maximum of each): about its width in pixels.
 ENVELOPE_BINS = 1500

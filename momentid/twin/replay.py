@@ -234,7 +234,8 @@ def replay_run(params: TwinParameters, run: RunData, *, model: mujoco.MjModel | 
         spec = twin_spec(params, t.timestep, sensors=sensors, added_mass=run.added_mass, name=f"twin_{run.name}")
         model = rig.compile_model(spec)
     names = sensor_names(d, len(params.extra_modes))
-    wanted = ["zdd"] + names["floors"] + names["q"] + names["table_at_floor"] + [c for row in names["extra"] for c in row]
+    wanted = (["zdd"] + names["floors"] + names["q"] + names["table_at_floor"]
+              + [c for row in names["extra"] for c in row])
     raw = roll(model, run["zdd"], t, wanted)
     recorded = run.group("a", d)
     start = quiet_lead_in(run)

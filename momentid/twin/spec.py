@@ -11,8 +11,8 @@ fixed tendons) and makes it the identified rig:
   (``extra_mode<e>``, spring ``m w^2`` and damper ``2 zeta w m`` for a body of the mean floor mass),
   so that its coordinate obeys ``eta'' + 2 zeta w eta' + w^2 eta = -z''``;
 * **sensors, natively**: MuJoCo 4.0 sensors keep a history (``nsample``) and read it ``delay``
-  seconds late (interpolated: :data:`LINEAR`, :data:`CUBIC`), which carries each floor sensor's clock offset.  The history
-  cannot read less than one step late, and its cubic interpolation needs two steps behind it, so
+  seconds late (interpolated: :data:`LINEAR`, :data:`CUBIC`), which carries each floor sensor's clock offset.  The
+  history cannot read less than one step late, and its cubic interpolation needs two steps behind it, so
   every sensor reads at least :data:`MIN_LATENCY_STEPS` steps late: the table sensor ``zdd`` reads a
   latency ``L`` late and floor sensor ``j`` ``L + clock_offset_j`` (``L``, whole steps, is as few as keep
   every delay at that floor).  A replay drives the table ``L`` ahead of the recording, so that the twin's

@@ -15,7 +15,7 @@
   (:mod:`~momentid.diagnosis.added_mass_words`, :mod:`~momentid.diagnosis.modal_words`,
   :mod:`~momentid.diagnosis.twin_words`); :mod:`~momentid.diagnosis.report`: the report folder (7);
 - :mod:`~momentid.diagnosis.twin_diagnose` (with :mod:`~momentid.estimation.rig_state`,
-  :mod:`~momentid.diagnosis.twin_fit` and :mod:`~momentid.diagnosis.twin_folds`): recordings without added mass, with
+  :mod:`~momentid.twin.fit` and :mod:`~momentid.diagnosis.twin_folds`): recordings without added mass, with
   stated floor masses and three trials or more, on the rig's MuJoCo twin (the same result);
 - :mod:`~momentid.diagnosis.real`: the other recordings without added mass (the modal path, the same
   result);

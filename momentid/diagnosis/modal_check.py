@@ -31,8 +31,9 @@ from momentid.estimation.modal import ModalFit, ModalModel, fit_modal
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import pick_resonances, response_amplitude
 from momentid.estimation.scaled import weighted_line
+from momentid.lab.sensors import gain_and_delay
 
-__all__ = ["RunsFit", "AmplitudeModel", "fit_runs", "replay", "sensors", "nrmse", "noise_nrmse", "amplitude_model",
+__all__ = ["RunsFit", "AmplitudeModel", "fit_runs", "replay", "nrmse", "noise_nrmse", "amplitude_model",
            "active_start", "pooled"]
 
 #: Training amplitudes must spread by at least this fraction of the largest for a trend to be fitted.
@@ -187,29 +188,7 @@ def replay(omega, zeta, residues, gain, offset, zdd: np.ndarray, dt: float) -> n
     oscillators = discretize(np.eye(d), np.diag(2 * zeta * omega), np.diag(omega ** 2), dt)
     absolute = outputs(oscillators, simulate_linear(oscillators, zdd))["a"]   # eta'' + z'', (n, d)
     a = absolute @ R + (1.0 - R.sum(axis=0))[None, :] * zdd[:, None]
-    return sensors(a, gain, offset, dt)
-
-
-def sensors(a: np.ndarray, gain, offset, dt: float, *, undo: bool = False) -> np.ndarray:
-    """Floor accelerations ``a`` (n, d) as the floor sensors read them: each channel times its gain and
-    delayed by its clock offset (fractional, in the frequency domain, zero-padded so that the delay does
-    not wrap around); ``undo=True`` is the inverse (a recording with its sensors' gains and offsets undone).
-
-    Parameters
-    ----------
-    a : ndarray, shape (n, d)
-        Accelerations (m/s^2).
-    gain, offset : array_like, shape (d,)
-        Gain (1) and clock offset (s, positive: lags) of each channel.
-    dt : float
-        Sample interval (s).
-    """
-    n = a.shape[0]
-    spectrum = np.fft.rfft(a, 2 * n, axis=0)
-    w_bins = 2 * np.pi * np.fft.rfftfreq(2 * n, dt)
-    gain, offset = np.asarray(gain, float)[None, :], np.asarray(offset, float)[None, :]
-    spectrum *= np.exp(1j * w_bins[:, None] * offset) / gain if undo else gain * np.exp(-1j * w_bins[:, None] * offset)
-    return np.fft.irfft(spectrum, 2 * n, axis=0)[:n]
+    return gain_and_delay(a, gain, offset, dt)
 
 
 def nrmse(measured: np.ndarray, model: np.ndarray) -> float:

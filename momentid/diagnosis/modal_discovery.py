@@ -38,6 +38,7 @@ from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
 from momentid.diagnosis.function_library import DELTA_FRACTIONS, SIGN_SCALE, Column
 from momentid.estimation.linear import discretize, outputs, simulate_linear
+from momentid.lab.sensors import gain_and_delay
 from momentid.mechanisms.data_driven import TERMS, term_signal
 
 __all__ = ["ModalDiscovery", "discover_modal", "plot_modal_discovered", "HIGH_PASS_OVER_MODE_1", "MIN_GAIN",
@@ -161,7 +162,7 @@ def _training(experiment: Experiment, linear: mc.RunsFit, train, m: int) -> _Tra
         run = experiment.run(name)
         dt, start, zdd = 1.0 / run.sample_rate, mc.active_start(run), run["zdd"]
         measured = run.group("a", d)
-        a = mc.sensors(measured, linear.gain[i], linear.offset[i], dt, undo=True) - zdd[:, None]
+        a = gain_and_delay(measured, linear.gain[i], linear.offset[i], dt, undo=True) - zdd[:, None]
         eta_m = (a[start:] @ np.linalg.pinv(R))[:, m]                 # the data's own eta_m''
         v, x = _integrals(eta_m, dt, f_low)
         oscillators = discretize(np.eye(d), np.diag(2 * linear.zeta * linear.omega), np.diag(linear.omega ** 2), dt)
@@ -422,7 +423,7 @@ def _replay(linear: mc.RunsFit, m: int, eta_m: np.ndarray, gain, offset, zdd: np
     others = R.copy()
     others[m] = 0.0
     return (mc.replay(linear.omega, linear.zeta, others, gain, offset, zdd, dt)
-            + mc.sensors(eta_m[:, None] * R[m][None, :], gain, offset, dt))
+            + gain_and_delay(eta_m[:, None] * R[m][None, :], gain, offset, dt))
 
 
 def _describe(mode: int, law: list[Column], k: float, c: float, theta: np.ndarray, peaks, top: float) -> str:

@@ -42,7 +42,8 @@ import numpy as np
 
 from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis import twin_fit, twin_folds
+from momentid.diagnosis import twin_folds
+from momentid.twin import fit as twin_fit
 from momentid.diagnosis.result import Diagnosis
 from momentid.estimation.rig_state import StateCheck, check_state
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
@@ -155,12 +156,12 @@ def _linear_twin(experiment: Experiment, training):
         return None, start, f"the linear twin of `momentid twin` was refused ({err}); the linear refit stands for it"
     p = twin.parameters
     zeta = np.clip(modal_properties(np.diag(p.masses), p.C, p.K).damping_ratio, 1e-4, None)
-    return twin, resim.RigModel(np.asarray(p.masses, float), np.asarray(p.K, float), zeta), ""
+    return twin, twin_fit.FittedRig(np.asarray(p.masses, float), np.asarray(p.K, float), zeta), ""
 
 
-def _xml(model: resim.RigModel, dt: float) -> str:
+def _xml(model: twin_fit.FittedRig, dt: float) -> str:
     """The MJCF of a re-simulated twin at the fits' step (loads in stock MuJoCo)."""
-    return resim.build_spec(model, dt / resim.substeps_for(dt)).to_xml()
+    return resim.build_spec(model.rig(), dt / resim.substeps_for(dt)).to_xml()
 
 
 def _verdict(before: float, fold) -> Verdict:
@@ -199,7 +200,7 @@ def _location(measured: np.ndarray, model: np.ndarray, fold, dt: float) -> dict:
             "band_share": round(share, 3), "words": words}
 
 
-def _named(model: resim.RigModel) -> tuple:
+def _named(model: twin_fit.FittedRig) -> tuple:
     """The augmented twin's joints as ``report.json`` mechanisms: per storey, N/m, N and mm."""
     out = []
     for m in model.friction:
@@ -213,7 +214,7 @@ def _named(model: resim.RigModel) -> tuple:
     return tuple(out)
 
 
-def _reference(per_run, training, held: str, start: resim.RigModel, tr) -> dict:
+def _reference(per_run, training, held: str, start: twin_fit.FittedRig, tr) -> dict:
     """Amplitude-dependent viscous damping (module docstring, stage 5): each mode's frequency and damping
     ratio from the training trials' own identifications, on a line against their response amplitude,
     predicted at the held-out trial's; replayed exactly (no integrator) with the residues of the twin's

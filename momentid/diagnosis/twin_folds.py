@@ -2,8 +2,8 @@
 
 For a held-out trial, with the other trials of the same rig state for training:
 
-* ``nrmse_linear_refit``: the linear twin (:class:`~momentid.lab.resim.RigModel` without friction)
-  fitted to the training trials by re-simulation (:func:`~momentid.diagnosis.twin_fit.fit_twin`),
+* ``nrmse_linear_refit``: the linear twin (:class:`~momentid.twin.fit.FittedRig` without friction)
+  fitted to the training trials by re-simulation (:func:`~momentid.twin.fit.fit_twin`),
   replayed on the held-out trial;
 * ``nrmse_after``: the augmented twin (the same plus ``joint_friction`` in every storey) fitted the
   same way, from the linear twin, replayed on the held-out trial;
@@ -27,11 +27,10 @@ import numpy as np
 
 from momentid.core.series import Experiment
 from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis import twin_fit
+from momentid.twin import fit as twin_fit
 from momentid.errors import IdentificationError
 from momentid.estimation.noise import estimate_noise
 from momentid.estimation.scaled import amplitude_trend as trend_of, identify_modal
-from momentid.lab import resim
 
 __all__ = ["Fold", "hold_out", "linear_start", "amplitude_trend", "FRICTION_STARTS"]
 
@@ -75,7 +74,7 @@ class Fold:
                 "cpu_seconds": self.cpu_seconds}
 
 
-def linear_start(experiment: Experiment, names) -> resim.RigModel:
+def linear_start(experiment: Experiment, names) -> twin_fit.FittedRig:
     """The linear twin of the modal identification of run(s) ``names`` (a name or a list) with the lab's
     stated masses.
 
@@ -88,12 +87,12 @@ def linear_start(experiment: Experiment, names) -> resim.RigModel:
     if ident.K is None:
         raise IdentificationError(f"{experiment.source}: no floor masses stated: the twin needs them "
                                   f"(experiment.toml [structure] masses)")
-    return resim.RigModel(np.asarray(ident.masses, float), ident.K, np.clip(ident.damping_ratio, 1e-4, None))
+    return twin_fit.FittedRig(np.asarray(ident.masses, float), ident.K, np.clip(ident.damping_ratio, 1e-4, None))
 
 
 def hold_out(experiment: Experiment, held: str, training, *, substeps: int | None = None,
              max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
-             starts=FRICTION_STARTS, start: resim.RigModel | None = None) -> Fold:
+             starts=FRICTION_STARTS, start: twin_fit.FittedRig | None = None) -> Fold:
     """Fit the linear and the augmented twin on ``training`` and check them on ``held`` (module docstring).
 
     Parameters
@@ -140,7 +139,7 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int | Non
                 seconds=time.perf_counter() - began, cpu_seconds=time.process_time() - cpu)
 
 
-def _simulated_experiment(experiment: Experiment, model: resim.RigModel, names, substeps: int | None) -> Experiment:
+def _simulated_experiment(experiment: Experiment, model: twin_fit.FittedRig, names, substeps: int | None) -> Experiment:
     """``experiment``'s runs ``names`` with their floor channels replaced by ``model``'s simulation, read by its
     sensors, plus white noise at each channel's measured level (the identification needs a noise floor)."""
     rng = np.random.default_rng(NOISE_SEED)
@@ -158,7 +157,7 @@ def _simulated_experiment(experiment: Experiment, model: resim.RigModel, names, 
     return replace(experiment, runs=tuple(runs))
 
 
-def amplitude_trend(experiment: Experiment, model: resim.RigModel, names,
+def amplitude_trend(experiment: Experiment, model: twin_fit.FittedRig, names,
                     substeps: int | None = None):
     """Mode 1 against the response amplitude, as the twin ``model`` predicts it on the runs ``names``.
 

@@ -27,7 +27,7 @@ import scipy.signal
 from momentid.core.series import RunData
 from momentid.lab.scenario import Instrument, Sensors
 
-__all__ = ["measure", "noise_std", "ANTIALIAS_ORDER"]
+__all__ = ["measure", "noise_std", "gain_and_delay", "ANTIALIAS_ORDER"]
 
 #: Order of the causal Butterworth anti-alias filter (``[sensors] antialias``):
 #: 24 dB/octave, the usual analogue front end of a data logger.
@@ -119,3 +119,25 @@ def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> Run
             x = np.clip(x, -inst.range, inst.range)
         out[:, j] = x
     return replace(run, time=run.time[::step].copy(), channels=names, values=out)
+
+
+def gain_and_delay(a: np.ndarray, gain, offset, dt: float, *, undo: bool = False) -> np.ndarray:
+    """Floor accelerations ``a`` (n, d) as the floor sensors read them: each channel times its gain and
+    delayed by its clock offset (fractional, in the frequency domain, zero-padded so that the delay does
+    not wrap around); ``undo=True`` is the inverse (a recording with its sensors' gains and offsets undone).
+
+    Parameters
+    ----------
+    a : ndarray, shape (n, d)
+        Accelerations (m/s^2).
+    gain, offset : array_like, shape (d,)
+        Gain (1) and clock offset (s, positive: lags) of each channel.
+    dt : float
+        Sample interval (s).
+    """
+    n = a.shape[0]
+    spectrum = np.fft.rfft(a, 2 * n, axis=0)
+    w_bins = 2 * np.pi * np.fft.rfftfreq(2 * n, dt)
+    gain, offset = np.asarray(gain, float)[None, :], np.asarray(offset, float)[None, :]
+    spectrum *= np.exp(1j * w_bins[:, None] * offset) / gain if undo else gain * np.exp(-1j * w_bins[:, None] * offset)
+    return np.fft.irfft(spectrum, 2 * n, axis=0)[:n]

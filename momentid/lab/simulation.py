@@ -87,11 +87,10 @@ class CallbackForces:
     def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
         self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
+        # The floor joints' dofs: one after another, unless a body on a floor below the top has a joint of
+        # its own (an attachment's), whose dof then sits between its floor's and the next floor's.
         dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
-        if dofs != list(range(dofs[0], dofs[0] + d)):
-            raise SimulationError(f"the floor joints' dofs {dofs} are not one after another: expected the "
-                                  f"chain of momentid.lab.rig.build_spec")
-        self._floors = slice(dofs[0], dofs[0] + d)
+        self._floors = np.array(dofs)
         self.terms = []   # (law on floats, upper dof, lower dof or -1, activation address or -1)
         self.rates: dict[int, tuple] = {}   # state actuator id -> (rate law, top, below, params, act address)
         for m in self.mechanisms:
@@ -108,9 +107,8 @@ class CallbackForces:
                 adr = int(model.actuator_actadr[act.id])
                 self.rates[act.id] = (kind.state_rate, top, below, p, adr)
             self.terms.append((kind.link_law(p, place, k), top, below, adr))
-        lo = self._floors.start
-        self._pushed = [(i, i - lo) for i in sorted({i for _, top, below, _ in self.terms for i in (top, below)
-                                                      if i >= 0})]   # (dof, index in the floors' forces)
+        self._pushed = sorted({i for _, top, below, _ in self.terms for i in (top, below) if i >= 0})
+        self._n_dofs = model.nv
         self._bound = None   # (data, its qpos, qvel, qfrc_applied, act): the arrays of the last data seen
 
     def _bind(self, data) -> tuple:
@@ -124,19 +122,19 @@ class CallbackForces:
 
     def __call__(self, model, data) -> None:
         _, qpos, qvel, out, act = self._bind(data)
-        q, v, t, lo = qpos.tolist(), qvel.tolist(), data.time, self._floors.start
-        forces = [0.0] * (self._floors.stop - lo)
+        q, v, t = qpos.tolist(), qvel.tolist(), data.time
+        forces = [0.0] * self._n_dofs       # by dof
         for law, top, below, adr in self.terms:
             if below >= 0:
                 x, xd = q[top] - q[below], v[top] - v[below]
             else:
                 x, xd = q[top], v[top]
             f = law(x, xd, t) if adr < 0 else law(x, xd, t, state=float(act[adr]))
-            forces[top - lo] -= f           # the link resists its stretch on its upper floor ...
+            forces[top] -= f                # the link resists its stretch on its upper floor ...
             if below >= 0:                  # ... and on its lower one
-                forces[below - lo] += f
-        for i, j in self._pushed:
-            out[i] = forces[j]
+                forces[below] += f
+        for i in self._pushed:
+            out[i] = forces[i]
 
     def state_rate(self, model, data, actuator: int) -> float:
         """``mjcb_act_dyn``: the rate of a state actuator's activation (a force's internal state)."""

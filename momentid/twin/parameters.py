@@ -19,6 +19,7 @@ import numpy as np
 
 from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
+from momentid.lab.rig_model import RigModel
 from momentid.lab.tendons import Tendon, pair_coefficient, tendon_layout
 
 __all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient",
@@ -137,6 +138,13 @@ class TwinParameters:
     @property
     def storeys(self) -> int:
         return self.masses.shape[0]
+
+    def rig(self, added_mass=None) -> RigModel:
+        """The rig MuJoCo builds (sensors and extra modes apart) with ``added_mass`` (kg, (d,); none by
+        default): K and C as tendons, each floor joint damped by ``mu dm`` (:attr:`added_mass_damping`)."""
+        dm = np.zeros(self.storeys) if added_mass is None else np.asarray(added_mass, float)
+        return RigModel.from_matrices(self.masses, self.K, self.C, self.storey_heights,
+                                      joint_damping=self.added_mass_damping * dm, added_mass=dm)
 
     def sensors_of(self, run: str) -> SensorModel:
         """The calibrated sensors of ``run``, else the nominal ones."""

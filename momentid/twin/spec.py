@@ -1,8 +1,9 @@
 """The calibrated twin as an MJCF model, built through ``mujoco.MjSpec`` on the rig of ``models/``.
 
-:func:`twin_spec` starts from :func:`momentid.lab.rig.build_spec` (the table on its slide joint
-driven by the table command, every floor a child of the table on its own slide joint, storeys as
-fixed tendons) and makes it the identified rig:
+:func:`twin_spec` builds the identified rig (:meth:`~momentid.twin.parameters.TwinParameters.rig`) with
+the lab's one builder, :func:`momentid.lab.rig.build_spec` (the table on its slide joint driven by the
+table command, every floor a child of the table on its own slide joint, K and C as fixed tendons), then
+adds its extra modes and sensors.  The twin holds:
 
 * **K and C exactly**: the storey tendons and, where the identified matrices are not tridiagonal,
   link tendons between farther levels (:func:`momentid.lab.tendons.tendon_layout`); the floor
@@ -34,10 +35,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from momentid.core.structure import Structure
 from momentid.errors import ModelError
 from momentid.lab import rig
-from momentid.lab.tendons import put_tendon, tendon_layout
 from momentid.twin.parameters import SensorModel, TwinParameters
 
 __all__ = ["Timing", "timing", "substeps", "latency", "twin_spec", "sensor_names", "MIN_LATENCY_STEPS",
@@ -136,11 +135,6 @@ def _delayed(sensor, delay: float, step: float, interp: int) -> None:
     sensor.interp = interp
 
 
-def _tendons(spec: mujoco.MjSpec, params: TwinParameters) -> None:
-    for t in tendon_layout(params.K, params.C):
-        put_tendon(spec, t)
-
-
 def _extra_modes(spec: mujoco.MjSpec, params: TwinParameters) -> None:
     base = spec.body("base")
     mass = float(np.mean(params.masses))
@@ -212,17 +206,8 @@ def twin_spec(params: TwinParameters, step: float, *, sensors: SensorModel | Non
     -------
     mujoco.MjSpec
     """
-    d = params.storeys
     sensors = params.nominal if sensors is None else sensors
-    dm = np.zeros(d) if added_mass is None else np.asarray(added_mass, float)
-    structure = Structure(masses=tuple(float(m) for m in params.masses),
-                          storey_stiffness=tuple(t.stiffness for t in tendon_layout(params.K, params.C)[:d]),
-                          storey_heights=tuple(float(h) for h in params.storey_heights),
-                          rayleigh_mu=0.0, rayleigh_kappa=0.0)
-    spec = rig.build_spec(structure, dm, timestep=step, name=name)
-    _tendons(spec, params)
-    for j in range(d):
-        spec.joint(f"q{j + 1}").damping = [params.added_mass_damping * float(dm[j]), 0.0, 0.0]
+    spec = rig.build_spec(params.rig(added_mass), timestep=step, name=name)
     _extra_modes(spec, params)
     lag = _sensors(spec, params, sensors, step)
     _custom(spec, params, sensors, lag)

@@ -1,6 +1,6 @@
 """Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without joint friction.
 
-The twin (:class:`~momentid.lab.resim.RigModel`: stated floor masses, a full stiffness matrix, modal
+The twin (:class:`~momentid.lab.FittedRig`: stated floor masses, a full stiffness matrix, modal
 damping, ``joint_friction`` in chosen storeys, one gain and clock offset per floor sensor) is fitted by
 output error: every training trial is re-simulated through MuJoCo under its recorded table
 acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
@@ -9,7 +9,7 @@ parameter set explains them all).  The optimiser is scipy's trust-region least s
 physical columns are forward differences, all compiled once and re-simulated in one batched rollout per
 trial (:func:`~momentid.lab.resim.simulate`); the sensors' columns are exact (no re-simulation).
 
-Every NRMSE is :func:`~momentid.diagnosis.modal_check.nrmse` over the floor channels after the trial's
+Every NRMSE is :func:`~momentid.twin.replay.nrmse` over the floor channels after the trial's
 quiet lead-in.  A trial's low-energy tail (after :data:`FIT_ENERGY` of its floor signal's energy) is not
 re-simulated while fitting; held-out trials are always simulated whole.
 """
@@ -18,21 +18,25 @@ from __future__ import annotations
 
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.optimize
 
 from momentid.core.series import RunData
-from momentid.diagnosis import modal_check as mc
+from momentid.core.structure import Mechanism
 from momentid.errors import IdentificationError, MomentidError
+from momentid.estimation.noise import quiet_lead_in
 from momentid.lab import resim
+from momentid.lab.rig_model import RigModel
+from momentid.lab.sensors import gain_and_delay
+from momentid.lab.tendons import pair_coefficient
 from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
-from momentid.lab.tendons import pair_coefficient
+from momentid.twin.replay import nrmse as replay_nrmse
 
-__all__ = ["Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse", "sensor_jacobian", "FIT_ENERGY",
-           "friction_start", "twin_modes", "joint_tendon_stiffness", "workers", "each"]
+__all__ = ["FittedRig", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
+           "sensor_jacobian", "FIT_ENERGY", "friction_start", "twin_modes", "joint_tendon_stiffness", "workers", "each"]
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
@@ -54,6 +58,71 @@ OFFSET_BOUNDS = (-0.02, 0.02)
 #: Share of the linear twin's viscous damping an augmented fit starts from.
 START_DAMPING_SHARE = 0.3
 _INVALID = 10.0     # residual of a parameter set whose stiffness is not positive definite
+
+
+@dataclass(frozen=True)
+class FittedRig:
+    """A real rig as the twin's fit sizes it: the parameters it searches, and the rig they make
+    (:meth:`rig`, built and re-simulated by the lab: :mod:`momentid.lab.resim`).
+
+    Attributes
+    ----------
+    masses : ndarray, shape (d,)
+        Floor masses (kg).
+    stiffness : ndarray, shape (d, d)
+        K (N/m) of the stuck joints (small drifts), symmetric positive definite.
+    damping_ratio : ndarray, shape (d,)
+        Modal viscous damping ratios (1) on the modes of (M, K), ascending frequency.
+    friction : tuple of Mechanism
+        ``joint_friction`` records (at most one per storey); empty: the linear twin.
+    gain, offset : ndarray, shape (d,)
+        Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
+    """
+
+    masses: np.ndarray
+    stiffness: np.ndarray
+    damping_ratio: np.ndarray
+    friction: tuple = ()
+    gain: np.ndarray = field(default=None)
+    offset: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        d = len(self.masses)
+        if self.gain is None:
+            object.__setattr__(self, "gain", np.ones(d))
+        if self.offset is None:
+            object.__setattr__(self, "offset", np.zeros(d))
+
+    @property
+    def storeys(self) -> int:
+        return len(self.masses)
+
+    @property
+    def damping(self) -> np.ndarray:
+        """C (N s/m), shape (d, d)."""
+        return resim.modal_damping(self.masses, self.stiffness, self.damping_ratio)
+
+    def linear(self) -> FittedRig:
+        """The same rig without its friction."""
+        return replace(self, friction=())
+
+    def rig(self) -> RigModel:
+        """The rig MuJoCo simulates (sensors apart): K and C as tendons, the friction on its storeys."""
+        return RigModel.from_matrices(self.masses, self.stiffness, self.damping,
+                                      np.full(self.storeys, resim.STOREY_HEIGHT), base_mass=resim.BASE_MASS,
+                                      mechanisms=self.friction)
+
+    def to_dict(self) -> dict:
+        return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
+                "damping_ratio": np.asarray(self.damping_ratio).tolist(),
+                "friction": [{**registry.get(m.type).place(m.location).location, **dict(m.parameters)}
+                             for m in self.friction],
+                "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
+
+
+def friction_records(storeys, params) -> tuple:
+    """``joint_friction`` records from per-storey ``params`` dicts."""
+    return tuple(Mechanism("joint_friction", int(s), tuple(p.items())) for s, p in zip(storeys, params))
 
 
 @dataclass(frozen=True)
@@ -86,7 +155,7 @@ class Trial:
 def trial(run: RunData, d: int) -> Trial:
     """A :class:`Trial` from a run with ``zdd`` and ``a1..ad`` (m/s^2)."""
     a = run.group("a", d)
-    start = mc.active_start(run)
+    start = quiet_lead_in(run)
     active = a[start:]
     energy = np.cumsum(np.sum(a ** 2, axis=1))
     stop = int(min(len(a), np.searchsorted(energy, FIT_ENERGY * energy[-1]) + 1))
@@ -110,7 +179,7 @@ class FitResult:
     nfev : int
     """
 
-    model: resim.RigModel
+    model: FittedRig
     trials: tuple
     nrmse: dict
     cost: float
@@ -124,7 +193,7 @@ class _Layout:
     its stiffness and slip drift are nearly interchangeable; the loss at a drift the rig reaches is what
     the trials determine."""
 
-    def __init__(self, template: resim.RigModel, storeys: tuple):
+    def __init__(self, template: FittedRig, storeys: tuple):
         self.template = template
         self.d = template.storeys
         self.storeys = tuple(storeys)
@@ -138,7 +207,7 @@ class _Layout:
                                      np.ones(3 * len(self.storeys)), np.full(self.d, 0.01), np.full(self.d, 1e-3)])
         assert self.scale.size == k + self.d + 3 * len(self.storeys) + 2 * self.d
 
-    def pack(self, model: resim.RigModel) -> np.ndarray:
+    def pack(self, model: FittedRig) -> np.ndarray:
         friction = {m.location: dict(m.parameters) for m in model.friction}
         parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
         for s in self.storeys:
@@ -148,7 +217,7 @@ class _Layout:
         parts += [np.log(model.gain), model.offset]
         return np.concatenate([np.ravel(p) for p in parts])
 
-    def unpack(self, theta) -> resim.RigModel:
+    def unpack(self, theta) -> FittedRig:
         d, k = self.d, len(self.iu[0])
         K = np.zeros((d, d))
         K[self.iu] = theta[:k]
@@ -162,7 +231,7 @@ class _Layout:
             params.append({"stiffness": stiffness, "slip_drift": slip, "exponent": chi})
             i += 3
         return replace(self.template, stiffness=K, damping_ratio=zeta,
-                       friction=resim.friction_records(self.storeys, params),
+                       friction=friction_records(self.storeys, params),
                        gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]))
 
     def bounds(self):
@@ -178,7 +247,7 @@ class _Layout:
         return np.array(lo), np.array(hi)
 
 
-def _valid(model: resim.RigModel) -> bool:
+def _valid(model: FittedRig) -> bool:
     K = np.asarray(model.stiffness)
     if np.any(np.linalg.eigvalsh(K) <= 0):
         return False
@@ -221,7 +290,7 @@ def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=Non
     substeps = _steps(substeps, tr.dt)
     stop = len(tr.zdd) if whole else tr.fit_stop
     first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
-    compiled = resim.compile_models(models, tr.dt / substeps) if compiled is None else compiled
+    compiled = resim.compile_models([m.rig() for m in models], tr.dt / substeps) if compiled is None else compiled
     out = np.empty((len(compiled), stop, tr.a.shape[1]))
     out[:, :first] = tr.zdd[None, :first, None]
     out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps, threads=threads)
@@ -231,16 +300,17 @@ def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=Non
 def _compiled_by_step(models, trials, substeps: int | None) -> dict:
     """``models`` compiled once per distinct sample interval of ``trials`` (the trials of one recording
     share it): ``{dt: [MjModel]}``."""
-    return {dt: resim.compile_models(models, dt / _steps(substeps, dt)) for dt in {t.dt for t in trials}}
+    rigs = [m.rig() for m in models]
+    return {dt: resim.compile_models(rigs, dt / _steps(substeps, dt)) for dt in {t.dt for t in trials}}
 
 
-def _residual(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
-    read = mc.sensors(a, model.gain, model.offset, tr.dt)
+def _residual(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
+    read = gain_and_delay(a, model.gain, model.offset, tr.dt)
     stop = a.shape[0]
     return ((tr.a[tr.start:stop] - read[tr.start:stop]) / tr.norm).ravel()
 
 
-def sensor_jacobian(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarray:
+def sensor_jacobian(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
     """Exact derivatives of the fit's residual on ``tr`` with respect to the sensors' log-gains and clock
     offsets: a reading ``g_j a_j(t - tau_j)`` changes by itself per unit of ``log g_j`` and by minus its
     time derivative (taken in the frequency domain, as the delay is) per second of ``tau_j``.
@@ -263,7 +333,7 @@ def sensor_jacobian(model: resim.RigModel, a: np.ndarray, tr: Trial) -> np.ndarr
     n = a.shape[0]
     w = 2 * np.pi * np.fft.rfftfreq(2 * n, tr.dt)[:, None]
     spectrum = np.fft.rfft(a, 2 * n, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
-    read = np.fft.irfft(spectrum, 2 * n, axis=0)[:n]                 # mc.sensors(a, gain, offset, dt)
+    read = np.fft.irfft(spectrum, 2 * n, axis=0)[:n]                 # gain_and_delay(a, gain, offset, dt)
     rate = np.fft.irfft(1j * w * spectrum, 2 * n, axis=0)[:n]        # its time derivative
     rows = stop - tr.start
     J = np.zeros((rows, d, 2 * d))
@@ -356,7 +426,7 @@ class _Problem:
         return J
 
 
-def fit_twin(trials, start: resim.RigModel, *, substeps: int | None = None,
+def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
              max_nfev: int = MAX_NFEV) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
@@ -387,18 +457,18 @@ def fit_twin(trials, start: resim.RigModel, *, substeps: int | None = None,
                      cost=float(2 * result.cost), nfev=int(problem.nsim))
 
 
-def predict(model: resim.RigModel, tr: Trial, substeps: int | None = None) -> np.ndarray:
+def predict(model: FittedRig, tr: Trial, substeps: int | None = None) -> np.ndarray:
     """``model``'s floor accelerations (n, d) on the whole of ``tr``, as its sensors read them."""
     a = _simulate([model], tr, True, substeps)[0]
-    return mc.sensors(a, model.gain, model.offset, tr.dt)
+    return gain_and_delay(a, model.gain, model.offset, tr.dt)
 
 
-def nrmse(model: resim.RigModel, tr: Trial, substeps: int | None = None) -> float:
+def nrmse(model: FittedRig, tr: Trial, substeps: int | None = None) -> float:
     """Held-out NRMSE of ``model`` on the whole of ``tr`` (floor channels, after the lead-in)."""
-    return mc.nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:])
+    return float(replay_nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:]))
 
 
-def twin_modes(model: resim.RigModel):
+def twin_modes(model: FittedRig):
     """``(omega (rad/s), zeta, residues (d modes, d floors))`` of the twin's stuck (small-drift) linear part,
     in :func:`~momentid.diagnosis.modal_check.replay`'s form."""
     m = np.asarray(model.masses, float)
@@ -409,15 +479,15 @@ def twin_modes(model: resim.RigModel):
     return np.sqrt(w2), np.asarray(model.damping_ratio, float), gamma[:, None] * phi.T
 
 
-def friction_start(linear: resim.RigModel, storeys, loss: float, slip_drift: float,
-                   exponent: float) -> resim.RigModel:
+def friction_start(linear: FittedRig, storeys, loss: float, slip_drift: float,
+                   exponent: float) -> FittedRig:
     """A start for the augmented fit: ``linear`` with joint friction in ``storeys`` that has lost ``loss``
     of the storey's stiffness at :data:`REFERENCE_DRIFT`, fully slipping at ``slip_drift`` (m), exponent
     ``exponent``; K stiffened by that loss (K is the stuck joints' stiffness) and the viscous damping
     lowered by :data:`START_DAMPING_SHARE` (the friction dissipates the rest)."""
     K = np.asarray(linear.stiffness)
     share = jf.lost_fraction(REFERENCE_DRIFT, slip_drift, exponent)
-    unit = resim.friction_records(storeys, [{"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}]
+    unit = friction_records(storeys, [{"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}]
                                   * len(storeys))
     params = [{"stiffness": loss * joint_tendon_stiffness(K, m) / share, "slip_drift": slip_drift, "exponent": exponent}
               for m in unit]
@@ -426,4 +496,4 @@ def friction_start(linear: resim.RigModel, storeys, loss: float, slip_drift: flo
                             f"cannot carry joint friction")
     return replace(linear, stiffness=K * (1.0 + loss),
                    damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
-                   friction=resim.friction_records(storeys, params))
+                   friction=friction_records(storeys, params))

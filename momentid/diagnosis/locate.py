@@ -148,6 +148,21 @@ def _bands(V, N, s, fs, f_modes) -> dict:
     return {k: (float(np.sqrt(a / b)) if b > 0 else 1.0) for k, (a, b) in out.items()}
 
 
+def _lone_floor(rows) -> int | None:
+    """The floor above the first whose equation residual stands out alone (more than twice every other
+    floor's excess over noise, and above :data:`EXCESS`); None when none does.  A
+    force on floor ``j`` alone (an attachment, a damper hung there) shows in the shear of every storey
+    up to ``j``: the storeys cannot say where it is, the floors can."""
+    r = np.concatenate([row.residual for row in rows])
+    n = np.concatenate([row.noise for row in rows])
+    floors = [_ratio(r[:, j], n[:, j]) for j in range(r.shape[1])]
+    j = int(np.argmax(floors))
+    others = floors[:j] + floors[j + 1:]
+    if j == 0 or floors[j] <= EXCESS or not others or floors[j] <= 2 * max(others):
+        return None
+    return j + 1
+
+
 def _words(loc: Localisation, rows) -> str:
     """One sentence in the lab's words."""
     worst = loc.storeys[f"storey{loc.storey}"]
@@ -157,6 +172,10 @@ def _words(loc: Localisation, rows) -> str:
     where = (f"concentrated in storey {loc.storey}" if not others or worst > 2 * max(others)
              else f"largest in storey {loc.storey}")
     parts = [f"Mismatch {where} ({worst:.1f}x noise)"]
+    floor = _lone_floor(rows)
+    if floor is not None:   # a force on one floor above the first: every storey below it carries it
+        parts = [f"Mismatch on floor {floor} alone (the shear of every storey below it carries it, storey "
+                 f"{loc.storey} most: {worst:.1f}x noise)"]
     sig = loc.signature
     shapes = {"drift_velocity_sign": "jumps with the sign of the drift velocity (a step at every reversal)",
               "drift_cubed": "grows with the drift cubed",

@@ -1,11 +1,12 @@
 """Stage 5 of the diagnosis: refit a candidate and re-simulate its augmented MuJoCo model.
 
-A candidate's kind says how it is sized (:class:`~momentid.mechanisms.base.Refit`): a nonlinear
-force at a link is refitted with the linear model by errors-in-variables, then its size searched by
-re-simulation; a flexible attachment is put on the lab's nominal model; a dashpot takes the damping
-pattern of the identified C; a sensor fault is undone on the recordings, which are then
-re-identified.  :class:`Refitter` builds a candidate's augmented model and scores it by replaying
-the training runs in MuJoCo.
+A candidate's kind sizes itself (:meth:`~momentid.mechanisms.base.MechanismKind.size`,
+:mod:`momentid.mechanisms.sizing`): a nonlinear force at a link is refitted with the linear model by
+errors-in-variables, then its size searched by re-simulation; a flexible attachment is put on the lab's
+nominal model; a dashpot takes the damping pattern of the identified C; a sensor fault is undone on the
+recordings, which are then re-identified; a tuned-mass damper searches its mass, frequency and damping
+by re-simulation.  :class:`Refitter` is what they ask (a :class:`~momentid.mechanisms.sizing.Sizer`):
+it builds a candidate's augmented model and scores it by replaying the training runs in MuJoCo.
 
 :class:`Resimulator` is what the later stages (selection, compound, open search) ask of it: another
 rig model (a calibrated twin of a real rig, replayed with its sensor models) plugs into the same
@@ -51,6 +52,12 @@ SEARCH_TOLERANCE = 0.005
 SEARCH_REPLAYS = 14
 #: ... and the relative step of the misfit's curvature at the optimum (the standard error).
 CURVATURE_STEP = 0.02
+#: Several parameters searched together (:meth:`Refitter.search`): the starting simplex's width in their
+#: logarithms (20 %: a screening grid's spacing and more), the tolerance on them (0.5 %) and the replays
+#: allowed.
+SIMPLEX_STEP = 0.2
+SIMPLEX_TOLERANCE = 0.005
+SEARCH_EVALUATIONS = 100
 
 
 #: scipy's bounded search: its golden section and its floor on the square root of the machine epsilon.
@@ -189,6 +196,7 @@ class Resimulator(Protocol):
     def better_of(self, structures, entries) -> Structure: ...
     def resimulate(self, structure: Structure, entry: Entry, others=(), span=SEARCH_RANGE,
                    grid: int = 0) -> tuple[dict, dict]: ...
+    def search(self, structure: Structure, entry: Entry, names: tuple[str, ...]) -> tuple[dict, dict]: ...
     def refit_forces(self, entries) -> ForceRefit | None: ...
     def identify_corrected(self, kind: MechanismKind, place: Place, params: dict): ...
     def remember(self, augmented: Augmented, score: float) -> None: ...
@@ -296,47 +304,25 @@ class Refitter:
         return self._corrected[key]
 
     def _build(self, kind: MechanismKind, place: Place, params: dict, std: dict) -> Augmented:
-        model, nominal = self.model, self.nominal
-        structure, refit, corrected = self.linear_structure, None, None
-        entry = Entry(kind, place, params)
-        if kind.refit is Refit.RESIMULATE and not model.ideal:
-            refit = self.refit_forces([entry])
-            if refit is not None:
-                params, std = refit.parameters[0], refit.std[0]
-                structure = identified_structure(refit.result, nominal)
-            # The force's size by re-simulation, on the refitted linear model and on the nominal one
-            # (a friction that sticks a storey leaves the linear fit poorly determined); the pair that
-            # replays best wins.
-            bases = [structure] + ([nominal] if nominal is not None else [])
-            structure = self.better_of(bases, [Entry(kind, place, params)])
-            params, sim_std = self.resimulate(structure, Entry(kind, place, params))
-            # the search's std is conditional on the linear model; the refit's marginal std carries
-            # the linear model's own uncertainty: report both, in quadrature
-            std = {k: float(math.hypot(v, std.get(k, 0.0))) for k, v in sim_std.items()}
-        elif kind.refit is Refit.ATTACHMENT and nominal is not None:
-            # Found by replaying the nominal model (the identified one has absorbed part of the attachment's
-            # dynamics in the runs that carry it): augment the nominal model.
-            structure = nominal
-        elif kind.refit is Refit.DAMPING_PATTERN:
-            # Rayleigh part + the dashpot: from the pattern fit of the identified C when it found this
-            # dashpot, else the nominal Rayleigh coefficients.
-            pattern = self.pattern
-            if pattern and pattern.candidate.kind is kind and pattern.candidate.place == place:
-                a_, b_, c_ = pattern.info["coefficients"]
-                params = {kind.fitted.name: float(c_)}
-            elif nominal is not None:
-                a_, b_ = nominal.rayleigh_mu, nominal.rayleigh_kappa
-            else:
-                a_, b_ = structure.rayleigh_mu, structure.rayleigh_kappa
-            structure = replace(structure, rayleigh_mu=max(a_, 0.0), rayleigh_kappa=max(b_, 0.0))
-            if nominal is not None:   # the lab's own model with the damper may replay better
-                structure = self.better_of((structure, nominal), [Entry(kind, place, params)])
-        elif kind.refit is Refit.CORRECT_DATA:
-            corrected = self.identify_corrected(kind, place, params)
-            structure = identified_structure(corrected, nominal)
-            if nominal is not None:   # the corrected data may fit the lab's own model better
-                structure = self.better_of((structure, nominal), [Entry(kind, place, params)])
-        return Augmented(kind, place, structure, params, std, kind.as_records(place, params), refit, corrected)
+        sized = kind.size(self, place, params, std)
+        return Augmented(kind, place, sized.structure, sized.parameters, sized.std,
+                         kind.as_records(place, sized.parameters), sized.refit, sized.corrected)
+
+    # ---------------------------------------------------------------- what a kind's sizing asks (Sizer)
+
+    @property
+    def ideal(self) -> bool:
+        """Noise-free recordings: a force needs no errors-in-variables refit."""
+        return self.model.ideal
+
+    @staticmethod
+    def entry(kind: MechanismKind, place: Place, params: dict) -> Entry:
+        """One mechanism of an augmented model (:class:`~momentid.diagnosis.replay.Entry`)."""
+        return Entry(kind, place, params)
+
+    def structure_of(self, result) -> Structure:
+        """An identification as the structure a replay is built on (the nominal one's heights and base)."""
+        return identified_structure(result, self.nominal)
 
     # ---------------------------------------------------------------- replays of the training runs
 
@@ -429,12 +415,70 @@ class Refitter:
             vertex = best - step * (qp - qm) / (2 * (qp - 2 * q0 + qm))
             if abs(vertex - best) < step and cost(vertex) < q0:
                 best, q0 = vertex, cost(vertex)
+        n_eff = self._independent_samples()
+        std = float(np.sqrt(2 * (q0 / max(n_eff - 1, 1)) / curvature)) if curvature > 0 else float("inf")
+        return dict(params, **{key: best}), {key: std}
+
+    def _independent_samples(self) -> float:
+        """Independent samples of the search run's misfit: its channels' samples within the band."""
         run = self._search_run()
         n_channels = sum(1 for g in ("a", "q") if run.has(f"{g}1")) * self.d
         band = self.model.band.high or run.sample_rate / 2
-        n_eff = n_channels * run.n_samples * min(1.0, 2 * band / run.sample_rate)
-        std = float(np.sqrt(2 * (q0 / max(n_eff - 1, 1)) / curvature)) if curvature > 0 else float("inf")
-        return dict(params, **{key: best}), {key: std}
+        return n_channels * run.n_samples * min(1.0, 2 * band / run.sample_rate)
+
+    def search(self, structure: Structure, entry: Entry, names: tuple[str, ...]) -> tuple[dict, dict]:
+        """Output-error search of several positive parameters ``names`` of ``entry`` together, by
+        re-simulation: Nelder-Mead on their logarithms (a simplex :data:`SIMPLEX_STEP` wide around the
+        starting values) of :meth:`misfit`, to :data:`SIMPLEX_TOLERANCE` in at most :data:`SEARCH_EVALUATIONS`
+        replays.  Standard errors from the misfit's curvature at the optimum (a central-difference
+        Hessian in the logarithms, :data:`CURVATURE_STEP`): ``cov = 2 s^2 H^-1`` as :meth:`resimulate`.
+
+        Returns
+        -------
+        params, std : dict
+            The entry's parameters with ``names`` refined, and the standard errors of ``names``.
+        """
+        kind, place, params = entry
+        x0 = np.log([float(params[n]) for n in names])
+        seen: dict[tuple, float] = {}
+
+        def trial(x) -> list:
+            return [Entry(kind, place, dict(params, **{n: float(np.exp(v)) for n, v in zip(names, x)}))]
+
+        def costs(xs) -> list[float]:   # points known in advance: replayed side by side
+            keys = [tuple(np.asarray(x, float)) for x in xs]
+            new = list(dict.fromkeys(k for k in keys if k not in seen))
+            seen.update(zip(new, self.misfits([(structure, trial(k)) for k in new])))
+            return [seen[k] for k in keys]
+
+        n = len(names)
+        simplex = x0 + np.vstack([np.zeros(n), SIMPLEX_STEP * np.eye(n)])
+        costs(list(simplex))
+        res = scipy.optimize.minimize(lambda x: costs([x])[0], x0, method="Nelder-Mead",
+                                      options={"initial_simplex": simplex, "xatol": SIMPLEX_TOLERANCE,
+                                               "fatol": 0.0, "maxfev": SEARCH_EVALUATIONS})
+        best = np.asarray(res.x, float)
+        h = CURVATURE_STEP
+        steps = [np.zeros(n)] + [s * h * np.eye(n)[i] for i in range(n) for s in (1, -1)]
+        steps += [h * (si * np.eye(n)[i] + sj * np.eye(n)[j]) for i in range(n) for j in range(i + 1, n)
+                  for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+        q = dict(zip(range(len(steps)), costs([best + s for s in steps])))
+        H = np.zeros((n, n))
+        for i in range(n):
+            H[i, i] = (q[1 + 2 * i] - 2 * q[0] + q[2 + 2 * i]) / h ** 2
+        k = 1 + 2 * n
+        for i in range(n):
+            for j in range(i + 1, n):
+                H[i, j] = H[j, i] = (q[k] - q[k + 1] - q[k + 2] + q[k + 3]) / (4 * h * h)
+                k += 4
+        values = np.exp(best)
+        s2 = q[0] / max(self._independent_samples() - 1, 1)
+        try:
+            var = np.diag(2 * s2 * np.linalg.inv(H)) if np.all(np.linalg.eigvalsh(H) > 0) else np.full(n, np.inf)
+        except np.linalg.LinAlgError:
+            var = np.full(n, np.inf)
+        std = {name: float(v * np.sqrt(w)) for name, v, w in zip(names, values, var)}
+        return dict(params, **{name: float(v) for name, v in zip(names, values)}), std
 
     def score(self, augmented: Augmented) -> float:
         """Mean NRMSE of the training runs replayed through an augmented model (band-limited)."""

@@ -153,7 +153,9 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     rss = max(yy - 2 * float(coef @ g) + float(coef @ G @ coef), 0.0)
     dof = max(int(train.sum()) - X.shape[1], 1)
     cov = np.linalg.pinv(G) * (rss / dof)
-    return coef[:k] / scale[:k], np.sqrt(np.diag(cov)[:k]) / scale[:k], float(explained)
+    # A signature nearly collinear with its confounds (a tuned-mass damper's body tuned far above the motion
+    # moves with its floor) leaves a variance of round-off size, of either sign: no variance is below 0.
+    return coef[:k] / scale[:k], np.sqrt(np.maximum(np.diag(cov)[:k], 0.0)) / scale[:k], float(explained)
 
 
 def _fitter(target: np.ndarray, train: np.ndarray, test: np.ndarray, noise_rss: float, extra=()):

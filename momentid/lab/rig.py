@@ -40,7 +40,7 @@ from momentid.lab.tendons import put_tendon
 
 __all__ = ["build_spec", "compile_model", "sensor_layout", "callback_forces", "storey_to_floor", "drifts",
            "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS", "stateful",
-           "state_actuator", "mujoco_warnings_counted_not_printed", "add_storey_elements", "empty_spec", "RigModel",
+           "state_actuator", "mujoco_warnings_counted_not_printed", "add_elements", "empty_spec", "RigModel",
            "SENSOR_GROUPS"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
@@ -109,7 +109,8 @@ def build_spec(rig: RigModel | Structure, added_mass=None, *, timestep: float = 
         registered in :mod:`momentid.mechanisms`.  A kind changes the MJCF through its hooks
         (``storey_tendon``: the storey tendon's stiffness and damping, e.g. ``extra_damper``,
         ``p_delta``; ``added_mass_body``: the added mass's body, e.g. ``flexible_added_mass``;
-        ``storey_elements``: bodies, joints and tendons of its own, e.g. ``joint_friction``); the
+        ``elements``: bodies, joints and tendons of its own at its place, e.g. ``joint_friction``,
+        ``tuned_mass_damper``); the
         ``callback`` kinds' forces across their place (a storey, a floor against the table, two
         floors) are applied by the simulator in a control callback (:func:`callback_forces`,
         :func:`needs_callback`); a force with memory (``has_state``) keeps its state in the activation
@@ -148,7 +149,7 @@ def build_spec(rig: RigModel | Structure, added_mass=None, *, timestep: float = 
     base, table = _base(spec, model)
     floors = _floors(spec, model, base)
     _tendons(spec, model)
-    add_storey_elements(spec, model.mechanisms, [base] + floors, timestep)
+    add_elements(spec, model.mechanisms, [base] + floors, timestep)
     _actuators(spec, model, table.armature + model.base_mass)
     _sensors(spec, d, sensors)
     return spec
@@ -264,30 +265,28 @@ def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
     return spec
 
 
-def add_storey_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:
-    """Add the MJCF elements of the ``mjcf_elements`` storey kinds among ``mechanisms`` (e.g.
-    ``joint_friction``'s sliders) to ``spec``.
+def add_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:
+    """Add the MJCF elements the ``mjcf_elements`` kinds among ``mechanisms`` build at their places
+    (:meth:`~momentid.mechanisms.base.MechanismKind.elements`: ``joint_friction``'s sliders across a
+    storey, ``tuned_mass_damper``'s body hung on a floor) to ``spec``.
 
     ``bodies`` are the base and the floors, in order (``bodies[i]`` is below storey ``i + 1``); the floor
-    joints are ``q<i>``.  The mass the elements put on a floor is taken off that floor's own, so that
-    the floor masses stay as stated.  The constraint solver becomes PGS (see the comment below).
+    joints are ``q<i>``.  The mass a kind's elements take off a floor (it says which) is taken off that
+    floor's own, so that the floor masses stay as stated.
     """
     for mech in mechanisms:
         kind = registry.get(mech.type)
-        place = kind.place(mech.location)
-        if not (kind.mjcf_elements and place.target is Target.STOREY):
+        if not kind.mjcf_elements:
             continue
-        # PGS: the table's huge armature (TABLE_INERTIA_RATIO) swamps the Newton solver's convergence test,
-        # which then stops before the sliders' friction constraints hold; PGS solves them one by one.
-        spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
-        below, above = place.nodes
-        lower = bodies[below]
-        added = kind.storey_elements(spec, mech, lower, f"q{above}", f"q{below}" if below > 0 else None, timestep)
-        if below > 0:
-            if not lower.mass > added:
-                raise ModelError(f"{mech.type} at {place.words}: its elements weigh {added:.3g} kg, more than "
-                                 f"floor {below} ({lower.mass:.3g} kg): expected a smaller timestep")
-            lower.mass = lower.mass - added
+        place = kind.place(mech.location)
+        for level, taken in kind.elements(spec, mech, place, bodies, timestep).items():
+            if level == 0:
+                continue
+            body = bodies[level]
+            if not body.mass > taken:
+                raise ModelError(f"{mech.type} at {place.words}: its elements weigh {taken:.3g} kg, more than "
+                                 f"floor {level} ({body.mass:.3g} kg): expected a smaller timestep")
+            body.mass = body.mass - taken
 
 
 def callback_forces(mechanisms, q: np.ndarray, v: np.ndarray, time: float = 0.0,

@@ -8,7 +8,7 @@ It declares, in one place, everything the rest of the project needs to know abou
   or a sensor channel; :mod:`momentid.mechanisms.place`), **parameters** with their SI units and
   physical bounds (a scenario's ``[truth]`` record is validated against them);
 - how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
-  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.storey_elements`), or the **storey force** or **link
+  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.elements`), or the **storey force** or **link
   force** (a floor against the table, or two floors) the simulator applies in its control callback
   (:meth:`MechanismKind.storey_force`, :meth:`MechanismKind.floor_force`), with an internal
   state the simulator integrates when the force has memory (:meth:`MechanismKind.has_state`,
@@ -47,6 +47,7 @@ from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.errors import ModelError
 from momentid.mechanisms.place import Place, Target
+from momentid.mechanisms.sizing import Sized, Sizer, size_correction
 
 __all__ = ["GRAVITY", "Target", "Place", "Refit", "Param", "MechanismKind", "SensorFault", "Screened",
            "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance"]
@@ -61,17 +62,21 @@ class Refit(enum.Enum):
     linear model, then its size searched by re-simulation.  ``ATTACHMENT``: a change of the rig the
     identified model partly absorbed, kept on the lab's nominal model.  ``DAMPING_PATTERN``: a linear
     term the identified C holds, read from its pattern.  ``CORRECT_DATA``: a sensor fault, undone on
-    the recordings, which are then re-identified.
+    the recordings, which are then re-identified.  ``SEARCH``: several parameters searched together by
+    re-simulation (a tuned-mass damper's mass, frequency and damping).
 
-    A kind states the rest of what its refit needs: :meth:`MechanismKind.force_signal` (``RESIMULATE``),
-    :meth:`MechanismKind.attachment_matrices` (``ATTACHMENT``), :meth:`MechanismKind.damping_pattern`
-    (``DAMPING_PATTERN``), :meth:`MechanismKind.correct` (``CORRECT_DATA``).
+    Each kind sizes itself (:meth:`MechanismKind.size`, :mod:`momentid.mechanisms.sizing`); the value
+    groups kinds for the stages that screen and combine them.  A kind states the rest of what its
+    sizing needs: :meth:`MechanismKind.force_signal` (``RESIMULATE``), :meth:`MechanismKind.attachment_matrices`
+    (``ATTACHMENT``), :meth:`MechanismKind.damping_pattern` (``DAMPING_PATTERN``),
+    :meth:`MechanismKind.correct` (``CORRECT_DATA``).
     """
 
     RESIMULATE = "resimulate"
     ATTACHMENT = "attachment"
     DAMPING_PATTERN = "damping pattern"
     CORRECT_DATA = "correct data"
+    SEARCH = "search"
 
 
 @dataclass(frozen=True)
@@ -263,8 +268,8 @@ class MechanismKind:
     #: identified model shows it only through what the added masses change; the lab's nominal model
     #: shows it whole (see :func:`~momentid.diagnosis.screening.linear_springs_left`).
     linear_spring: ClassVar[bool] = False
-    #: A storey kind that adds bodies, joints and tendons of its own to the MJCF
-    #: (:meth:`storey_elements`), e.g. ``joint_friction``'s sliders.
+    #: A kind that adds bodies, joints and tendons of its own to the MJCF at its place (:meth:`elements`),
+    #: e.g. ``joint_friction``'s sliders across a storey, ``tuned_mass_damper``'s body hung on a floor.
     mjcf_elements: ClassVar[bool] = False
     #: One line for the docs and ``describe``.
     summary: ClassVar[str] = ""
@@ -318,13 +323,15 @@ class MechanismKind:
         """
         return stiffness, damping
 
-    def storey_elements(self, spec, mech: Mechanism, lower_body, upper_joint: str, lower_joint: str | None,
-                        timestep: float) -> float:
-        """For ``mjcf_elements`` kinds: add the storey's own bodies, joints and tendons to ``spec``
-        (``mujoco.MjSpec``), riding on ``lower_body`` (the body below the storey); ``upper_joint`` and
-        ``lower_joint`` name the slide joints of the floors above and below (None: the table).  Returns
-        the mass (kg) added onto ``lower_body``."""
-        return 0.0
+    def elements(self, spec, mech: Mechanism, place: Place, bodies, timestep: float) -> dict[int, float]:
+        """For ``mjcf_elements`` kinds: add the bodies, joints and tendons of ``mech`` at ``place`` to
+        ``spec`` (``mujoco.MjSpec``): across a storey (riding on the body below it), hung on a floor, ...
+
+        ``bodies`` are the table's (``bodies[0]``) and the floors' ``mujoco.MjsBody`` (``bodies[j]``: floor
+        ``j``, on the slide joint ``q<j>``); ``timestep`` is the integrator's step (s).  Returns the mass
+        (kg) the elements take off each level (``{level: kg}``): a body riding on a floor and counted in
+        its stated mass."""
+        return {}
 
     def added_mass_body(self, mech: Mechanism, body, mass: float) -> None:
         """Change the MJCF body (``mujoco.MjsBody``) of the added mass ``mass`` (kg) on ``mech``'s floor."""
@@ -421,6 +428,12 @@ class MechanismKind:
         (:meth:`~momentid.mechanisms.place.Place.above`)."""
         raise NotImplementedError(f"{self.name} has no force signal")
 
+    def size(self, sizer: Sizer, place: Place, params: dict, std: dict) -> Sized:
+        """How the diagnosis sizes a screened candidate of this kind at ``place``, from its screened
+        ``params`` and their standard errors ``std``: the model it sits on and its parameters
+        (:mod:`momentid.mechanisms.sizing`: a kind names its way among its bases, or brings its own)."""
+        raise ModelError(f"{self.name} is not sized by the diagnosis: it is not in its library")
+
     def damping_pattern(self, place: Place, storeys: int) -> np.ndarray:
         """For ``DAMPING_PATTERN`` kinds: its term (d, d) in the damping matrix C per unit of the fitted
         coefficient at ``place`` (a dashpot across a link: ``w w^T``, ``w`` its direction)."""
@@ -466,6 +479,9 @@ class SensorFault(MechanismKind):
 
     target = Target.CHANNEL
     refit = Refit.CORRECT_DATA
+
+    def size(self, sizer, place, params, std):
+        return size_correction(self, sizer, place, params, std)
 
     def channel_signature(self, signals: EquationSignals, group: str, floor: int):
         """The fault's term on channel ``group`` (``"a"`` or ``"q"``) of ``floor`` (0-based) in the

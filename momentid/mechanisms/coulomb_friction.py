@@ -8,6 +8,7 @@ import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import ResimulatedForce
 
 __all__ = ["CoulombFriction", "FRICTION_SMOOTHING", "SCREENING_SMOOTHING", "smooth_sign"]
 
@@ -31,7 +32,7 @@ def smooth_sign(x):
 
 
 @register
-class CoulombFriction(MechanismKind):
+class CoulombFriction(ResimulatedForce, MechanismKind):
     name = "coulomb_friction"
     target = Target.STOREY
     params = (Param("force", "N", "friction force, opposes the storey drift velocity", low=0.0, low_open=True,

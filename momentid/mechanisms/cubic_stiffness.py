@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import ResimulatedForce
 
 __all__ = ["CubicStiffness"]
 
 
 @register
-class CubicStiffness(MechanismKind):
+class CubicStiffness(ResimulatedForce, MechanismKind):
     name = "cubic_stiffness"
     target = Target.STOREY
     params = (Param("k3", "N/m^3", "cubic stiffness, + hardening / - softening", example=3.5e7),)

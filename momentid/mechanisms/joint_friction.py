@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Target
@@ -169,9 +170,14 @@ class JointFriction(MechanismKind):
     def storey_tendon(self, mech, stiffness, damping, weight_above, height):
         return stiffness - dict(mech.parameters)["stiffness"], damping
 
-    def storey_elements(self, spec, mech, lower_body, upper_joint, lower_joint, timestep):
-        return add_sliders(spec, dict(mech.parameters), mech.location, lower_body, upper_joint, lower_joint,
-                           timestep)
+    def elements(self, spec, mech, place, bodies, timestep):
+        # PGS: the table's huge armature swamps the Newton solver's convergence test, which then stops
+        # before the sliders' friction constraints hold; PGS solves them one by one.
+        spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
+        below, above = place.nodes
+        taken = add_sliders(spec, dict(mech.parameters), mech.location, bodies[below], f"q{above}",
+                            f"q{below}" if below > 0 else None, timestep)
+        return {below: taken}
 
     def describe(self, place, params, std):
         slip = float(backbone(params, params["slip_drift"]))

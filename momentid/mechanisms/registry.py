@@ -23,7 +23,7 @@ __all__ = ["REGISTRY", "register", "load", "get", "names", "library", "real_rig_
 REGISTRY: dict[str, MechanismKind] = {}
 
 #: Modules of the package that declare no kind.
-_INFRASTRUCTURE = {"base", "place", "registry"}
+_INFRASTRUCTURE = {"base", "place", "registry", "sizing"}
 
 
 def register(cls: type[MechanismKind]) -> type[MechanismKind]:

@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import json
 
+from momentid import mechanisms
+
 from benchmarks.common import hidden_rig, matrix_parser, run_cases, save, timed_diagnosis
 
-#: Fault field of ``[sensors.channel.*]`` -> the mechanism kind that names it.
-FAULT_KINDS = {"clock_offset": "sensor_delay", "gain": "sensor_gain", "bias": "sensor_bias"}
+#: Fault field of ``[sensors.channel.*]`` -> the mechanism kind that names it (the registry's).
+FAULT_KINDS = {key: kind.name for key, kind in mechanisms.sensor_settings().items()}
 
 PAIRS = [  # (hidden [truth] mechanisms, per-channel faults)
     ([{"type": "coulomb_friction", "storey": 2, "force": 0.3}], {"zdd": {"clock_offset": 0.01}}),

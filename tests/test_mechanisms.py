@@ -33,7 +33,7 @@ from momentid.diagnosis.screening import Domain, screen_equation, screen_storeys
 from momentid.errors import ModelError, ScenarioError
 from momentid.lab import rig
 from momentid.lab import simulation as sim
-from momentid.lab.scenario import ChannelFault, Sensors, parse_scenario
+from momentid.lab.scenario import ChannelFault, parse_scenario
 from momentid.lab.sensors import measure
 from momentid.mechanisms import registry
 from momentid.mechanisms.base import GRAVITY, Place, Target, storey_to_floor
@@ -160,28 +160,38 @@ def test_a_tuned_mass_damper_is_screened_at_its_floor():
     assert abs(best.parameters["mass"] - 1.0) < 0.3 and abs(best.parameters["frequency"] / 0.9 - 1) < 0.16
 
 
-#: Each sensor kind's parameter in the lab's sensor model (``[sensors.channel.*]``).
-CHANNEL_FAULTS = {"sensor_delay": "clock_offset", "sensor_gain": "gain", "sensor_bias": "bias"}
-
-
 @pytest.mark.parametrize("name", [k.name for k in mechanisms.REGISTRY.values() if k.target is Target.CHANNEL])
-def test_sensor_kinds_match_the_lab_sensor_model_and_undo(name):
+def test_the_lab_applies_each_sensor_fault_by_its_kind(name):
+    """One model of a sensor fault: ``[sensors.channel.X]`` states it by the kind's setting, the lab's
+    sensor model applies the kind's own ``distort`` (bit for bit), and a fault that can be undone is."""
     kind = mechanisms.get(name)
-    value = kind.fitted.example
+    value = kind.setting.example
     t = np.arange(4000) / 1000.0
     x = np.sin(2 * np.pi * 2.0 * t)
     distorted = kind.distort(t, x, {kind.fitted.name: value})
-    inner = slice(100, -100)   # away from the ends, where a shifted record has no samples to read
-    # Undoing a fault by interpolation: linear interpolation of a 2 Hz sine at 1 kHz, twice, errs
-    # by ~(2 pi 2 / 1000)^2 / 8 ~ 2e-5 of its amplitude; 1e-4 bounds it.
-    assert np.max(np.abs(kind.correct(t, distorted, {kind.fitted.name: value})[inner] - x[inner])) < 1e-4
-    if name in CHANNEL_FAULTS:
-        channels = ("zdd", "z", "zd", "a1", "q1", "v1")
-        run = RunData("r", np.zeros(1), t, channels, np.column_stack([x] * len(channels)))
-        fault = ChannelFault(**{CHANNEL_FAULTS[name]: value})
-        lab = measure(run, Sensors(faults=(("a1", fault),)), seed=0, run_index=0)["a1"]
-        # The lab shifts by cubic interpolation, the kind by linear: the difference above, again.
-        assert np.max(np.abs(lab[inner] - distorted[inner])) < 1e-4
+    channels = ("zdd", "z", "zd", "a1", "q1", "v1")
+    run = RunData("r", np.zeros(1), t, channels, np.column_stack([x] * len(channels)))
+    data = tomllib.loads((SCENARIOS / "hidden" / "clean.toml").read_text())
+    data["sensors"] = {"set": "all", "channel": {"a1": {kind.setting.name: value}}}
+    sensors = parse_scenario(data, source=SCENARIOS / "hidden" / "fault.toml").sensors
+    assert sensors.fault("a1") == ChannelFault((kind.record("a1", value),))
+    assert np.array_equal(measure(run, sensors, seed=0, run_index=0)["a1"], distorted)
+    assert not np.array_equal(distorted, x)
+    if kind.reversible:
+        inner = slice(100, -100)   # away from the ends, where a shifted record has no samples to read
+        # Undoing a fault by interpolation: linear interpolation of a 2 Hz sine at 1 kHz errs by
+        # ~(2 pi 2 / 1000)^2 / 8 ~ 2e-5 of its amplitude; 1e-4 bounds it.
+        assert np.max(np.abs(kind.correct(t, distorted, {kind.fitted.name: value})[inner] - x[inner])) < 1e-4
+
+
+def test_a_channel_fault_outside_its_bounds_or_unknown_is_refused():
+    data = tomllib.loads((SCENARIOS / "hidden" / "clean.toml").read_text())
+    data["sensors"]["channel"] = {"a1": {"gain": 0.0}}
+    with pytest.raises(ScenarioError, match=r"sensors.channel.a1.gain.*positive"):
+        parse_scenario(data, source=SCENARIOS / "hidden" / "fault.toml")
+    data["sensors"]["channel"] = {"a1": {"wobble": 1.0}}
+    with pytest.raises(ScenarioError, match=r"unknown key 'sensors.channel.a1.wobble'.*clock_offset"):
+        parse_scenario(data, source=SCENARIOS / "hidden" / "fault.toml")
 
 
 def test_truth_records_are_validated_against_the_parameter_bounds():

@@ -44,6 +44,7 @@ from threadpoolctl import threadpool_limits
 
 from momentid.core.series import Experiment
 from momentid.diagnosis.compound import Compound, Correction, extend
+from momentid.diagnosis.data_check import diagnose_data
 from momentid.diagnosis.discovery import as_unexplained, challenge, discover
 from momentid.diagnosis.refit import noise_carrier, noise_ratios
 from momentid.diagnosis.replay import replay_check
@@ -80,7 +81,13 @@ def diagnose(experiment: Experiment, *, replay: bool = True, hold_out: str | Non
     Returns
     -------
     Diagnosis
+        When a recorded channel shows a fault by itself (a saturation's clipped peaks), that fault, named
+        with no model (:func:`momentid.diagnosis.data_check.diagnose_data`): the model-based stages need
+        channels without it.
     """
+    named = diagnose_data(experiment)   # what the channels show by themselves (a saturation) comes first
+    if named is not None:
+        return named
     if not any(np.any(run.added_mass) for run in experiment.runs):
         from momentid.diagnosis import twin_diagnose
         if twin_diagnose.applies(experiment):        # stated masses, 3+ trials: on the MuJoCo twin

@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from momentid.core.clipping import find_clipping, runs_of
 from momentid.core.series import RunData, channel_unit
 from momentid.errors import SensorDataError
 
@@ -22,20 +23,6 @@ MAX_REPAIR_GAP = 5
 #: Largest deviation of one sample interval from the median, as a fraction of
 #: it, that :func:`check_run` still calls even sampling (logger clock jitter).
 _TIME_STEP_TOLERANCE = 1e-3
-
-#: A flat run at a channel's peak entered or left by a step larger than this
-#: many quantisation steps is clipping; a quantised smooth peak is entered by one.
-_CLIP_STEP_QUANTA = 2.5
-
-#: Relative tolerance for "at the peak value" (floating-point round-off only).
-_PEAK_TOLERANCE = 1e-12
-
-
-def _runs_of(mask: np.ndarray):
-    """(start, stop) of every run of True in a boolean vector."""
-    padded = np.concatenate([[False], mask, [False]])
-    edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
-    return list(zip(edges[::2], edges[1::2]))
 
 
 def check_run(run: RunData, source: str = "<memory>", *, clip_samples: int = 3) -> tuple[RunData, tuple[str, ...]]:
@@ -75,7 +62,7 @@ def check_run(run: RunData, source: str = "<memory>", *, clip_samples: int = 3) 
         if missing.any():
             if missing.all():
                 raise SensorDataError(f"{where}: channel {name} has no finite sample")
-            for a, b in _runs_of(missing):
+            for a, b in runs_of(missing):
                 if b - a > MAX_REPAIR_GAP or a == 0 or b == x.size:
                     raise SensorDataError(
                         f"{where}: channel {name} is missing {b - a} samples from t = {t[a]:.6g} s: "
@@ -89,24 +76,12 @@ def check_run(run: RunData, source: str = "<memory>", *, clip_samples: int = 3) 
 
 
 def check_clipping(where: str, name: str, x: np.ndarray, clip_samples: int = 3) -> None:
-    """A flat run at the channel's extreme, entered or left by a step larger
-    than the channel's quantisation, is clipping (a quantised smooth peak is
-    entered by one quantum)."""
-    peak = float(np.max(np.abs(x)))
-    if peak == 0:
-        return
-    levels = np.unique(x)
-    quantum = float(np.min(np.diff(levels))) if levels.size > 1 else peak
-    at_peak = np.abs(np.abs(x) - peak) <= _PEAK_TOLERANCE * peak
-    for a, b in _runs_of(at_peak):
-        if b - a < clip_samples:
-            continue
-        steps = [abs(x[a] - x[a - 1])] if a > 0 else []
-        steps += [abs(x[b] - x[b - 1])] if b < x.size else []
-        if steps and max(steps) > _CLIP_STEP_QUANTA * quantum:
-            raise SensorDataError(
-                f"{where}: channel {name} is clipped: {b - a} consecutive samples at {x[a]:.6g} "
-                f"{channel_unit(name)} from t-index {a}; expected a transducer range above the signal (drop "
-                f"the channel or re-record)"
-            )
-
+    """Refuse a clipped channel (:func:`find_clipping`): its shape at the clipped peaks is not the
+    structure's.  (The diagnosis reads the same finding as a candidate, a sensor saturation.)"""
+    found = find_clipping(x, clip_samples)
+    if found is not None:
+        raise SensorDataError(
+            f"{where}: channel {name} is clipped: {found.first_run} consecutive samples at {found.first_value:.6g} "
+            f"{channel_unit(name)} from t-index {found.first}; expected a transducer range above the signal (drop "
+            f"the channel or re-record)"
+        )

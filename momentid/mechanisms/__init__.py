@@ -11,9 +11,9 @@ import sys
 from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit
 from momentid.mechanisms.place import Place, Target
 from momentid.mechanisms.registry import (REGISTRY, get, library, load, names, open_search_kind, register, rig_kinds,
-                                          validate)
+                                          sensor_settings, validate)
 
 load(sys.modules[__name__])
 
 __all__ = ["GRAVITY", "MechanismKind", "Param", "Place", "Refit", "Target", "REGISTRY", "get", "library", "load",
-           "names", "open_search_kind", "register", "rig_kinds", "validate"]
+           "names", "open_search_kind", "register", "rig_kinds", "sensor_settings", "validate"]

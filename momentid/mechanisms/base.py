@@ -50,7 +50,7 @@ from momentid.mechanisms.place import Place, Target
 from momentid.mechanisms.sizing import Sized, Sizer, size_correction
 
 __all__ = ["GRAVITY", "Target", "Place", "Refit", "Param", "MechanismKind", "SensorFault", "Screened",
-           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance"]
+           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance", "SensorStage"]
 
 GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
 
@@ -470,15 +470,47 @@ class MechanismKind:
         return f"Best explanation: {self.name.replace('_', ' ')} at {place.words}: {p}."
 
 
-class SensorFault(MechanismKind):
-    """A fault of one sensor channel, undone on the recordings (``Refit.CORRECT_DATA``).
+class SensorStage(enum.Enum):
+    """Where in a channel's front end a sensor fault acts (:func:`momentid.lab.sensors.measure` applies
+    every fault of ``[sensors.channel.X]`` at its stage, in this order)."""
 
-    A subclass states its fault's term in the floor equations on a floor's accelerometer or
-    displacement channel (:meth:`channel_signature`); screening fits it on every channel.
+    SIGNAL = "signal"    # on the true signal, before the anti-alias filter and the sampling (a clock offset)
+    GAIN = "gain"        # on the sampled signal, before the instrument's own bias (a sensitivity)
+    OFFSET = "offset"    # after the instrument's own bias (an offset)
+    RANGE = "range"      # on the reading, noise and quantisation included (a saturation)
+
+
+class SensorFault(MechanismKind):
+    """A fault of one sensor channel: one model, the lab's and the diagnosis's.
+
+    The lab applies it from a scenario's ``[sensors.channel.X]`` (the key :attr:`setting`, at its
+    :attr:`stage`) through :meth:`distort`; the diagnosis undoes it on the recordings
+    (:meth:`correct`, ``Refit.CORRECT_DATA``) when it can be undone (:attr:`reversible`).  A subclass
+    states its fault's term in the floor equations on a floor's accelerometer or displacement channel
+    (:meth:`channel_signature`), which screening fits on every channel, or what a look at the recorded
+    channel alone finds (:meth:`inspect`).
     """
 
     target = Target.CHANNEL
     refit = Refit.CORRECT_DATA
+    #: The key of ``[sensors.channel.X]`` that states this fault in a scenario, with its unit and bounds
+    #: (its value is the fault's :attr:`fitted` parameter).
+    setting: ClassVar[Param]
+    #: Where in the channel's front end the lab applies it.
+    stage: ClassVar[SensorStage] = SensorStage.OFFSET
+    #: The fault can be undone on a recording (:meth:`correct`); one that cannot is applied to the
+    #: model's readings instead when the diagnosis replays it.
+    reversible: ClassVar[bool] = True
+
+    def record(self, channel: str, value: float) -> Mechanism:
+        """This fault on ``channel`` at ``value`` (its :attr:`setting`) as the lab applies it."""
+        return Mechanism(self.name, channel, ((self.fitted.name, float(value)),))
+
+    def inspect(self, run: RunData, channel: str) -> tuple[dict, float] | None:
+        """What the recorded ``channel`` of ``run`` shows of this fault by itself, with no model: its
+        parameters and the share of the channel's samples it holds, or None (the default: a fault only
+        the model-based checks see)."""
+        return None
 
     def size(self, sizer, place, params, std):
         return size_correction(self, sizer, place, params, std)

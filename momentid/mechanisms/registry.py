@@ -17,7 +17,7 @@ from momentid.mechanisms.base import MechanismKind
 from momentid.mechanisms.place import Target
 
 __all__ = ["REGISTRY", "register", "load", "get", "names", "library", "real_rig_kinds", "rig_kinds", "open_search_kind",
-           "validate"]
+           "validate", "sensor_settings"]
 
 #: name -> kind, in the order the package's modules are imported (alphabetical).
 REGISTRY: dict[str, MechanismKind] = {}
@@ -71,6 +71,11 @@ def real_rig_kinds() -> tuple[MechanismKind, ...]:
 def rig_kinds() -> tuple[MechanismKind, ...]:
     """The kinds a rig's model can carry (a scenario's ``[truth]``): every kind but the sensor faults."""
     return tuple(k for k in REGISTRY.values() if k.target is not Target.CHANNEL)
+
+
+def sensor_settings() -> dict[str, MechanismKind]:
+    """The sensor-fault kinds by the key that states each in a scenario's ``[sensors.channel.X]``."""
+    return {k.setting.name: k for k in REGISTRY.values() if k.target is Target.CHANNEL and hasattr(k, "setting")}
 
 
 def open_search_kind(target: Target) -> MechanismKind:

@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 import momentid as mi
-from momentid.diagnosis import twin_folds, twin_fit
+from momentid.diagnosis import twin_folds
+from momentid.twin import fit as twin_fit
 from momentid.diagnosis.pipeline import diagnose
 from momentid.estimation.scaled import amplitude_trend, identify_per_run
 from momentid.lab import resim

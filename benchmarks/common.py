@@ -197,7 +197,7 @@ def hidden_rig(truth=(), faults=None, noise: float = 0.01, excitation: dict | No
 def timed_diagnosis(scenario):
     """The diagnosis of ``scenario``'s simulated recordings and its time (s), the simulation not counted."""
     import momentid as mi
-    from momentid.diagnosis.pipeline import diagnose
+    from momentid.diagnosis.dispatch import diagnose
 
     experiment = mi.simulate(scenario)
     start = time.perf_counter()

@@ -56,7 +56,7 @@ import momentid as mi
 from benchmarks.common import HIDDEN_RIG, ROOT, run_cases, save
 from benchmarks.diagnosis_compound import FAULT_KINDS
 from momentid.core.analytic import modal_properties
-from momentid.diagnosis.pipeline import diagnose
+from momentid.diagnosis.dispatch import diagnose
 from momentid.errors import SimulationError
 from momentid.lab.scenario import parse_scenario
 

@@ -27,7 +27,7 @@ The names below are the ones most scripts need.
 from momentid.core.analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement, Mechanism, Structure
-from momentid.diagnosis.pipeline import Diagnosis, diagnose
+from momentid.diagnosis.dispatch import Diagnosis, diagnose
 from momentid.errors import (
     IdentificationError,
     ModelError,

@@ -248,7 +248,7 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_diagnose(args) -> int:
-    from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.diagnosis.dispatch import diagnose, write_report
     from momentid.diagnosis.report import REPORT_FILES, report_folder
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording

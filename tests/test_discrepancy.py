@@ -14,7 +14,7 @@ import momentid as mi
 from momentid import mechanisms
 from momentid.cli import main
 from momentid.diagnosis.data_check import DataEvidence
-from momentid.diagnosis.pipeline import diagnose, write_report
+from momentid.diagnosis.dispatch import diagnose, write_report
 
 from conftest import SCENARIOS, load
 

@@ -11,7 +11,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from momentid.diagnosis import modal_check as mc
+from momentid.diagnosis.modal import check as mc
 from momentid.twin import fit as twin_fit
 from momentid.lab import resim
 from momentid.lab.sensors import gain_and_delay

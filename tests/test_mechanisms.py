@@ -28,8 +28,8 @@ from momentid import mechanisms
 from momentid.core.analytic import modal_properties
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism
-from momentid.diagnosis.residuals import ResidualRow, floor_residual
-from momentid.diagnosis.screening import Domain, screen_equation, screen_storeys
+from momentid.diagnosis.added_mass.residuals import ResidualRow, floor_residual
+from momentid.diagnosis.added_mass.screening import Domain, screen_equation, screen_storeys
 from momentid.errors import ModelError, ScenarioError
 from momentid.lab import rig
 from momentid.lab import simulation as sim

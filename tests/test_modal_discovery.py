@@ -1,4 +1,4 @@
-"""The open search of the modal path (:mod:`momentid.diagnosis.modal_discovery`) on simulated
+"""The open search of the modal path (:mod:`momentid.diagnosis.modal.open_search`) on simulated
 accelerometer-only rigs: 120 Hz, no added mass, like ``tests/test_real_diagnose.py``'s, but with a
 cubic spring in storey 1 (a rig that stiffens with its drift), simulated by an independent
 fixed-step RK4 of the shear building at 8 sub-steps per sample."""
@@ -12,9 +12,9 @@ import pytest
 
 import momentid as mi
 from momentid.core.series import RunData
-from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis.modal_discovery import MIN_HELD_OUT_GAIN, discover_modal
-from momentid.diagnosis.real import diagnose_modal
+from momentid.diagnosis.modal import check as mc
+from momentid.diagnosis.modal.open_search import MIN_HELD_OUT_GAIN, discover_modal
+from momentid.diagnosis.modal.path import diagnose_modal
 from momentid.diagnosis.report import write_report
 
 from test_real_diagnose import DURATION, FS, LEAD_IN, MASSES, SIGMA, STIFFNESS, lab

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from threadpoolctl import threadpool_limits
 
-from momentid.diagnosis import selection
-from momentid.diagnosis.residuals import equation_residuals, fit_linear_model
-from momentid.diagnosis.selection import screen
-from momentid.diagnosis.sensor_check import check_sensors
+from momentid.diagnosis.added_mass import selection as selection
+from momentid.diagnosis.added_mass.residuals import equation_residuals, fit_linear_model
+from momentid.diagnosis.added_mass.selection import screen
+from momentid.diagnosis.added_mass.sensor_faults import check_sensors
 
 
 def _screened(experiment):
@@ -33,8 +33,8 @@ def test_replays_on_the_workers_are_replays_in_turn(simulated, monkeypatch):
     """A size search replays its grid and its curvature's neighbours side by side, and a score its
     training runs: the same numbers as one after the other."""
     from momentid import mechanisms
-    from momentid.diagnosis import refit
-    from momentid.diagnosis.replay import Entry, records
+    from momentid.diagnosis.added_mass import resimulation as refit
+    from momentid.diagnosis.added_mass.augmented import Entry, records
 
     experiment = simulated("hidden/friction_storey2")
     with threadpool_limits(limits=1, user_api="blas"):
@@ -64,7 +64,7 @@ def test_the_size_searchs_opening_is_the_one_scipy_asks_for():
     import numpy as np
     import scipy.optimize
 
-    from momentid.diagnosis.refit import brent_opening
+    from momentid.diagnosis.added_mass.resimulation import brent_opening
     grid = np.linspace(math.log(0.3), math.log(3.0), 11)
     for bounds, xatol in (((math.log(0.5 * 0.2), math.log(5.0 * 0.2)), 0.005), ((math.log(0.5), math.log(2.0)), 0.02),
                           ((grid[3], grid[5]), 0.005)):

@@ -21,7 +21,7 @@ from momentid.cli import main
 from momentid.core.analytic import modal_properties
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
-from momentid.diagnosis.modal_check import replay as modal_replay
+from momentid.diagnosis.modal.check import replay as modal_replay
 from momentid.lab import rig
 from momentid.lab.scenario import parse_scenario
 from momentid.twin import (ExtraMode, SensorModel, TwinParameters, build_twin, model_matrices, read_twin,

@@ -18,8 +18,8 @@ from pathlib import Path
 from momentid import mechanisms
 from momentid.core.series import Experiment, channel_unit
 from momentid.diagnosis import figures
-from momentid.diagnosis.replay import measured_groups
-from momentid.diagnosis.residuals import nrmse
+from momentid.diagnosis.added_mass.augmented import measured_groups
+from momentid.diagnosis.added_mass.residuals import nrmse
 from momentid.diagnosis.result import Diagnosis, Evidence
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.errors import SimulationError

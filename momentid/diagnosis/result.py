@@ -14,10 +14,10 @@ contract, ``report.json`` and ``--json``):
 - the open search's law (``discovered``), the augmented MJCF, the curves of the held-out run, and
   what reading the recording recovered (``notes``);
 - the **evidence** of the path that produced it (an :class:`Evidence`, which words and draws it):
-  :class:`~momentid.diagnosis.added_mass_words.AddedMassEvidence` (a rig identified with added masses:
-  residuals, screening, selection, localisation) or :class:`~momentid.diagnosis.modal_words.ModalEvidence`
+  :class:`~momentid.diagnosis.added_mass.words.AddedMassEvidence` (a rig identified with added masses:
+  residuals, screening, selection, localisation) or :class:`~momentid.diagnosis.modal.words.ModalEvidence`
   (accelerometers only: the modal model's per-channel misfit, its training fits, the amplitude model) or
-  :class:`~momentid.diagnosis.twin_words.TwinEvidence` (accelerometers only, on the rig's calibrated MuJoCo
+  :class:`~momentid.diagnosis.twin.words.TwinEvidence` (accelerometers only, on the rig's calibrated MuJoCo
   twin: the rig-state check, the training trials, the fitted twins, the reference figure, ``twin.xml``).
 """
 
@@ -59,7 +59,7 @@ class Evidence(abc.ABC):
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """Result of :func:`~momentid.diagnosis.pipeline.diagnose` for every kind of recording
+    """Result of :func:`~momentid.diagnosis.dispatch.diagnose` for every kind of recording
     (``report.json`` is :meth:`to_dict`; see the module docstring).
 
     Attributes

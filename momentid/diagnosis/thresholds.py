@@ -5,9 +5,9 @@ from __future__ import annotations
 __all__ = ["EXCESS", "EXPLAINED", "ACCEPTED", "NOTHING_TO_EXPLAIN", "BLOCK_S", "removed_share"]
 
 #: A residual above this multiple of its noise-only level counts as a mismatch: equation and replay
-#: residual RMS (:mod:`~momentid.diagnosis.residuals`), storey/run/window excess
-#: (:mod:`~momentid.diagnosis.locate`) and the kinematic check's weighted residual power per
-#: frequency bin (:mod:`~momentid.diagnosis.consistency`).  Noise alone gives ratios near 1; 1.3
+#: residual RMS (:mod:`~momentid.diagnosis.added_mass.residuals`), storey/run/window excess
+#: (:mod:`~momentid.diagnosis.added_mass.locate`) and the kinematic check's weighted residual power per
+#: frequency bin (:mod:`~momentid.diagnosis.added_mass.kinematic_check`).  Noise alone gives ratios near 1; 1.3
 #: leaves room for the scatter of the estimates and the approximations of the noise propagation.
 EXCESS = 1.3
 

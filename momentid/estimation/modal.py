@@ -344,7 +344,7 @@ def fit_modal(model: ModalModel, runs, frequency_hz, *, masses=None, stated=None
     Starts: the picked resonances (:data:`START_DAMPING`), and the subspace estimate's poles nearest
     to them when it finds all ``d``; each completed by :func:`linear_start`.  See :func:`refine`.
     The first-order hold by default: the diagnosis replays this fit by an exact first-order-hold
-    simulation (:mod:`momentid.diagnosis.modal_check`), which it must match; ``identify`` uses
+    simulation (:mod:`momentid.diagnosis.modal.check`), which it must match; ``identify`` uses
     :func:`momentid.estimation.modal_select.select_modes` and the band-limited response.
 
     Parameters

@@ -1,7 +1,7 @@
 """Recorded data checked before identification: refused, or repaired and reported.
 
 :func:`check_run` is what every estimator (:mod:`~momentid.estimation.identification`,
-:mod:`~momentid.estimation.scaled`) and the modal diagnosis (:mod:`momentid.diagnosis.modal_check`)
+:mod:`~momentid.estimation.scaled`) and the modal diagnosis (:mod:`momentid.diagnosis.modal.check`)
 run on a recorded run first.
 """
 

@@ -246,10 +246,10 @@ class MechanismKind:
     fitted: ClassVar[Param | None] = None
     #: Built into rigs but outside the diagnosis library (its answer is "unexplained").
     truth_only: ClassVar[bool] = False
-    #: The open search's law at its target (:mod:`momentid.diagnosis.discovery` builds its records).
+    #: The open search's law at its target (:mod:`momentid.diagnosis.added_mass.open_search` builds its records).
     open_search: ClassVar[bool] = False
     #: Fitted by re-simulation on a real rig's MuJoCo twin (the accelerometer-only diagnosis,
-    #: :mod:`momentid.diagnosis.twin_diagnose`), whatever ``truth_only`` says of the added-mass one.
+    #: :mod:`momentid.diagnosis.twin.path`), whatever ``truth_only`` says of the added-mass one.
     real_rig: ClassVar[bool] = False
     #: A force the MJCF cannot express (a storey force, or a link force between a floor and the table
     #: or two floors), applied by the simulator's control callback.
@@ -266,7 +266,7 @@ class MechanismKind:
     dissipative: ClassVar[bool] = False
     #: A linear storey spring (a loss of stiffness) the identified K takes in, in every run alike: an
     #: identified model shows it only through what the added masses change; the lab's nominal model
-    #: shows it whole (see :func:`~momentid.diagnosis.screening.linear_springs_left`).
+    #: shows it whole (see :func:`~momentid.diagnosis.added_mass.screening.linear_springs_left`).
     linear_spring: ClassVar[bool] = False
     #: A kind that adds bodies, joints and tendons of its own to the MJCF at its place (:meth:`elements`),
     #: e.g. ``joint_friction``'s sliders across a storey, ``tuned_mass_damper``'s body hung on a floor.
@@ -419,7 +419,7 @@ class MechanismKind:
 
     def from_kinematic(self, fit) -> tuple[dict, dict, float] | None:
         """For ``kinematic`` kinds: (parameters, standard errors, share explained) of this fault from the
-        kinematic check's fit on one channel (:class:`~momentid.diagnosis.consistency.SensorFit`)."""
+        kinematic check's fit on one channel (:class:`~momentid.diagnosis.added_mass.kinematic_check.SensorFit`)."""
         return None
 
     def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above) -> np.ndarray:

@@ -7,7 +7,7 @@ on the floor's velocity; it only pushes (its force is clipped at zero when the f
 faster than the spring relaxes).  ``pounding`` is the one-sided case on the + side.
 
 Truth only: hidden scenarios carry it to test the diagnosis's open search (physics outside the
-library, :mod:`momentid.diagnosis.discovery`).
+library, :mod:`momentid.diagnosis.added_mass.open_search`).
 """
 
 from __future__ import annotations

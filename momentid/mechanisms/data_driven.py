@@ -1,5 +1,5 @@
 """A force discovered from the data: a sparse sum of terms of one storey's drift, or of one floor's
-displacement against the table (the diagnosis's open search, :mod:`momentid.diagnosis.discovery`).
+displacement against the table (the diagnosis's open search, :mod:`momentid.diagnosis.added_mass.open_search`).
 
 The force (N, positive resists ``x``) is ``sum_i c_i phi_i(x, v, t, z)`` over the terms of
 :data:`TERMS`, with ``x`` the storey drift or floor displacement (m), ``v`` its rate (m/s), ``t``

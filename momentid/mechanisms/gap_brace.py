@@ -5,7 +5,7 @@ drift ``x`` exceeds the slack ``gap`` either way; beyond it the brace adds its `
 ``stiffness sign(x) max(|x| - gap, 0)``.
 
 Truth only: hidden scenarios carry it to test the diagnosis's open search (physics outside the
-library, :mod:`momentid.diagnosis.discovery`).
+library, :mod:`momentid.diagnosis.added_mass.open_search`).
 """
 
 from __future__ import annotations

@@ -160,7 +160,7 @@ class JointFriction(MechanismKind):
                     "damping grow as A^(chi+1))", low=-0.95, high=2.0, example=-0.4))
     #: The added-mass diagnosis has no screening signature for it yet (it would call it "unexplained"); the
     #: real rig's twin fits it by re-simulation (:mod:`momentid.twin.fit`, used by
-    #: :mod:`momentid.diagnosis.twin_diagnose`: ``momentid diagnose`` of accelerometer-only recordings).
+    #: :mod:`momentid.diagnosis.twin.path`: ``momentid diagnose`` of accelerometer-only recordings).
     truth_only = True
     real_rig = True
     mjcf_elements = True

@@ -6,7 +6,7 @@ penetration and a dashpot ``damping`` on the floor's velocity; it only pushes (t
 clipped at zero when the floor pulls away faster than the spring relaxes).
 
 Truth only: hidden scenarios carry it to test the diagnosis's open search (physics outside the
-library, :mod:`momentid.diagnosis.discovery`).
+library, :mod:`momentid.diagnosis.added_mass.open_search`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """How a kind sizes a screened candidate: each kind brings its own (:meth:`MechanismKind.size`).
 
 The diagnosis hands a kind a :class:`Sizer` (its re-simulation of the training runs:
-:class:`momentid.diagnosis.refit.Refitter`) and the screened parameters; the kind returns the model it
+:class:`momentid.diagnosis.added_mass.resimulation.Refitter`) and the screened parameters; the kind returns the model it
 is sized on and its parameters (:class:`Sized`).  The usual ways, one mix-in class each, which a kind
 names among its bases (a kind with a way of its own overrides :meth:`size`, as
 :mod:`~momentid.mechanisms.tuned_mass_damper` does):

@@ -470,7 +470,7 @@ def nrmse(model: FittedRig, tr: Trial, substeps: int | None = None) -> float:
 
 def twin_modes(model: FittedRig):
     """``(omega (rad/s), zeta, residues (d modes, d floors))`` of the twin's stuck (small-drift) linear part,
-    in :func:`~momentid.diagnosis.modal_check.replay`'s form."""
+    in :func:`~momentid.diagnosis.modal.check.replay`'s form."""
     m = np.asarray(model.masses, float)
     m_half = np.sqrt(m)
     w2, psi = np.linalg.eigh(np.asarray(model.stiffness) / m_half[:, None] / m_half[None, :])

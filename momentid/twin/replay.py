@@ -13,7 +13,7 @@ and held by the storeys' springs; the table's own position, which a biased accel
 away, enters no force and no reading.
 
 Score: ``NRMSE = sqrt(sum_j |a_j - a_j,twin|^2 / sum_j |a_j - mean_j|^2)`` over the floor sensors and
-the samples after the quiet lead-in (the definition of :mod:`momentid.diagnosis.modal_check`), with
+the samples after the quiet lead-in (the definition of :mod:`momentid.diagnosis.modal.check`), with
 one constant per sensor fitted (its bias); beside it, the NRMSE the sensors' noise alone leaves
 (levels from :func:`momentid.estimation.noise.estimate_noise`): the floor sensors' own, and the table
 sensor's, which drives the twin and reaches the floors through it.

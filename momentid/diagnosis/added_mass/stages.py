@@ -1,8 +1,8 @@
-"""Stages 1-6 of the diagnosis in one call: from an experiment to stage 6's finding.
+"""Stages 1-6 of the added-mass diagnosis in one call: from an experiment to stage 6's finding.
 
-:func:`~momentid.diagnosis.pipeline.diagnose` runs them once, and again on recordings a compound
-diagnosis (:mod:`~momentid.diagnosis.compound`) asks to have corrected: each run has its own
-:class:`~momentid.diagnosis.refit.Refitter`, nothing is shared between them.
+:func:`~momentid.diagnosis.added_mass.path.diagnose_added_mass` runs them once, and again on recordings a compound
+diagnosis (:mod:`~momentid.diagnosis.added_mass.compound`) asks to have corrected: each run has its own
+:class:`~momentid.diagnosis.added_mass.resimulation.Refitter`, nothing is shared between them.
 """
 
 from __future__ import annotations
@@ -10,18 +10,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from momentid.core.series import Experiment
-from momentid.diagnosis.locate import Localisation, locate
-from momentid.diagnosis.refit import Refitter
-from momentid.diagnosis.residuals import EquationResiduals, LinearModel, equation_residuals, fit_linear_model
-from momentid.diagnosis.selection import Finding, Screening, choose, screen, select
-from momentid.diagnosis.sensor_check import SensorCheck, check_sensors
+from momentid.diagnosis.added_mass.locate import Localisation, locate
+from momentid.diagnosis.added_mass.resimulation import Refitter
+from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel, equation_residuals, fit_linear_model
+from momentid.diagnosis.added_mass.selection import Finding, Screening, choose, screen, select
+from momentid.diagnosis.added_mass.sensor_faults import SensorCheck, check_sensors
 
 __all__ = ["Stages", "run_stages"]
 
 
 @dataclass(frozen=True)
 class Stages:
-    """The results of stages 1-6 (see :mod:`momentid.diagnosis.pipeline`)."""
+    """The results of stages 1-6 (see :mod:`momentid.diagnosis.dispatch`)."""
 
     model: LinearModel
     residuals: EquationResiduals

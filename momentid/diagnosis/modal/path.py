@@ -1,22 +1,22 @@
 """Diagnosis of recordings without added mass: a held-out check of the modal model and a verdict.
 
 Its result is the :class:`~momentid.diagnosis.result.Diagnosis` of every recording, with a
-:class:`~momentid.diagnosis.modal_words.ModalEvidence`, which words it.
+:class:`~momentid.diagnosis.modal.words.ModalEvidence`, which words it.
 
-:func:`diagnose_modal` is what :func:`momentid.diagnosis.pipeline.diagnose` runs when no run adds
+:func:`diagnose_modal` is what :func:`momentid.diagnosis.dispatch.diagnose` runs when no run adds
 mass (real labs: accelerometers only, no added-mass runs).  Stages:
 
 1. **Hold-out**: the run the user names, else the last run of the recording (as on the added-mass
    path); the others train.  With a single run there is nothing to hold out: it is checked in-sample
    and the report says so.
 2. **Linear model**: the modal model fitted on each training run
-   (:func:`~momentid.diagnosis.modal_check.fit_runs`) and pooled into one amplitude-independent model
-   (:func:`~momentid.diagnosis.modal_check.pooled`: weighted mean modes, mean residues; a joint fit of
+   (:func:`~momentid.diagnosis.modal.check.fit_runs`) and pooled into one amplitude-independent model
+   (:func:`~momentid.diagnosis.modal.check.pooled`: weighted mean modes, mean residues; a joint fit of
    runs whose modes differ lets the sensor gains absorb the difference, 15 % on a simulated rig), replayed on the
    held-out run's measured table acceleration with the training runs' mean sensor gains and clock offsets:
    ``nrmse_before``.
 3. **Noise baseline**: what sensor noise alone leaves on the held-out run
-   (:func:`~momentid.diagnosis.modal_check.noise_nrmse`; levels from the lab's statement, the quiet
+   (:func:`~momentid.diagnosis.modal.check.noise_nrmse`; levels from the lab's statement, the quiet
    lead-in or a high band, valid at any rate).
 4. **Amplitude dependence** (the candidate the data can test): from the same per-run fits, each mode's
    frequency and damping ratio regressed on the run's response amplitude; the held-out run's modes
@@ -29,7 +29,7 @@ mass (real labs: accelerometers only, no added-mass runs).  Stages:
    Sensor clock offsets beyond :data:`LATE_SAMPLES` of a sample in every run are findings;
    rocking/out-of-plane motion is a stated limit (the recording holds the shaking axis only).
 6. **Open search** (when the verdict is not ``none`` and a run is held out): a nonlinear restoring law
-   on one mode (:mod:`~momentid.diagnosis.modal_discovery`), reported as ``discovered`` with whether it
+   on one mode (:mod:`~momentid.diagnosis.modal.open_search`), reported as ``discovered`` with whether it
    beats the linear model on the held-out run; the verdict does not change.
 """
 
@@ -40,9 +40,9 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from momentid.core.series import Experiment
-from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis.modal_discovery import discover_modal
-from momentid.diagnosis.modal_words import ModalEvidence
+from momentid.diagnosis.modal import check as mc
+from momentid.diagnosis.modal.open_search import discover_modal
+from momentid.diagnosis.modal.words import ModalEvidence
 from momentid.diagnosis.result import Diagnosis
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
 from momentid.diagnosis.verdict import Named, Verdict
@@ -132,7 +132,7 @@ def diagnose_modal(experiment: Experiment, *, hold_out: str | None = None) -> Di
     Returns
     -------
     Diagnosis
-        With a :class:`~momentid.diagnosis.modal_words.ModalEvidence`: the per-channel misfit, the
+        With a :class:`~momentid.diagnosis.modal.words.ModalEvidence`: the per-channel misfit, the
         training runs' pooled modal model, the amplitude model tried, the sensor findings.
 
     Raises

@@ -1,4 +1,4 @@
-"""Stage 5 of the diagnosis: refit a candidate and re-simulate its augmented MuJoCo model.
+"""Stage 6 of the added-mass diagnosis: size a candidate and re-simulate its augmented MuJoCo model.
 
 A candidate's kind sizes itself (:meth:`~momentid.mechanisms.base.MechanismKind.size`,
 :mod:`momentid.mechanisms.sizing`): a nonlinear force at a link is refitted with the linear model by
@@ -25,8 +25,8 @@ import scipy.optimize
 
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
-from momentid.diagnosis.replay import Entry, identified_structure, joint_replay, records
-from momentid.diagnosis.residuals import LinearModel, band_signals, nrmse, replay_noise
+from momentid.diagnosis.added_mass.augmented import Entry, identified_structure, joint_replay, records
+from momentid.diagnosis.added_mass.residuals import LinearModel, band_signals, nrmse, replay_noise
 from momentid.core.processes import run_forked
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
@@ -123,7 +123,7 @@ class Augmented:
 
     @property
     def entries(self) -> tuple[Entry, ...]:
-        """The model's mechanisms as :func:`~momentid.diagnosis.replay.joint_replay` replays them."""
+        """The model's mechanisms as :func:`~momentid.diagnosis.added_mass.augmented.joint_replay` replays them."""
         return () if self.kind is None else (Entry(self.kind, self.place, self.parameters),)
 
 
@@ -138,7 +138,7 @@ def _force_signature(entry: Entry, run: RunData, signals: dict, d: int):
 def refit_eiv(entries, runs, result, band, f_top) -> ForceRefit | None:
     """Errors-in-variables fit of the linear model together with the mechanisms' forces.
 
-    ``entries``: the :class:`~momentid.diagnosis.replay.Entry` of each force at a link
+    ``entries``: the :class:`~momentid.diagnosis.added_mass.augmented.Entry` of each force at a link
     (``RESIMULATE`` kinds), fitted jointly, each from its parameters' values.  None when the runs do
     not allow it.
     """
@@ -317,7 +317,7 @@ class Refitter:
 
     @staticmethod
     def entry(kind: MechanismKind, place: Place, params: dict) -> Entry:
-        """One mechanism of an augmented model (:class:`~momentid.diagnosis.replay.Entry`)."""
+        """One mechanism of an augmented model (:class:`~momentid.diagnosis.added_mass.augmented.Entry`)."""
         return Entry(kind, place, params)
 
     def structure_of(self, result) -> Structure:
@@ -486,7 +486,7 @@ class Refitter:
 
     def score_joint(self, structure: Structure, entries, mechanism_records) -> float:
         """:meth:`score` of a model with several mechanisms (:class:`Entry` each, applied as
-        :func:`~momentid.diagnosis.replay.joint_replay` does) and their ``mechanism_records``."""
+        :func:`~momentid.diagnosis.added_mass.augmented.joint_replay` does) and their ``mechanism_records``."""
         key = self._score_key(structure, entries, mechanism_records)
         if key not in self._scores:
             def replayed(run: RunData) -> float:

@@ -1,4 +1,5 @@
-"""The open search: when no mechanism of the library explains the misfit, model it from the data.
+"""Stage 8 of the added-mass diagnosis, the open search: when no mechanism of the library explains the misfit,
+model it from the data.
 
 :func:`discover` runs after selection when the verdict is ``unexplained``.  At every storey (a force
 against its drift) and every floor above the first against the table (floor 1 against the table
@@ -26,11 +27,11 @@ from threadpoolctl import threadpool_limits
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.function_library import ALWAYS, Selected, columns, hysteretic_columns, refine, select
-from momentid.diagnosis.interpret import describe, physics
-from momentid.diagnosis.refit import Resimulator, brent_opening
-from momentid.diagnosis.replay import Entry, measured_groups
-from momentid.diagnosis.residuals import EquationResiduals, LinearModel, blocks, nrmse
-from momentid.diagnosis.selection import Finding, OutsideLibrary, explained_share
+from momentid.diagnosis.discovered_physics import describe, physics
+from momentid.diagnosis.added_mass.resimulation import Resimulator, brent_opening
+from momentid.diagnosis.added_mass.augmented import Entry, measured_groups
+from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel, blocks, nrmse
+from momentid.diagnosis.added_mass.selection import Finding, OutsideLibrary, explained_share
 from momentid.diagnosis.thresholds import EXCESS
 from momentid.diagnosis.verdict import Verdict
 from momentid.core.processes import run_forked
@@ -86,7 +87,7 @@ class Discovery:
     plot : dict
         ``x`` (m), ``measured`` and ``law`` (N): the residual's force at the place and the discovered law.
     physics : dict
-        Its class of physics and that class's numbers (:func:`~momentid.diagnosis.interpret.physics`).
+        Its class of physics and that class's numbers (:func:`~momentid.diagnosis.discovered_physics.physics`).
     replaces : OutsideLibrary or None
         When it beat the physics the library named (:func:`challenge`): what, and the training NRMSEs.
     """
@@ -141,7 +142,7 @@ def search(rows, noise_floor: np.ndarray, d: int) -> Found | None:
     Parameters
     ----------
     rows : sequence of ResidualRow
-        The training runs' equation residual (:class:`~momentid.diagnosis.residuals.ResidualRow`).
+        The training runs' equation residual (:class:`~momentid.diagnosis.added_mass.residuals.ResidualRow`).
     noise_floor : ndarray, shape (d,)
         Per floor, the residual RMS sensor noise alone leaves (N).
     d : int
@@ -280,7 +281,7 @@ def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Resimu
     the named model's training replays stay above ``EXCESS`` x their noise level, the open search
     runs on the whole mismatch; its force wins when its training replays leave at most
     ``1 - BEATS_LIBRARY`` of the named model's misfit above noise.  ``replaces`` then says what it
-    beat (:class:`~momentid.diagnosis.selection.OutsideLibrary`).  None when the named physics
+    beat (:class:`~momentid.diagnosis.added_mass.selection.OutsideLibrary`).  None when the named physics
     includes a sensor fault the channels show, replays at the noise level, or the search finds
     nothing better.
 
@@ -295,11 +296,11 @@ def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Resimu
     named : Finding
         The named mechanisms' joint model (its ``structure`` and ``records``).
     entries : sequence of Entry
-        Each named mechanism (:class:`~momentid.diagnosis.replay.Entry`).
+        Each named mechanism (:class:`~momentid.diagnosis.added_mass.augmented.Entry`).
     before : float
         The held-out run's replay NRMSE through the linear model.
     confirmed : Candidate, optional
-        The sensor fault the channels show (:attr:`~momentid.diagnosis.sensor_check.SensorCheck.fault`).
+        The sensor fault the channels show (:attr:`~momentid.diagnosis.added_mass.sensor_faults.SensorCheck.fault`).
     """
     shown = confirmed is not None and any(e.kind.target is Target.CHANNEL and e.kind is confirmed.kind
                                           and e.place == confirmed.place for e in entries)

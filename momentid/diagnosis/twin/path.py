@@ -13,7 +13,7 @@ masses:
 3. **The linear twin** (``nrmse_before``): ``momentid twin`` calibrated on the training trials
    (:func:`momentid.twin.build_twin`), replayed on the held-out trial with its nominal sensors; its
    MJCF is ``twin.xml``.
-4. **Re-simulation** (:func:`~momentid.diagnosis.twin_folds.hold_out`): from that twin, the linear
+4. **Re-simulation** (:func:`~momentid.diagnosis.twin.folds.hold_out`): from that twin, the linear
    twin refitted to all training trials at once through MuJoCo (``nrmse_linear_refit``), the twin
    with ``joint_friction`` in every storey fitted the same way (``nrmse_after``; its MJCF is
    ``model_augmented.xml``), a linear twin fitted to the held-out trial itself (``nrmse_linear_own``)
@@ -29,7 +29,7 @@ masses:
    ``UNEXPLAINED``, located in words (floor sensor, mode band).
 
 The result is the :class:`~momentid.diagnosis.result.Diagnosis` of every recording, with a
-:class:`~momentid.diagnosis.twin_words.TwinEvidence`, which words it.
+:class:`~momentid.diagnosis.twin.words.TwinEvidence`, which words it.
 Its ``location`` is where the held-out misfit left is largest (floor sensor, mode band); the joints'
 places are their ``mechanisms`` entries'.
 """
@@ -41,13 +41,13 @@ import time
 import numpy as np
 
 from momentid.core.series import Experiment
-from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis import twin_folds
+from momentid.diagnosis.modal import check as mc
+from momentid.diagnosis.twin import folds as twin_folds
 from momentid.twin import fit as twin_fit
 from momentid.diagnosis.result import Diagnosis
 from momentid.estimation.rig_state import StateCheck, check_state
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
-from momentid.diagnosis.twin_words import TwinEvidence
+from momentid.diagnosis.twin.words import TwinEvidence
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.scaled import identify_per_run, weighted_line

@@ -16,9 +16,9 @@ from momentid.diagnosis.verdict import Verdict
 from momentid.mechanisms.place import Place
 
 if TYPE_CHECKING:
-    from momentid.diagnosis.locate import Localisation
-    from momentid.diagnosis.screening import Candidate
-    from momentid.diagnosis.selection import Selection
+    from momentid.diagnosis.added_mass.locate import Localisation
+    from momentid.diagnosis.added_mass.screening import Candidate
+    from momentid.diagnosis.added_mass.selection import Selection
 
 __all__ = ["AddedMassEvidence", "summary"]
 
@@ -70,7 +70,7 @@ class AddedMassEvidence(Evidence):
         figures.plot_replay(diag, path)
 
     def figures(self, diag: Diagnosis, folder: Path) -> list[str]:
-        from momentid.diagnosis.locate import plot_localisation
+        from momentid.diagnosis.added_mass.locate import plot_localisation
         plot_localisation(self.localisation.to_dict(), folder / "locate.png")
         return ["locate.png"]
 

@@ -1,5 +1,5 @@
 """What a diagnosis of accelerometer-only recordings by the modal model
-(:mod:`~momentid.diagnosis.real`) shows beside its verdict, and says in words."""
+(:mod:`~momentid.diagnosis.modal.path`) shows beside its verdict, and says in words."""
 
 from __future__ import annotations
 
@@ -9,14 +9,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from momentid.diagnosis import figures
-from momentid.diagnosis.modal_discovery import MIN_GAIN
+from momentid.diagnosis.modal.open_search import MIN_GAIN
 from momentid.diagnosis.result import Diagnosis, Evidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
 
 if TYPE_CHECKING:
-    from momentid.diagnosis.modal_check import AmplitudeModel
-    from momentid.diagnosis.modal_discovery import ModalDiscovery
+    from momentid.diagnosis.modal.check import AmplitudeModel
+    from momentid.diagnosis.modal.open_search import ModalDiscovery
 
 __all__ = ["ModalEvidence", "summary"]
 

@@ -1,7 +1,7 @@
 """Held-out check of the modal model on recordings without added mass (accelerometers only).
 
 Real labs record table and floor accelerations, often at 60-200 Hz, and add no mass: the
-equation-(3) residuals of :mod:`~momentid.diagnosis.residuals` need M, C, K, mu and
+equation-(3) residuals of :mod:`~momentid.diagnosis.added_mass.residuals` need M, C, K, mu and
 displacements, which such data cannot give.  What they can give is the modal model of
 :mod:`momentid.estimation.modal` (frequencies, damping ratios, residues, per-run sensor gains and
 clock offsets).  This module fits it on training runs and replays it on a held-out run:

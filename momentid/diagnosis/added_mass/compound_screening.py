@@ -1,7 +1,7 @@
-"""What a step of a compound diagnosis (:mod:`~momentid.diagnosis.compound`) screens: the library
+"""What a step of a compound diagnosis (:mod:`~momentid.diagnosis.added_mass.compound`) screens: the library
 on what the mechanisms found leave, in the equation residuals of the identified and the nominal
 model (each storey kind also on its own storey's shear residual, where a mechanism found elsewhere
-leaves nothing: :func:`~momentid.diagnosis.screening.screen_storeys`), and the damping pattern of C
+leaves nothing: :func:`~momentid.diagnosis.added_mass.screening.screen_storeys`), and the damping pattern of C
 refitted with the forces found; and which candidates of it are re-simulated (:func:`shortlist`).
 """
 
@@ -10,12 +10,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 from momentid import mechanisms
-from momentid.diagnosis.refit import ForceRefit
-from momentid.diagnosis.replay import Entry, identified_structure
-from momentid.diagnosis.screening import (Candidate, Domain, damping_pattern, linear_springs_left, remaining_excess,
-                                          screen_equation, screen_storeys)
-from momentid.diagnosis.selection import SHORTLIST_FLOOR
-from momentid.diagnosis.stages import Stages
+from momentid.diagnosis.added_mass.resimulation import ForceRefit
+from momentid.diagnosis.added_mass.augmented import Entry, identified_structure
+from momentid.diagnosis.added_mass.screening import (Candidate, Domain, damping_pattern, linear_springs_left,
+                                                     remaining_excess, screen_equation, screen_storeys)
+from momentid.diagnosis.added_mass.selection import SHORTLIST_FLOOR
+from momentid.diagnosis.added_mass.stages import Stages
 from momentid.diagnosis.thresholds import EXCESS
 from momentid.mechanisms.base import Refit
 from momentid.mechanisms.place import Target
@@ -33,7 +33,7 @@ def candidates(stages: Stages, entries) -> list[Candidate]:
     model, residuals = stages.model, stages.residuals
     # A sensor fault is undone on the data, not fitted; an attachment's equation signature is a grid
     # over frequencies, not a few columns: neither is carried as columns, and an attachment is not
-    # screened again (its replay screening, stage 4, is its test; the grid would cost most of the time).
+    # screened again (its replay screening, stage 5, is its test; the grid would cost most of the time).
     found = [(e.kind, e.place) for e in entries
              if e.kind.target is not Target.CHANNEL and e.kind.refit is not Refit.ATTACHMENT]
     storey_kinds = [k for k in mechanisms.library() if k.refit is Refit.RESIMULATE]

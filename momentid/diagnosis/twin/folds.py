@@ -10,7 +10,7 @@ For a held-out trial, with the other trials of the same rig state for training:
 * ``nrmse_linear_own``: a linear twin fitted to the held-out trial itself (the best any model without
   amplitude dependence does on it);
 * ``noise_nrmse``: what the held-out trial's sensor noise alone leaves
-  (:func:`~momentid.diagnosis.modal_check.noise_nrmse`, on the own twin's modes).
+  (:func:`~momentid.diagnosis.modal.check.noise_nrmse`, on the own twin's modes).
 
 The held-out trial's outputs enter none of the first two.  :func:`amplitude_trend` identifies the
 augmented twin's own simulated trials exactly as the recordings are identified
@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from momentid.core.series import Experiment
-from momentid.diagnosis import modal_check as mc
+from momentid.diagnosis.modal import check as mc
 from momentid.twin import fit as twin_fit
 from momentid.errors import IdentificationError
 from momentid.estimation.noise import estimate_noise

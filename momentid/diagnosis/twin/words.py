@@ -1,4 +1,4 @@
-"""What a twin diagnosis (:mod:`~momentid.diagnosis.twin_diagnose`) shows beside its verdict, says and
+"""What a twin diagnosis (:mod:`~momentid.diagnosis.twin.path`) shows beside its verdict, says and
 draws: its evidence, the summary in words and the replay plot (:func:`momentid.diagnosis.report.write_report`
 writes them with ``twin.xml`` and ``model_augmented.xml``)."""
 
@@ -21,7 +21,7 @@ __all__ = ["TwinEvidence", "summary", "plot_replay"]
 @dataclass(frozen=True)
 class TwinEvidence(Evidence):
     """What a diagnosis of accelerometer-only recordings on the rig's MuJoCo twin shows beside its
-    verdict (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`).
+    verdict (:func:`momentid.diagnosis.twin.path.diagnose_twin`).
 
     Attributes
     ----------
@@ -42,7 +42,7 @@ class TwinEvidence(Evidence):
     seconds : dict
         Wall-clock seconds per stage, and the CPU seconds of the whole.
     fold : Fold
-        The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin_folds.Fold`).
+        The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin.folds.Fold`).
     """
 
     training: tuple[str, ...]

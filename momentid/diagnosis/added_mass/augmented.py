@@ -16,7 +16,7 @@ import numpy as np
 from momentid.core.analytic import shear_stiffness
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
-from momentid.diagnosis.residuals import LinearModel, nrmse
+from momentid.diagnosis.added_mass.residuals import LinearModel, nrmse
 from momentid.errors import SimulationError
 from momentid.lab import rig
 from momentid.mechanisms.base import MechanismKind

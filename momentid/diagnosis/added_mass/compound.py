@@ -1,6 +1,6 @@
-"""Stage 6b of the diagnosis: several mechanisms at once.
+"""Stage 6b of the added-mass diagnosis: several mechanisms at once.
 
-After stage 6 names one mechanism (a :class:`~momentid.diagnosis.selection.Finding`),
+After stage 6 names one mechanism (a :class:`~momentid.diagnosis.added_mass.selection.Finding`),
 :func:`extend` asks what is left with it in the model, and names every further mechanism that
 earns its place:
 
@@ -8,7 +8,7 @@ earns its place:
   corrected training replays are at the noise level (within ``EXCESS``), the corrected experiment is
   diagnosed again (the physics behind a faulty channel is found on clean data);
 * with a **physical mechanism** in the model, the library is screened again on what it leaves: its
-  signature's columns are fitted with every candidate's (:func:`~momentid.diagnosis.screening.
+  signature's columns are fitted with every candidate's (:func:`~momentid.diagnosis.added_mass.screening.
   screen_equation` with ``found``), on the equation residual's alternate blocks.  The best candidate
   of each kind that explains at least ``SHORTLIST_FLOOR`` of the excess left on the held-out blocks
   is re-simulated (beside a dashpot of the damping pattern, a dissipative force at its link too),
@@ -16,7 +16,7 @@ earns its place:
   that the model without it leaves.  The loop stops when none does, when the replays are at the
   noise level, or at ``MAX_MECHANISMS``.  The trials of a step run on two processes
   (:mod:`~momentid.core.processes`) and return their results as values.  (What a step screens:
-  :mod:`~momentid.diagnosis.compound_screening`.)  Then every mechanism named is **re-tested** by
+  :mod:`~momentid.diagnosis.added_mass.compound_screening`.)  Then every mechanism named is **re-tested** by
   the same rule with the others in the model: the model without it, its other sizes searched again,
   must leave ``EARNS`` more of the misfit; the weakest that does not is dropped (:func:`_retest`);
 * beside the physics, a **sensor fault** that contended with it in screening is undone and the
@@ -29,7 +29,7 @@ model), and one augmented MuJoCo model carries them all.
 
 Diagnosing corrected recordings again is not done here: :func:`extend` returns a :class:`Correction`
 (the corrected experiment, and what to do with its diagnosis), and the pipeline
-(:func:`momentid.diagnosis.pipeline.diagnose`) runs the stages on it with their own refitter.
+(:func:`momentid.diagnosis.added_mass.path.diagnose_added_mass`) runs the stages on it with their own refitter.
 
 A stage-6 verdict of ``unexplained`` whose best candidate removed part of the misfit is also
 extended: when that candidate and the further ones together remove ``ACCEPTED`` of the training
@@ -45,13 +45,13 @@ from collections.abc import Callable
 
 from momentid.core.series import Experiment
 from momentid.core.structure import Structure
-from momentid.diagnosis.compound_screening import (STEP_SHORTLIST, candidates, elastic, force_entries,
-                                                   refitted, shortlist)
-from momentid.diagnosis.refit import SEARCH_RANGE, ForceRefit
-from momentid.diagnosis.replay import Entry, identified_structure, records
-from momentid.diagnosis.screening import Candidate, Domain, pattern_fit
-from momentid.diagnosis.selection import Finding, Step, explained_share
-from momentid.diagnosis.stages import Stages
+from momentid.diagnosis.added_mass.compound_screening import (STEP_SHORTLIST, candidates, elastic, force_entries,
+                                                              refitted, shortlist)
+from momentid.diagnosis.added_mass.resimulation import SEARCH_RANGE, ForceRefit
+from momentid.diagnosis.added_mass.augmented import Entry, identified_structure, records
+from momentid.diagnosis.added_mass.screening import Candidate, Domain, pattern_fit
+from momentid.diagnosis.added_mass.selection import Finding, Step, explained_share
+from momentid.diagnosis.added_mass.stages import Stages
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.core.processes import run_forked
@@ -85,7 +85,7 @@ class Compound:
     mechanisms : tuple of Named
         Every named mechanism, primary first (empty for ``none`` and ``unexplained``).
     entries : tuple of Entry
-        Each of them as :func:`~momentid.diagnosis.replay.joint_replay` replays them (sensor faults
+        Each of them as :func:`~momentid.diagnosis.added_mass.augmented.joint_replay` replays them (sensor faults
         first: undone on the recordings).
     steps : tuple of Step
         Each further mechanism tried, and whether it earned its place.
@@ -499,7 +499,7 @@ def _fault_beside(stages: Stages, physics: Compound, corrections: int) -> Compou
 
 def _table_fault(stages: Stages, physics: Compound) -> Compound:
     """A fault of the table channel beside the physics found, by re-simulation: of those the replay
-    screening fitted (:func:`~momentid.diagnosis.screening.screen_replay`) and the kinematic check
+    screening fitted (:func:`~momentid.diagnosis.added_mass.screening.screen_replay`) and the kinematic check
     does not rule out, the one that replays best with the physics at its screened size is sized with
     the physics in the model, and joins when it removes at least ``EARNS`` of the training replays'
     misfit above noise that the physics alone leaves.

@@ -1,6 +1,6 @@
 """The open search on recordings without added mass: a nonlinear restoring law on one mode.
 
-When the linear modal model of :mod:`momentid.diagnosis.real` misses a held-out run, one mode is
+When the linear modal model of :mod:`momentid.diagnosis.modal.path` misses a held-out run, one mode is
 given a restoring force beyond ``k eta + c eta'`` from the function library's terms
 (:func:`momentid.mechanisms.data_driven.term_signal`: quadratic and cubic stiffness, quadratic
 damping, friction, two-sided gaps and one-sided stops; not the hysteretic state or the stiffness
@@ -35,7 +35,7 @@ import numpy as np
 import scipy.linalg
 
 from momentid.core.series import Experiment
-from momentid.diagnosis import modal_check as mc
+from momentid.diagnosis.modal import check as mc
 from momentid.diagnosis.function_library import DELTA_FRACTIONS, SIGN_SCALE, Column
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.lab.sensors import gain_and_delay

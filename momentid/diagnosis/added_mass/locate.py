@@ -1,4 +1,5 @@
-"""Where and how the model and the recordings disagree: storey, runs, time, amplitude, signature.
+"""Stage 4 of the added-mass diagnosis: where and how model and recordings disagree (storey, runs, time, amplitude,
+signature).
 
 The floor-equation residual ``r = (M + dM) a + C v + K q`` (what the linear
 model leaves unexplained, per floor) is summed from the roof down, giving the
@@ -16,7 +17,7 @@ and compared with simple shapes: the sign of the drift velocity (a step at every
 reversal: friction), the drift cubed (stiffening/softening), the drift times the
 weight above (P-Delta).  Every number is a ratio to the noise-only level, so 1
 means "nothing there".  This describes the mismatch; naming the physics is
-:mod:`momentid.diagnosis.pipeline`'s job.
+:mod:`momentid.diagnosis.dispatch`'s job.
 """
 
 from __future__ import annotations
@@ -80,7 +81,7 @@ def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None
     Parameters
     ----------
     rows : sequence of ResidualRow
-        Per run (:class:`~momentid.diagnosis.residuals.ResidualRow`): the band-limited signals
+        Per run (:class:`~momentid.diagnosis.added_mass.residuals.ResidualRow`): the band-limited signals
         (``'a'``, ``'v'``, ``'q'``, each (n, d)), the floor residual (n, d) of the model and the
         same residual of a noise-only input (n, d).
     d : int

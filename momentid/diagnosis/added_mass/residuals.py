@@ -1,4 +1,4 @@
-"""Stages 1 and 2 of the diagnosis: the linear model, and what it leaves in the floor equations.
+"""Stages 1 and 2 of the added-mass diagnosis: the linear model, and what it leaves in the floor equations.
 
 *Linear model* (:func:`fit_linear_model`): identified from the training runs (errors-in-variables
 for noisy data), beside the nominal model the lab states, and the band the diagnosis works in.
@@ -18,7 +18,7 @@ import numpy as np
 from momentid.core.analytic import modal_properties
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import Structure
-from momentid.diagnosis.consistency import noise_sigma
+from momentid.diagnosis.added_mass.kinematic_check import noise_sigma
 from momentid.diagnosis.thresholds import BLOCK_S, EXCESS
 from momentid.errors import IdentificationError
 from momentid.estimation.identification import identify

@@ -1,4 +1,4 @@
-"""Stage 4 of the diagnosis: every registered mechanism's signature, fitted where it could be.
+"""Stage 5 of the added-mass diagnosis: every registered mechanism's signature, fitted where it could be.
 
 Each kind of :mod:`momentid.mechanisms` states its signature in the floor-force residual
 (:meth:`~momentid.mechanisms.base.MechanismKind.screen_equation`); its coefficients are fitted by
@@ -21,8 +21,8 @@ import numpy as np
 import scipy.optimize
 
 from momentid import mechanisms
-from momentid.diagnosis.consistency import ROUND_OFF
-from momentid.diagnosis.residuals import (ResidualRow, blocks, replay_noise, replay_outputs)
+from momentid.diagnosis.added_mass.kinematic_check import ROUND_OFF
+from momentid.diagnosis.added_mass.residuals import (ResidualRow, blocks, replay_noise, replay_outputs)
 from momentid.estimation.reconstruct import band_filter
 from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
 from momentid.errors import IdentificationError

@@ -1,7 +1,7 @@
-"""Stage 3 of the diagnosis: the sensors checked against each other, whatever the structure does.
+"""Stage 3 of the added-mass diagnosis: the sensors checked against each other, whatever the structure does.
 
 A floor accelerometer must read the table acceleration plus the floor displacement's second
-derivative (``a_j = zdd + q_j''``, :func:`~momentid.diagnosis.consistency.kinematic_check`).  One
+derivative (``a_j = zdd + q_j''``, :func:`~momentid.diagnosis.added_mass.kinematic_check.kinematic_check`).  One
 channel that contradicts the others is a sensor fault, which also disturbs every model-based
 residual; consistent channels rule out a gain or a clock offset on any of them.
 """
@@ -11,9 +11,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from momentid import mechanisms
-from momentid.diagnosis.consistency import KinematicCheck, kinematic_check
-from momentid.diagnosis.residuals import LinearModel
-from momentid.diagnosis.screening import Candidate, Domain
+from momentid.diagnosis.added_mass.kinematic_check import KinematicCheck, kinematic_check
+from momentid.diagnosis.added_mass.residuals import LinearModel
+from momentid.diagnosis.added_mass.screening import Candidate, Domain
 from momentid.diagnosis.thresholds import EXPLAINED
 from momentid.mechanisms.place import Place, Target
 

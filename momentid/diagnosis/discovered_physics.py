@@ -1,6 +1,6 @@
 """What a discovered force is, physically: its class and the numbers an engineer reads off it.
 
-The open search (:mod:`~momentid.diagnosis.discovery`) returns a force as a sum of library terms
+The open search (:mod:`~momentid.diagnosis.added_mass.open_search`) returns a force as a sum of library terms
 (:data:`momentid.mechanisms.data_driven.TERMS`) at a place.  :func:`physics` reads the terms
 beyond the linear spring and dashpot as one class of physics:
 

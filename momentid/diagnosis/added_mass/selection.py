@@ -1,4 +1,4 @@
-"""Stages 4b and 6 of the diagnosis: which candidate to name, then the choice by re-simulation.
+"""Stages 5 and 6 of the added-mass diagnosis: which candidate to name, then the choice by re-simulation.
 
 :func:`screen` gathers the screened candidates of every domain; :func:`choose` picks the verdict
 (a mechanism, ``unexplained`` or ``none``) from them; :func:`select` re-simulates the plausible
@@ -13,12 +13,13 @@ from dataclasses import dataclass, field, replace
 
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
-from momentid.diagnosis.locate import Localisation
-from momentid.diagnosis.refit import Augmented, ForceRefit, Refitter
-from momentid.diagnosis.residuals import EquationResiduals, LinearModel
-from momentid.diagnosis.screening import (Candidate, DampingPattern, Domain, ReplayResiduals, damping_pattern,
-                                          screen_attachment, screen_equation, screen_replay, screening_order)
-from momentid.diagnosis.sensor_check import SensorCheck
+from momentid.diagnosis.added_mass.locate import Localisation
+from momentid.diagnosis.added_mass.resimulation import Augmented, ForceRefit, Refitter
+from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel
+from momentid.diagnosis.added_mass.screening import (Candidate, DampingPattern, Domain, ReplayResiduals,
+                                                     damping_pattern, screen_attachment, screen_equation, screen_replay,
+                                                     screening_order)
+from momentid.diagnosis.added_mass.sensor_faults import SensorCheck
 from momentid.diagnosis.thresholds import ACCEPTED, EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
 from momentid.core.processes import run_forked
@@ -40,7 +41,7 @@ EARNS = 0.5
 
 @dataclass(frozen=True)
 class Screening:
-    """Stage 4: the screened candidates.
+    """Stage 5: the screened candidates.
 
     Attributes
     ----------
@@ -136,7 +137,7 @@ class Step:
 @dataclass(frozen=True)
 class OutsideLibrary:
     """A force outside the library that replays the training runs better than the physics the library
-    named (:func:`~momentid.diagnosis.discovery.challenge`): what was named, and the training runs'
+    named (:func:`~momentid.diagnosis.added_mass.open_search.challenge`): what was named, and the training runs'
     NRMSE through the named model, the discovered force's model and noise alone, with the share of
     the named model's misfit above noise the force removes."""
 
@@ -211,7 +212,7 @@ class Finding:
 
     ``location`` is the mechanism's place, or where an ``unexplained`` mismatch is.  ``refit`` and
     ``corrected`` are the augmented model's errors-in-variables refit and corrected identification
-    (:class:`~momentid.diagnosis.refit.Augmented`), which a compound diagnosis continues from.
+    (:class:`~momentid.diagnosis.added_mass.resimulation.Augmented`), which a compound diagnosis continues from.
     """
 
     verdict: Verdict
@@ -238,7 +239,7 @@ def _physical(c: Candidate) -> bool:
 
 
 def screen(model: LinearModel, residuals: EquationResiduals, sensors: SensorCheck) -> Screening:
-    """Stage 4: screen every mechanism in every domain; keep the physical candidates."""
+    """Stage 5: screen every mechanism in every domain; keep the physical candidates."""
     d, result, band, f_top = model.storeys, model.result, model.band, model.f_top
     has_nominal = model.nominal_result is not None
     domains = [(result, residuals.rows, Domain.EQUATION)]

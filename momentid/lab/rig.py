@@ -35,6 +35,7 @@ from momentid.core.structure import Structure
 from momentid.mechanisms.base import drifts, storey_to_floor
 from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 from momentid.mechanisms.place import Place, Target
+from momentid.lab.native_forces import add_program, state_actuator
 from momentid.lab.rig_model import RigModel
 from momentid.lab.tendons import put_tendon
 
@@ -76,11 +77,6 @@ _GAIN_PARAMETERS = 10
 def stateful(mechanisms) -> tuple:
     """The ``mechanisms`` whose force has an internal state (in order): each gets a state actuator."""
     return tuple(m for m in mechanisms if registry.get(m.type).has_state(dict(m.parameters)))
-
-
-def state_actuator(k: int) -> str:
-    """Name of the actuator holding the internal state of the ``k``-th (0-based) stateful mechanism."""
-    return f"state{k + 1}"
 
 
 #: The rig's sensors by group, in the order they are added: the table's acceleration, displacement and
@@ -146,6 +142,7 @@ def build_spec(rig: RigModel | Structure, added_mass=None, *, timestep: float = 
     for mech in model.mechanisms:
         registry.validate(mech, d)
     spec = empty_spec(name, timestep, integrator)
+    add_program(spec, model.mechanisms)   # the callback forces' program for the native callbacks
     base, table = _base(spec, model)
     floors = _floors(spec, model, base)
     _tendons(spec, model)

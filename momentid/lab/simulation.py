@@ -25,7 +25,7 @@ import numpy as np
 from mujoco import rollout as _rollout
 
 from momentid import mechanisms as mechanisms_registry
-from momentid.lab import rig
+from momentid.lab import native_forces, rig
 from momentid.io.plausible import implausible
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
@@ -191,12 +191,17 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     out = np.empty((n_steps // every, len(index)))
     data = mujoco.MjData(model)
     chunk = every * max(1, _CHUNK_STEPS // every)
-    callback = CallbackForces(model, mechanisms, structure) if rig.needs_callback(mechanisms) else None
-    act_dyn = callback.state_rate if callback is not None and callback.rates else None
+    callback = act_dyn = None
+    if rig.needs_callback(mechanisms):
+        native = native_forces.load_program(model, mechanisms, structure)
+        callback = None if native else CallbackForces(model, mechanisms, structure)
+        act_dyn = callback.state_rate if callback is not None and callback.rates else None
     # the table's jerk drives actuator 0; state actuators (forces with memory) take no control
     control = jerk[:, None] if model.nu == 1 else np.column_stack([jerk] + [np.zeros(n_steps)] * (model.nu - 1))
     warnings: dict[str, int] = {}
-    with _control_callback(callback, act_dyn):
+    callbacks = (native_forces.installed() if callback is None and rig.needs_callback(mechanisms)
+                 else _control_callback(callback, act_dyn))
+    with callbacks:
         for start in range(0, n_steps, chunk):
             stop = min(n_steps, start + chunk)
             states, sensors = _rollout.rollout(model, data, state[None], control[None, start:stop])

@@ -46,6 +46,7 @@ import numpy as np
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.errors import ModelError
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Place, Target
 from momentid.mechanisms.sizing import Sized, Sizer, size_correction
 
@@ -367,6 +368,19 @@ class MechanismKind:
         """
         law = self.storey_force if place.target is Target.STOREY else self.floor_force
         return lambda x, v, t, **state: law(params, x, v, t, stiffness, **state)
+
+    def native_law(self) -> NativeLaw | None:
+        """For ``callback`` kinds: the force law (and its state's rate) as native code, which the simulator
+        calls from MuJoCo's step with no Python (:mod:`momentid.mechanisms.native`), taking
+        :meth:`native_parameters`; the same law as :meth:`storey_force` / :meth:`floor_force` to round-off.
+        None: the simulator calls the Python law (:meth:`link_law`)."""
+        return None
+
+    def native_parameters(self, params: dict, stiffness: float | None) -> list[float]:
+        """The parameter vector :meth:`native_law` takes: the values of :attr:`params` in order, then the
+        storey's ``stiffness`` (N/m) when the kind ``needs_stiffness``."""
+        values = [float(params[p.name]) for p in self.params]
+        return values + [float(stiffness)] if self.needs_stiffness else values
 
     def has_state(self, params: dict) -> bool:
         """True when the force has memory: one internal state the simulator integrates with the

@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 from momentid.mechanisms.sizing import ResimulatedForce
 
@@ -31,6 +32,10 @@ def smooth_sign(x):
     return math.tanh(x) if isinstance(x, float) else np.tanh(x)
 
 
+def _native_force(p, x, v, t, s):
+    return p[0] * math.tanh(v / FRICTION_SMOOTHING)
+
+
 @register
 class CoulombFriction(ResimulatedForce, MechanismKind):
     name = "coulomb_friction"
@@ -49,6 +54,9 @@ class CoulombFriction(ResimulatedForce, MechanismKind):
     def link_law(self, params, place, stiffness):
         force, tanh = params["force"], math.tanh   # storey_force on floats, without its calls
         return lambda x, v, t: force * tanh(v / FRICTION_SMOOTHING)
+
+    def native_law(self):
+        return NativeLaw(_native_force)
 
     def screen_equation(self, signals, fit, place):
         velocity = signals.stretch_rate(place)

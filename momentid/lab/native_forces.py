@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import threading
 from collections.abc import Iterator
 
 import mujoco
@@ -33,7 +34,7 @@ import numpy as np
 from momentid import mechanisms as registry
 
 __all__ = ["PROGRAM", "HEADER", "ENABLED", "program_size", "add_program", "available", "load_program", "installed",
-           "state_actuator"]
+           "state_actuator", "applies"]
 
 #: Name of the custom numeric holding a model's forces for the native callbacks.
 PROGRAM = "momentid_forces"
@@ -287,16 +288,34 @@ def load_program(model: mujoco.MjModel, mechanisms, structure=None) -> bool:
     return True
 
 
+def applies(mechanisms) -> bool:
+    """True when the native callbacks apply every callback force of ``mechanisms`` (so their rollouts
+    need no Python: they may run on threads side by side)."""
+    forces = [m for m in mechanisms if registry.get(m.type).callback]
+    return available() and all(registry.get(m.type).native_law() is not None for m in forces)
+
+
+_USERS = threading.Lock(), [0, None]   # (lock, [rollouts using the callbacks, the callbacks they replaced])
+
+
 @contextlib.contextmanager
 def installed() -> Iterator[None]:
     """Install the native control and act_dyn callbacks (every model rolled out meanwhile must carry a
-    loaded program, :func:`load_program`); restore the previous ones after."""
+    loaded program, :func:`load_program`); restore the previous ones when the last rollout using them
+    ends.  Threads may use it side by side: the callbacks read each model's own program."""
     control, act_dyn = _callbacks()
-    previous, previous_dyn = mujoco.get_mjcb_control(), mujoco.get_mjcb_act_dyn()
-    mujoco.set_mjcb_control(control.ctypes)
-    mujoco.set_mjcb_act_dyn(act_dyn.ctypes)
+    lock, users = _USERS
+    with lock:
+        if users[0] == 0:
+            users[1] = mujoco.get_mjcb_control(), mujoco.get_mjcb_act_dyn()
+            mujoco.set_mjcb_control(control.ctypes)
+            mujoco.set_mjcb_act_dyn(act_dyn.ctypes)
+        users[0] += 1
     try:
         yield
     finally:
-        mujoco.set_mjcb_control(previous)
-        mujoco.set_mjcb_act_dyn(previous_dyn)
+        with lock:
+            users[0] -= 1
+            if users[0] == 0:
+                mujoco.set_mjcb_control(users[1][0])
+                mujoco.set_mjcb_act_dyn(users[1][1])

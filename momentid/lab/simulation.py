@@ -378,17 +378,18 @@ def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int,
                    progress: Callable[[int], None]) -> Iterator[RunData]:
     """Simulate the runs ``workers`` at a time; yield them in run order.
 
-    A linear rig has no Python inside the step and ``mujoco.rollout`` releases
-    the GIL, so the runs go to threads.  A rig with callback physics is
-    GIL-bound; its runs go to forked processes that inherit the scenario and
-    motion (not pickled).  Either way each run is exactly
+    A linear rig, or one whose callback forces run as native code
+    (:func:`momentid.lab.native_forces.applies`), has no Python inside the
+    step and ``mujoco.rollout`` releases the GIL, so the runs go to threads.
+    A rig with Python callback physics is GIL-bound; its runs go to forked
+    processes that inherit the scenario and motion (not pickled).  Either way each run is exactly
     :func:`simulate_run`, so the numbers equal the serial path's bit for bit.
     """
     from concurrent.futures import ThreadPoolExecutor
 
     from momentid.core.processes import forked_pool
 
-    forked = rig.needs_callback(scenario.truth)
+    forked = rig.needs_callback(scenario.truth) and not native_forces.applies(scenario.truth)
     with contextlib.ExitStack() as stack:
         if forked:   # workers that die with this process, killed when it is interrupted
             pool = stack.enter_context(forked_pool(workers, _set_forked_job, (scenario, motion)))

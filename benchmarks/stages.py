@@ -165,7 +165,8 @@ REPLAY_FORCES = (("coulomb_friction", 1, (("force", 0.3),)), ("cubic_stiffness",
 def bench_replay(scenario, experiment, *, repeat: int) -> list[Row]:
     """A diagnosis's replay of one run with callback forces against ``mujoco.rollout`` of the same
     compiled model from the same state under the same controls, with no callback installed: what the
-    Python force callback costs over MuJoCo's own stepping."""
+    force callback (the kinds' compiled laws, :mod:`momentid.lab.native_forces`) costs over MuJoCo's own
+    stepping."""
     import mujoco
     from mujoco import rollout
 

@@ -19,7 +19,8 @@ from collections.abc import Callable
 import numpy as np
 
 __all__ = ["ROOT", "RESULTS", "HIDDEN_RIG", "Row", "timed", "cpu_seconds", "machine", "blas_threads", "bench_scenario",
-           "describe_scenario", "scenario_variant_file", "hidden_rig", "timed_diagnosis", "matrix_parser", "run_cases",
+           "describe_scenario", "scenario_variant_file", "hidden_rig", "timed_diagnosis",
+           "measured_diagnosis", "raw_rollout_seconds", "cost_cells", "cost_summary", "matrix_parser", "run_cases",
            "save"]
 
 #: The repository, and the folder benchmark results are written to.
@@ -194,15 +195,70 @@ def hidden_rig(truth=(), faults=None, noise: float = 0.01, excitation: dict | No
     return parse_scenario(data, source=HIDDEN_RIG)
 
 
-def timed_diagnosis(scenario):
-    """The diagnosis of ``scenario``'s simulated recordings and its time (s), the simulation not counted."""
-    import momentid as mi
+def raw_rollout_seconds(experiment, repeat: int = 3) -> float:
+    """Best of ``repeat`` times (s) of one raw ``mujoco.rollout`` of the experiment's first run through its
+    linear rig (the stated structure, no mechanism, no callback, one thread): the unit a diagnosis's time
+    is stated in, measured in the same process right after it."""
+    import mujoco
+    from mujoco import rollout
+
+    from momentid.lab import rig
+    from momentid.lab.simulation import initial_state, table_jerk
+
+    run = experiment.runs[0]
+    h = 1.0 / run.sample_rate
+    model = rig.compile_model(rig.build_spec(experiment.structure, run.added_mass, timestep=h, name="raw"))
+    nodes = np.append(run["zdd"], run["zdd"][-1])
+    state, control = initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h)[:, None]
+    data, best = mujoco.MjData(model), np.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        rollout.rollout(model, data, state[None], control[None])
+        best = min(best, time.perf_counter() - start)
+    return best
+
+
+def measured_diagnosis(experiment) -> tuple:
+    """``diagnose(experiment)`` and what it cost: ``{"seconds", "replays", "rollout_seconds", "ratio"}``,
+    its wall time, the replays it made (in this process, its threads and its forked workers:
+    :func:`momentid.core.counters.counting`), one raw rollout of a run of its rig
+    (:func:`raw_rollout_seconds`, measured right after) and the ratio of the two times (the diagnosis in
+    raw rollouts: less sensitive to the machine's load than seconds)."""
+    from momentid.core import counters
     from momentid.diagnosis.dispatch import diagnose
 
-    experiment = mi.simulate(scenario)
-    start = time.perf_counter()
-    d = diagnose(experiment)
-    return d, time.perf_counter() - start
+    with counters.counting() as replays:
+        start = time.perf_counter()
+        d = diagnose(experiment)
+        seconds = time.perf_counter() - start
+        n = replays()
+    raw = raw_rollout_seconds(experiment)
+    return d, {"seconds": seconds, "replays": n, "rollout_seconds": raw, "ratio": seconds / raw}
+
+
+def cost_cells(r: dict) -> str:
+    """A row's diagnosis time, that time in raw rollouts of one run, and its replays (table cells)."""
+    if "ratio" not in r:
+        return f"{r['seconds']:.0f} s | - | -"
+    return f"{r['seconds']:.0f} s | {r['ratio']:.0f}x | {r['replays']}"
+
+
+def cost_summary(rows: list[dict]) -> str:
+    """Median and max of the rows' diagnosis times, in seconds and raw rollouts, and their replays."""
+    def med(key):
+        values = sorted(r[key] for r in rows if key in r)
+        return values[len(values) // 2] if values else float("nan"), max(values, default=float("nan"))
+    (s, s_max), (x, x_max), (n, n_max) = med("seconds"), med("ratio"), med("replays")
+    return (f"diagnosis time median {s:.0f} s, max {s_max:.0f} s; in raw rollouts of one run median {x:.0f}x, "
+            f"max {x_max:.0f}x; replays median {n:.0f}, max {n_max:.0f}")
+
+
+def timed_diagnosis(scenario):
+    """The diagnosis of ``scenario``'s simulated recordings and its costs (:func:`measured_diagnosis`),
+    the simulation not counted."""
+    import momentid as mi
+
+    return measured_diagnosis(mi.simulate(scenario))
 
 
 def matrix_parser(module: str, doc: str) -> argparse.ArgumentParser:

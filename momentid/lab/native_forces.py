@@ -34,7 +34,7 @@ import numpy as np
 from momentid import mechanisms as registry
 
 __all__ = ["PROGRAM", "HEADER", "ENABLED", "program_size", "add_program", "available", "load_program", "installed",
-           "state_actuator", "applies"]
+           "state_actuator", "applies", "threadable", "plain"]
 
 #: Name of the custom numeric holding a model's forces for the native callbacks.
 PROGRAM = "momentid_forces"
@@ -97,7 +97,7 @@ def _offsets() -> dict[str, int] | None:
     except Exception:   # noqa: BLE001 - a MuJoCo whose description this reader does not know
         return None
     out = {f"d_{f}": getattr(data_t, f).offset for f in ("time", "qpos", "qvel", "act", "qfrc_applied")}
-    out.update({f"m_{f}": getattr(model_t, f).offset for f in ("numeric_adr", "numeric_data")})
+    out.update({f"m_{f}": getattr(model_t, f).offset for f in ("nnumeric", "numeric_adr", "numeric_data")})
     spec = mujoco.MjSpec()
     body = spec.worldbody.add_body(mass=1.0, inertia=[1.0, 1.0, 1.0])
     body.add_joint(name="j", type=mujoco.mjtJoint.mjJNT_SLIDE)
@@ -113,6 +113,7 @@ def _offsets() -> dict[str, int] | None:
     pointers = {"d_qpos": data.qpos, "d_qvel": data.qvel, "d_act": data.act, "d_qfrc_applied": data.qfrc_applied}
     ok = all(at(data._address, out[k], ctypes.c_size_t) == a.ctypes.data for k, a in pointers.items())
     ok &= at(data._address, out["d_time"], ctypes.c_double) == 1234.5
+    ok &= at(model._address, out["m_nnumeric"], ctypes.c_int64) == model.nnumeric
     ok &= at(model._address, out["m_numeric_adr"], ctypes.c_size_t) == model.numeric_adr.ctypes.data
     ok &= at(model._address, out["m_numeric_data"], ctypes.c_size_t) == model.numeric_data.ctypes.data
     return out if ok else None
@@ -136,7 +137,7 @@ def _compile():
         return None
     d_time, d_qpos, d_qvel, d_act, d_qfrc = (offsets[f"d_{f}"] for f in ("time", "qpos", "qvel", "act",
                                                                           "qfrc_applied"))
-    m_numadr, m_numdata = offsets["m_numeric_adr"], offsets["m_numeric_data"]
+    m_nnumeric, m_numadr, m_numdata = offsets["m_nnumeric"], offsets["m_numeric_adr"], offsets["m_numeric_data"]
 
     @intrinsic
     def pointer(typingctx, address):
@@ -184,6 +185,8 @@ def _compile():
 
     @numba.cfunc(types.void(types.int64, types.int64))
     def control(m, d):
+        if carray(pointer(m + m_nnumeric), 1, np.int64)[0] < 1:
+            return   # a model with no callback force, rolled out on another thread meanwhile: nothing to push
         base = program(m)
         n = np.int64(carray(pointer(base), 1, np.float64)[0])
         size = 1
@@ -295,6 +298,14 @@ def applies(mechanisms) -> bool:
     return available() and all(registry.get(m.type).native_law() is not None for m in forces)
 
 
+def threadable(mechanisms) -> bool:
+    """True when rollouts of models with ``mechanisms`` run no Python in MuJoCo's step: no callback force,
+    or every one native (:func:`applies`); such rollouts may run on threads side by side, with each other
+    and with those of models with no callback force (the native control callback leaves a model without a
+    program alone).  A rig with no callback force loads no compiled code to answer."""
+    return not any(registry.get(m.type).callback for m in mechanisms) or applies(mechanisms)
+
+
 _USERS = threading.Lock(), [0, None]   # (lock, [rollouts using the callbacks, the callbacks they replaced])
 
 
@@ -319,3 +330,23 @@ def installed() -> Iterator[None]:
             if users[0] == 0:
                 mujoco.set_mjcb_control(users[1][0])
                 mujoco.set_mjcb_act_dyn(users[1][1])
+
+
+@contextlib.contextmanager
+def plain() -> Iterator[None]:
+    """Around a rollout of a model with no callback force: no control callback of another model may act
+    on it.  The native callbacks, installed meanwhile by a rollout on another thread (:func:`installed`),
+    leave a model without a program alone, so they stay (removing them would leave that rollout without
+    its forces); any other control callback is removed for the block and restored after."""
+    lock, users = _USERS
+    with lock:
+        previous = mujoco.get_mjcb_control()
+        keep = users[0] > 0 or previous is None
+        if not keep:
+            mujoco.set_mjcb_control(None)
+    try:
+        yield
+    finally:
+        if not keep:
+            with lock:
+                mujoco.set_mjcb_control(previous)

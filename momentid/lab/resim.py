@@ -24,6 +24,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout as _rollout
 
+from momentid.core import counters
 from momentid.errors import ModelError, SimulationError
 from momentid.lab import rig as lab_rig
 from momentid.lab.rig_model import RigModel
@@ -103,6 +104,7 @@ def simulate(models, zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SA
         Floor accelerations (m/s^2) at the samples, as ideal sensors read them.
     """
     models = list(models)
+    counters.add(counters.REPLAYS, len(models))
     first = models[0]
     if abs(first.opt.timestep * substeps - dt) > 1e-5 * dt:     # an MJCF prints the step to 6 digits
         raise SimulationError(f"model timestep {first.opt.timestep} s: expected the sample interval {dt} s / "

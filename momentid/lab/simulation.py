@@ -27,6 +27,7 @@ from mujoco import rollout as _rollout
 from momentid import mechanisms as mechanisms_registry
 from momentid.lab import native_forces, rig
 from momentid.io.plausible import implausible
+from momentid.core import counters
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
 from momentid.lab.excitation import GroundMotion, ground_motion
@@ -199,8 +200,12 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     # the table's jerk drives actuator 0; state actuators (forces with memory) take no control
     control = jerk[:, None] if model.nu == 1 else np.column_stack([jerk] + [np.zeros(n_steps)] * (model.nu - 1))
     warnings: dict[str, int] = {}
-    callbacks = (native_forces.installed() if callback is None and rig.needs_callback(mechanisms)
-                 else _control_callback(callback, act_dyn))
+    if not rig.needs_callback(mechanisms):
+        callbacks = native_forces.plain()
+    elif callback is None:
+        callbacks = native_forces.installed()
+    else:
+        callbacks = _control_callback(callback, act_dyn)
     with callbacks:
         for start in range(0, n_steps, chunk):
             stop = min(n_steps, start + chunk)
@@ -544,6 +549,7 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     """
     zdd = np.asarray(run["zdd"] if zdd is None else zdd, float)
     h = 1.0 / run.sample_rate
+    counters.add(counters.REPLAYS)
     spec = rig.build_spec(structure, run.added_mass, timestep=h, name="replay", mechanisms=mechanisms)
     model = rig.compile_model(spec)
     layout = rig.sensor_layout(model)

@@ -28,7 +28,7 @@ from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.function_library import ALWAYS, Selected, columns, hysteretic_columns, refine, select
 from momentid.diagnosis.discovered_physics import describe, physics
-from momentid.diagnosis.added_mass.resimulation import Resimulator, brent_opening
+from momentid.diagnosis.added_mass.resimulation import Refitter, Resimulator, brent_opening, side_by_side
 from momentid.diagnosis.added_mass.augmented import Entry, measured_groups
 from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel, blocks, nrmse
 from momentid.diagnosis.added_mass.selection import Finding, OutsideLibrary, explained_share
@@ -190,6 +190,14 @@ def _record(found: Found, scale: float = 1.0) -> Mechanism:
     return Mechanism(kind.name, found.place.index, tuple(params.items()))
 
 
+def _side_by_side(refitter: Resimulator, misfit, scales: list, record: Mechanism) -> list:
+    """``misfit`` at each of ``scales`` side by side: a :class:`Refitter`'s replays with ``record``'s kind
+    on threads when they run natively (:func:`side_by_side`), another rig model's on forked workers."""
+    if isinstance(refitter, Refitter):
+        return side_by_side(misfit, scales, [record])
+    return run_forked(misfit, scales)
+
+
 def _misfit(refitter: Resimulator, structure: Structure, record: Mechanism) -> float:
     """The refitter's replay misfit of its search run through ``structure`` with the force ``record``."""
     kind = mechanisms.get(record.type)
@@ -239,9 +247,9 @@ def _sized(refitter: Resimulator, structure: Structure, found: Found) -> tuple[f
     low, high = SCALE_RANGE
     bounds = (math.log(low), math.log(high))
     first = brent_opening(bounds, SCALE_TOLERANCE)   # the search's first points and 0: side by side
-    seen: dict[float, float] = dict(zip(first, run_forked(misfit, first)))
+    seen: dict[float, float] = dict(zip(first, _side_by_side(refitter, misfit, first, _record(found))))
     known = brent_opening(bounds, SCALE_TOLERANCE, (seen[first[0]], seen[first[1]])) + [0.0]
-    seen.update(zip(known, run_forked(misfit, known)))
+    seen.update(zip(known, _side_by_side(refitter, misfit, known, _record(found))))
 
     def cost(u: float) -> float:
         if u not in seen:

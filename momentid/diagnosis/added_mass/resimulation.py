@@ -27,7 +27,7 @@ from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.added_mass.augmented import Entry, identified_structure, joint_replay, records
 from momentid.diagnosis.added_mass.residuals import LinearModel, band_signals, nrmse, replay_noise
-from momentid.core.processes import run_forked
+from momentid.core.processes import run_forked, run_threaded
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
 from momentid.estimation.reconstruct import Prefilter, band_filter
@@ -35,7 +35,7 @@ from momentid.mechanisms.base import MechanismKind, Refit
 from momentid.mechanisms.place import Place
 
 __all__ = ["Augmented", "ForceRefit", "Refitter", "Resimulator", "refit_eiv", "noise_ratios", "noise_carrier",
-           "brent_opening", "SEARCH_RANGE"]
+           "brent_opening", "side_by_side", "SEARCH_RANGE"]
 
 #: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
 _UNSTABLE = 1e200
@@ -88,6 +88,21 @@ def brent_opening(bounds: tuple[float, float], xatol: float, values: tuple[float
     if values[1] <= values[0]:   # the step found a better point: the bracket closes from below
         return [_golden_step(x1, b, x2, xatol)]
     return [_golden_step(a, x2, x1, xatol)]
+
+
+def side_by_side(job, tasks, mechanisms=()) -> list:
+    """``[job(task) for task in tasks]`` for jobs that replay models with ``mechanisms`` (the records of
+    every task's model together), side by side on the machine's cores: on threads when those replays run
+    no Python in MuJoCo's step (:func:`momentid.lab.native_forces.threadable`: ``mujoco.rollout``
+    releases the GIL, and a thread starts no process), else on forked workers
+    (:func:`~momentid.core.processes.run_forked`).  The same values either way, and as one after the
+    other (``tests/test_parallel_stages.py``)."""
+    from momentid.lab.native_forces import threadable
+
+    tasks = list(tasks)
+    if len(tasks) < 2:
+        return [job(task) for task in tasks]
+    return (run_threaded if threadable(list(mechanisms)) else run_forked)(job, tasks)
 
 
 @dataclass(frozen=True)
@@ -346,9 +361,11 @@ class Refitter:
         return q
 
     def misfits(self, trials) -> list[float]:
-        """:meth:`misfit` of each ``(structure, entries)`` of ``trials``, on the worker processes when
-        there are several (independent replays: the same values as one after the other)."""
-        return run_forked(lambda trial: self.misfit(*trial), list(trials))
+        """:meth:`misfit` of each ``(structure, entries)`` of ``trials``, side by side when there are several
+        (:func:`side_by_side`; independent replays: the same values as one after the other)."""
+        trials = list(trials)
+        return side_by_side(lambda trial: self.misfit(*trial), trials,
+                            [m for _, entries in trials for m in records(entries)])
 
     def better_of(self, structures, entries) -> Structure:
         """The one of ``structures`` whose model with ``entries`` has the least :meth:`misfit` (the
@@ -496,7 +513,7 @@ class Refitter:
                 except (SimulationError, ModelError):   # an unstable augmented model explains nothing
                     return float("inf")
                 return nrmse(sim, measured, run.sample_rate, self.model.band)
-            out = run_forked(replayed, self.model.train.runs)   # independent runs: side by side
+            out = side_by_side(replayed, self.model.train.runs, mechanism_records)   # independent runs
             self._scores[key] = float("inf") if math.inf in out else float(np.mean(out))
         return self._scores[key]
 

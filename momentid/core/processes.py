@@ -349,5 +349,14 @@ def run_threaded(job: Callable, tasks: Sequence) -> list:
     with helpers_allowed() as allowed:
         if not allowed:
             return [job(task) for task in tasks]
-        with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(min(WORKERS, len(tasks))) as pool:
-            return list(pool.map(job, tasks))
+        pool = ThreadPoolExecutor(min(WORKERS, len(tasks)))
+        try:
+            with threadpool_limits(limits=1, user_api="blas"):
+                return list(pool.map(job, tasks))
+        except BaseException:
+            # Interrupted (Ctrl-C, SIGTERM): the tasks not started are dropped; those running end with
+            # their replay
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        finally:
+            pool.shutdown(wait=True)

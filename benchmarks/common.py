@@ -258,7 +258,8 @@ def cost_summary(rows: list[dict]) -> str:
         return values[len(values) // 2] if values else float("nan"), max(values, default=float("nan"))
     (s, s_max), (x, x_max), (c, c_max), (n, n_max) = med("seconds"), med("ratio"), med("cpu_ratio"), med("replays")
     return (f"diagnosis time median {s:.0f} s, max {s_max:.0f} s; in raw rollouts of one run median {x:.0f}x, "
-            f"max {x_max:.0f}x (CPU: median {c:.0f}x, max {c_max:.0f}x); replays median {n:.0f}, max {n_max:.0f}")
+            f"max {x_max:.0f}x (CPU: median {c:.0f}x, max {c_max:.0f}x); replays median {n:.0f}, max {n_max:.0f}; "
+            f"load average {os.getloadavg()[0]:.1f} at the end on {os.cpu_count()} cores")
 
 
 def timed_diagnosis(scenario):

@@ -111,8 +111,8 @@ def run(seeds: int, noises, kinds, run_counts, workers: int | None = None) -> li
 
 def _line(r: dict) -> str:
     if not r["noise"]:
-        return (f"| {r['sensor_set']} | {r['runs']} | 0 % | {r['estimator']} | {r['max_rel_error']:.1e} | - | - | - | - "
-                f"| - | {r['failed']} |")
+        return (f"| {r['sensor_set']} | {r['runs']} | 0 % | {r['estimator']} | {r['max_rel_error']:.1e} "
+                f"| - | - | - | - | - | {r['failed']} |")
     ok = r["std_over_crlb_max"] <= 1.5 and r["bias_over_std_max"] < 1.0
     return (f"| {r['sensor_set']} | {r['runs']} | {100 * r['noise']:g} % | {r['estimator']} | "
             f"{r['max_rel_error']:.1e} | {r['worst_rel_std']:.2e} | {r['worst_rel_crlb']:.2e} | "
@@ -121,7 +121,8 @@ def _line(r: dict) -> str:
 
 
 HEADER = ("| sensor set | runs | noise | estimator | worst rel. error | worst rel. std | worst rel. CRLB | "
-          "max std/CRLB | max abs(bias)/std | target met | failed fits |\n|---|---|---|---|---|---|---|---|---|---|---|")
+          "max std/CRLB | max abs(bias)/std | target met | failed fits |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def plot(rows: list[dict], path: Path) -> None:

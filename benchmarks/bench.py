@@ -45,7 +45,7 @@ import json
 import sys
 import tempfile
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 from benchmarks.common import Row, bench_scenario, describe_scenario, machine, scenario_variant_file
 from benchmarks.stages import (RUN_TARGET_S, bench_identify, bench_record, bench_replay, bench_run, bench_simulate,

@@ -14,12 +14,13 @@ import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
 __all__ = ["ROOT", "RESULTS", "HIDDEN_RIG", "Row", "timed", "cpu_seconds", "machine", "blas_threads", "bench_scenario",
-           "describe_scenario", "scenario_variant_file", "hidden_rig", "timed_diagnosis", "matrix_parser", "run_cases",
+           "describe_scenario", "scenario_variant_file", "hidden_rig", "timed_diagnosis",
+           "measured_diagnosis", "raw_rollout_seconds", "cost_cells", "cost_summary", "matrix_parser", "run_cases",
            "save"]
 
 #: The repository, and the folder benchmark results are written to.
@@ -194,15 +195,79 @@ def hidden_rig(truth=(), faults=None, noise: float = 0.01, excitation: dict | No
     return parse_scenario(data, source=HIDDEN_RIG)
 
 
-def timed_diagnosis(scenario):
-    """The diagnosis of ``scenario``'s simulated recordings and its time (s), the simulation not counted."""
-    import momentid as mi
-    from momentid.diagnosis.pipeline import diagnose
+def raw_rollout_seconds(experiment, repeat: int = 3, structure=None, cpu: bool = False) -> float:
+    """Best of ``repeat`` times (s) of one raw ``mujoco.rollout`` of the experiment's first run through its
+    linear rig (``structure``, default the experiment's nominal one; no mechanism, no callback, one
+    thread): the unit a diagnosis's time is stated in, measured in the same process right after it.
+    ``cpu``: the CPU time of this process instead of the wall time."""
+    import mujoco
+    from mujoco import rollout
 
-    experiment = mi.simulate(scenario)
-    start = time.perf_counter()
-    d = diagnose(experiment)
-    return d, time.perf_counter() - start
+    from momentid.lab import rig
+    from momentid.lab.simulation import initial_state, table_jerk
+
+    run = experiment.runs[0]
+    h = 1.0 / run.sample_rate
+    structure = experiment.structure if structure is None else structure
+    model = rig.compile_model(rig.build_spec(structure, run.added_mass, timestep=h, name="raw"))
+    nodes = np.append(run["zdd"], run["zdd"][-1])
+    state, control = initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h)[:, None]
+    data, best = mujoco.MjData(model), np.inf
+    clock = time.process_time if cpu else time.perf_counter
+    for _ in range(repeat):
+        start = clock()
+        rollout.rollout(model, data, state[None], control[None])
+        best = min(best, clock() - start)
+    return best
+
+
+def measured_diagnosis(experiment, structure=None) -> tuple:
+    """``diagnose(experiment)`` and what it cost: its wall and CPU seconds (this process and the workers it
+    forked), the replays it made (in this process, its threads and its forked workers:
+    :func:`momentid.core.counters.counting`), one raw rollout of a run of its rig, wall and CPU
+    (:func:`raw_rollout_seconds`, measured right after), and the diagnosis in raw rollouts: ``ratio``
+    (wall / wall) and ``cpu_ratio`` (CPU / CPU, the steadier of the two on a loaded machine, where a
+    diagnosis waits for the cores).  ``structure``: the linear rig of the raw rollout when the experiment
+    states none (an accelerometer-only lab's)."""
+    from momentid.core import counters
+    from momentid.diagnosis.dispatch import diagnose
+
+    with counters.counting() as replays:
+        start, cpu = time.perf_counter(), cpu_seconds()
+        d = diagnose(experiment)
+        seconds, cpu = time.perf_counter() - start, cpu_seconds() - cpu
+        n = replays()
+    raw = raw_rollout_seconds(experiment, structure=structure)
+    raw_cpu = raw_rollout_seconds(experiment, structure=structure, cpu=True)
+    return d, {"seconds": seconds, "cpu_seconds": cpu, "replays": n, "rollout_seconds": raw,
+               "rollout_cpu_seconds": raw_cpu, "ratio": seconds / raw, "cpu_ratio": cpu / raw_cpu}
+
+
+def cost_cells(r: dict) -> str:
+    """A row's diagnosis time, that time in raw rollouts of one run, and its replays (table cells)."""
+    if "ratio" not in r:
+        return f"{r['seconds']:.0f} s | - | -"
+    cpu = f" / CPU {r['cpu_ratio']:.0f}x" if "cpu_ratio" in r else ""
+    return f"{r['seconds']:.0f} s | {r['ratio']:.0f}x{cpu} | {r['replays']}"
+
+
+def cost_summary(rows: list[dict]) -> str:
+    """Median and max of the rows' diagnosis times, in seconds and raw rollouts, and their replays."""
+    def med(key):
+        values = sorted(r[key] for r in rows if key in r)
+        return values[len(values) // 2] if values else float("nan"), max(values, default=float("nan"))
+    (s, s_max), (x, x_max), (c, c_max), (n, n_max) = med("seconds"), med("ratio"), med("cpu_ratio"), med("replays")
+    return (f"diagnosis time median {s:.0f} s, max {s_max:.0f} s; in raw rollouts of one run median {x:.0f}x, "
+            f"max {x_max:.0f}x (CPU: median {c:.0f}x, max {c_max:.0f}x); replays median {n:.0f}, max {n_max:.0f}; "
+            f"load average {os.getloadavg()[0]:.1f} at the end on {os.cpu_count()} cores")
+
+
+def timed_diagnosis(scenario):
+    """The diagnosis of ``scenario``'s simulated recordings and its costs (:func:`measured_diagnosis`),
+    the simulation not counted."""
+    import momentid as mi
+
+    return measured_diagnosis(mi.simulate(scenario))
 
 
 def matrix_parser(module: str, doc: str) -> argparse.ArgumentParser:

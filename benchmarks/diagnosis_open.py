@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import json
 
-from benchmarks.common import hidden_rig, matrix_parser, run_cases, save, timed_diagnosis
+from benchmarks.common import cost_cells, cost_summary, hidden_rig, matrix_parser, run_cases, save, timed_diagnosis
 
 NOISE = 0.01
 
@@ -30,7 +30,7 @@ CASES = [  # (truth kind, its [truth] table with the place), two places and magn
 
 def _case(job) -> dict:
     kind, spec = job
-    d, elapsed = timed_diagnosis(hidden_rig([{"type": kind, **spec}], noise=NOISE))   # the rig with this force
+    d, costs = timed_diagnosis(hidden_rig([{"type": kind, **spec}], noise=NOISE))   # the rig with this force
     place = {k: v for k, v in spec.items() if k in ("storey", "floor")}
     found = d.discovered
     return {"truth": kind, "spec": spec, "noise": NOISE, "verdict": d.mechanism, "expected_location": place,
@@ -38,25 +38,26 @@ def _case(job) -> dict:
             "nrmse_before": found.nrmse_before if found else d.nrmse_before,
             "nrmse_after": found.nrmse_after if found else d.nrmse_after,
             "description": found.description if found else "(nothing discovered)",
-            "terms": list(found.terms) if found else [], "seconds": elapsed}
+            "terms": list(found.terms) if found else [], **costs}
 
 
 def main(argv=None) -> int:
     args = matrix_parser("benchmarks.diagnosis_open", __doc__).parse_args(argv)
     rows = run_cases(CASES, args.workers, case=_case)
-    lines = ["| truth | where | verdict | discovered at | right | held-out NRMSE before -> after | ratio | time |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| truth | where | verdict | discovered at | right | held-out NRMSE before -> after | ratio | time "
+             "| x raw rollout | replays |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         ratio = r["nrmse_before"] / r["nrmse_after"] if r["nrmse_after"] > 0 else float("inf")
         params = {k: v for k, v in r["spec"].items() if k not in ("storey", "floor")}
         lines.append(f"| {r['truth']} {json.dumps(params)} | {json.dumps(r['expected_location'])} | {r['verdict']} | "
                      f"{json.dumps(r['location'])} | {'yes' if r['located'] else 'no'} | "
                      f"{100 * r['nrmse_before']:.2f} % -> {100 * r['nrmse_after']:.2f} % | {ratio:.1f}x | "
-                     f"{r['seconds']:.0f} s |")
+                     f"{cost_cells(r)} |")
     good = [r for r in rows if r["verdict"] == "unexplained" and r["located"]
             and r["nrmse_after"] * 2 <= r["nrmse_before"]]
     lines += ["", f"Verdict unexplained, discovered at the right place and held-out NRMSE at least 2x lower: "
-                  f"{len(good)} of {len(rows)} ({args.workers} cases diagnosed at once on this machine).", "",
+                  f"{len(good)} of {len(rows)} ({args.workers} cases diagnosed at once on this machine); "
+                  f"{cost_summary(rows)}.", "",
               "Descriptions:", ""] + [f"- {r['truth']} {json.dumps(r['expected_location'])}: {r['description']}"
                                       for r in rows]
     save(args.out, "diagnosis_open", rows, lines)

@@ -45,18 +45,15 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import resource
 import subprocess
-import time
 from pathlib import Path
 
 import numpy as np
 
 import momentid as mi
-from benchmarks.common import HIDDEN_RIG, ROOT, run_cases, save
+from benchmarks.common import HIDDEN_RIG, ROOT, measured_diagnosis, run_cases, save
 from benchmarks.diagnosis_compound import FAULT_KINDS
 from momentid.core.analytic import modal_properties
-from momentid.diagnosis.pipeline import diagnose
 from momentid.errors import SimulationError
 from momentid.lab.scenario import parse_scenario
 
@@ -385,11 +382,6 @@ def judge(case: dict, d) -> dict:
     return {"right": not why, "false_alarm": false_alarm, "why": "; ".join(why)}
 
 
-def _cpu() -> float:
-    return sum(getattr(resource.getrusage(who), f) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
-               for f in ("ru_utime", "ru_stime"))
-
-
 def _case(job) -> dict:
     """One case's row; a case that raises is a row saying so (wrong), not the end of the benchmark."""
     try:
@@ -406,9 +398,7 @@ def run_case(category: str, index: int) -> dict:
     """Draw, simulate, diagnose and judge case ``index`` of ``category``: its row of the table."""
     case = draw_case(category, index)
     experiment = _simulate(case["rig"], case["truth"], case["faults"], noisy=True)
-    start, cpu = time.perf_counter(), _cpu()
-    d = diagnose(experiment)
-    seconds, cpu = time.perf_counter() - start, _cpu() - cpu
+    d, costs = measured_diagnosis(experiment)
     rig = case["rig"]
     excitation = {k: v for k, v in rig["excitation"].items() if k != "file"}
     return {"category": category, "index": index, "storeys": len(rig["structure"]["masses"]),
@@ -417,7 +407,7 @@ def run_case(category: str, index: int) -> dict:
             "named": [m.to_dict() for m in d.mechanisms],
             "discovered": d.discovered.to_dict() if d.discovered is not None else None,
             "nrmse_before": d.nrmse_before, "nrmse_after": d.nrmse_after, **judge(case, d),
-            "seconds": seconds, "cpu_seconds": cpu, "code": _code()}
+            **costs, "code": _code()}
 
 
 def _code() -> str:
@@ -453,25 +443,39 @@ def _answer(r: dict) -> str:
     return f"{r['verdict']} {json.dumps(r['location']) if r['location'] else ''}".strip()
 
 
+def _cell(r: dict, key: str, unit: str = "") -> str:
+    return f"{r[key]:.0f}{unit}" if key in r else "-"
+
+
+def _median(rows: list[dict], key: str, unit: str = "") -> str:
+    values = sorted(r[key] for r in rows if key in r)
+    return f"{values[len(values) // 2]:.0f}{unit}" if values else "-"
+
+
 def table(rows: list[dict]) -> list[str]:
     """Summary per category, then one line per case."""
-    lines = ["| category | cases | right | false alarms | median time (wall / CPU) | max time (wall / CPU) |",
-             "|---|---|---|---|---|---|"]
+    lines = ["| category | cases | right | false alarms | median time (wall / CPU) | max time (wall / CPU) "
+             "| median x raw rollout (wall / CPU) | median replays |", "|---|---|---|---|---|---|---|---|"]
     for cat in CATEGORIES:
         rs = [r for r in rows if r["category"] == cat]
         if not rs:
             continue
         wall, cpu = sorted(r["seconds"] for r in rs), sorted(r["cpu_seconds"] for r in rs)
-        lines.append(f"| {cat} | {len(rs)} | {sum(r['right'] for r in rs)} ({100 * np.mean([r['right'] for r in rs]):.0f} %)"
-                     f" | {sum(r['false_alarm'] for r in rs)} | {wall[len(wall) // 2]:.0f} s / {cpu[len(cpu) // 2]:.0f} s"
-                     f" | {wall[-1]:.0f} s / {cpu[-1]:.0f} s |")
-    lines += ["", "| case | storeys | excitation | noise | hidden (change) | answer | right | why not | wall / CPU |",
-              "|---|---|---|---|---|---|---|---|---|"]
+        right = [r["right"] for r in rs]
+        lines.append(f"| {cat} | {len(rs)} | {sum(right)} ({100 * np.mean(right):.0f} %)"
+                     f" | {sum(r['false_alarm'] for r in rs)}"
+                     f" | {wall[len(wall) // 2]:.0f} s / {cpu[len(cpu) // 2]:.0f} s"
+                     f" | {wall[-1]:.0f} s / {cpu[-1]:.0f} s"
+                     f" | {_median(rs, 'ratio', 'x')} / {_median(rs, 'cpu_ratio', 'x')} | {_median(rs, 'replays')} |")
+    lines += ["", "| case | storeys | excitation | noise | hidden (change) | answer | right | why not | wall / CPU "
+              "| x raw rollout (wall / CPU) | replays |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         exc = r["excitation"]["type"]
         lines.append(f"| {r['category']} {r['index']} | {r['storeys']} | {exc} | {100 * r['noise']:.2f} % | "
-                     f"{_truth_words(r)} ({100 * r['change']:.0f} %) | {_answer(r)} | {'yes' if r['right'] else 'no'} | "
-                     f"{r['why']} | {r['seconds']:.0f} / {r['cpu_seconds']:.0f} s |")
+                     f"{_truth_words(r)} ({100 * r['change']:.0f} %) | {_answer(r)} | "
+                     f"{'yes' if r['right'] else 'no'} | "
+                     f"{r['why']} | {r['seconds']:.0f} / {r['cpu_seconds']:.0f} s | "
+                     f"{_cell(r, 'ratio', 'x')} / {_cell(r, 'cpu_ratio', 'x')} | {_cell(r, 'replays')} |")
     return lines
 
 

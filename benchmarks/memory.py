@@ -26,11 +26,11 @@ import numpy as np
 
 import momentid as mi
 from momentid.core.series import RunData
+from momentid.estimation import equation_form as identify_module
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.lab.scenario import BandLimitedNoise
 
 ROOT = Path(__file__).resolve().parents[1]
-from momentid.estimation import equation_form as identify_module
 
 
 def synthesize(path: Path, seconds: float) -> int:

@@ -9,8 +9,8 @@ exactly as ``momentid identify`` does:
 * 1, 2, 3 or 5 storeys; sensors at 60, 120 or 200 Hz; the top storey mode at 10-40 % of the sample rate;
   Rayleigh damping from two ratios drawn between 0.1 % and 3 %;
 * table excitation: band-limited noise, a sine test below mode 1 (the way the shipped trials are
-  driven) or the El Centro record, the last two with the table's own tracking error (broadband, 5 %); a quiet lead-in of 3-8 s before the
-  table moves (the noise source of a real record) and a ring-down after it;
+  driven) or the El Centro record, the last two with the table's own tracking error (broadband, 5 %); a quiet lead-in of
+  3-8 s before the table moves (the noise source of a real record) and a ring-down after it;
 * accelerometers with white noise (5-20 mm/s^2, an IMU's), a bias on every channel, and on each floor
   sensor a gain error (up to +-3 %) and a clock offset (up to +-0.6 sample); a 4th-order anti-alias filter
   at 0.45 x the sample rate on half of the cases;
@@ -362,7 +362,8 @@ def evaluate(case: Case) -> dict:
     capped = any("evaluation cap" in w for w in r.warnings)
     extra = getattr(r, "extra_modes", ())
     row.update(frequency=r.frequency.tolist(), frequency_std=r.frequency_std.tolist(), damping=r.damping_ratio.tolist(),
-               damping_std=r.damping_ratio_std.tolist(), frequency_error=f_err.tolist(), frequency_sigmas=f_sig.tolist(),
+               damping_std=r.damping_ratio_std.tolist(), frequency_error=f_err.tolist(),
+               frequency_sigmas=f_sig.tolist(),
                damping_error=z_err.tolist(), damping_sigmas=z_sig.tolist(),
                extra=[m.frequency for m in extra], warnings=list(r.warnings), capped=capped,
                ok=bool(np.all(frequency_ok) and np.all(damping_ok) and not capped))
@@ -385,7 +386,8 @@ def _table(rows) -> str:
         k = int(np.argmax(np.abs(row["damping_error"])))
         extra = " ".join(f"{f:.3f}" for f in row["extra"]) or "-"
         lines.append(f"| {c['index']} | {c['storeys']} | {c['sample_rate']:g} | {c['excitation']} | "
-                     f"{c['duration']:g} | {app} | {100 * row['frequency_error'][i]:+.3f} [{row['frequency_sigmas'][i]:.1f}] | "
+                     f"{c['duration']:g} | {app} | {100 * row['frequency_error'][i]:+.3f} "
+                     f"[{row['frequency_sigmas'][i]:.1f}] | "
                      f"{100 * row['damping_error'][k]:+.1f} "
                      f"[{row['damping_sigmas'][k]:.1f}] | {zt} | {extra} | {'yes' if row['capped'] else 'no'} | "
                      f"{'yes' if row['ok'] else 'NO'} |")

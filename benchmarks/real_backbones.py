@@ -23,8 +23,7 @@ import scipy.signal
 import momentid as mi
 from benchmarks.real_folds import RIG, ROOT, TRIALS
 from momentid.core.structure import Mechanism
-from momentid.diagnosis import twin_fit
-from momentid.lab import resim
+from momentid.twin import fit as twin_fit
 
 #: Mode 1's band (Hz) on this rig (3.7-3.8 Hz; modes 2 and 3 at 11 and 17 Hz).
 BAND = (2.5, 5.5)
@@ -59,11 +58,11 @@ def summary(amplitude, frequency) -> list:
     return out
 
 
-def _model(d: dict) -> resim.RigModel:
+def _model(d: dict) -> twin_fit.FittedRig:
     friction = tuple(Mechanism("joint_friction", f["storey"], tuple((k, f[k]) for k in ("stiffness", "slip_drift",
                                                                                          "exponent")))
                      for f in d["friction"])
-    return resim.RigModel(np.array(d["masses_kg"]), np.array(d["stiffness_n_per_m"]), np.array(d["damping_ratio"]),
+    return twin_fit.FittedRig(np.array(d["masses_kg"]), np.array(d["stiffness_n_per_m"]), np.array(d["damping_ratio"]),
                           friction, np.array(d["sensor_gain"]), np.array(d["sensor_offset_s"]))
 
 

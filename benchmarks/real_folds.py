@@ -5,8 +5,8 @@
 The flexible 3-storey model of ``data/mini_shake_table/flexible_3storey`` softens and gains damping as
 it shakes harder.  Its four trials of 2025-03-06 (northridge, sine_1p0, sine_1p5, sine_2p0; synchronised
 clocks) are held out one at a time, each fold run as ``momentid diagnose flex3.mcap --hold-out TRIAL``
-runs it (:func:`momentid.diagnosis.pipeline.diagnose` on the whole recording, which runs
-:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`): the
+runs it (:func:`momentid.diagnosis.dispatch.diagnose` on the whole recording, which runs
+:func:`momentid.diagnosis.twin.path.diagnose_twin`): the
 held-out NRMSE of the linear twin refitted on the three training trials by re-simulation, of the
 augmented twin (the same plus Iwan joint friction in every storey, fitted the same way), of a linear
 twin fitted to the held-out trial itself, and of noise alone; the fitted parameters; and the amplitude
@@ -28,8 +28,9 @@ from pathlib import Path
 import numpy as np
 
 import momentid as mi
-from momentid.diagnosis import twin_folds, twin_fit
-from momentid.diagnosis.pipeline import diagnose
+from momentid.diagnosis.twin import folds as twin_folds
+from momentid.twin import fit as twin_fit
+from momentid.diagnosis.dispatch import diagnose
 from momentid.estimation.scaled import amplitude_trend, identify_per_run
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
@@ -165,8 +166,8 @@ def _table(rows, verdict) -> list:
     lines += ["", f"Criteria: after < refit on every fold: {verdict['every_fold_better']}; mean after/refit "
               f"{verdict['mean_ratio']:.2f} (<= {MEAN_RATIO}): {verdict['mean_ratio'] <= MEAN_RATIO}; after <= "
               f"{OWN_FACTOR} x own on {verdict['own_folds']} of {len(rows)} folds (>= {OWN_FOLDS}): "
-              f"{verdict['own_folds'] >= OWN_FOLDS}; trend within {TREND_SIGMAS:g} sigma on {verdict['trend_folds']} of "
-              f"{len(rows)} folds."]
+              f"{verdict['own_folds'] >= OWN_FOLDS}; trend within {TREND_SIGMAS:g} sigma on "
+              f"{verdict['trend_folds']} of {len(rows)} folds."]
     return lines
 
 

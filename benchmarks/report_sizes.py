@@ -5,8 +5,8 @@
 Imports both shipped rigs (``data/mini_shake_table/flexible_3storey`` and ``stiff_1storey``) and
 simulates ``scenarios/hidden/damper_storey3.toml``, then runs the commands that write a
 ``report.html``: ``identify -o``, ``identify --per-run -o``, ``twin -o`` and ``diagnose -o``, each with
-its default trials (every trial; the twin leaves out one the rig-state check sets apart).  Records each page's size, its figures, and the UFF
-files' sizes; a command that refuses is recorded with its one-line error.  Writes
+its default trials (every trial; the twin leaves out one the rig-state check sets apart).  Records each page's
+size, its figures, and the UFF files' sizes; a command that refuses is recorded with its one-line error.  Writes
 ``benchmarks/results/report_sizes.json`` and ``report_sizes.md``.
 """
 

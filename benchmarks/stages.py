@@ -33,9 +33,9 @@ class RawRig:
         from momentid.lab.simulation import ground_motion_of, initial_state, table_jerk
 
         if rig.needs_callback(scenario.truth):
+            callbacks = ", ".join(m.type for m in scenario.truth if m.type in rig.CALLBACK_MECHANISMS)
             raise MomentidError(f"{scenario.source}: the simulate benchmark needs a rig without callback "
-                                f"physics, got [truth] {', '.join(m.type for m in scenario.truth if m.type in rig.CALLBACK_MECHANISMS)}: "
-                                f"expected a linear rig")
+                                f"physics, got [truth] {callbacks}: expected a linear rig")
         motion = ground_motion_of(scenario)
         self.n_steps = scenario.n_samples * scenario.substeps
         nodes = np.asarray(motion.acceleration(np.arange(self.n_steps + 1) * scenario.timestep), float)
@@ -165,7 +165,8 @@ REPLAY_FORCES = (("coulomb_friction", 1, (("force", 0.3),)), ("cubic_stiffness",
 def bench_replay(scenario, experiment, *, repeat: int) -> list[Row]:
     """A diagnosis's replay of one run with callback forces against ``mujoco.rollout`` of the same
     compiled model from the same state under the same controls, with no callback installed: what the
-    Python force callback costs over MuJoCo's own stepping."""
+    force callback (the kinds' compiled laws, :mod:`momentid.lab.native_forces`) costs over MuJoCo's own
+    stepping."""
     import mujoco
     from mujoco import rollout
 

@@ -50,7 +50,7 @@ def cli(argv) -> str | None:
 
 def stages(rec: Path, runs: str, out: Path) -> dict:
     """Wall seconds of the twin's stages, called one by one."""
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     from momentid.estimation.identification import identify
     from momentid.io.recording import read_recording
     from momentid.twin import build, files, parameters, replay, spec
@@ -77,7 +77,7 @@ def main(argv=None) -> int:
         cli(["import", str(SHIPPED), "-o", str(rec)])
         for label, runs in (("five trials", None), ("four same-day trials", SAME_DAY)):
             select = ["--runs", runs] if runs else []
-            ident = min((timed(lambda: cli(["identify", str(rec), *select]))[1:] for _ in range(args.repeat)))
+            ident = min(timed(lambda: cli(["identify", str(rec), *select]))[1:] for _ in range(args.repeat))
             refused, wall, cpu = timed(lambda: cli(["twin", str(rec), "-o", f"{tmp}/{label}", *select]))
             if refused:
                 row = {"calibrated_on": label, "identify_wall_s": ident[0], "twin_wall_s": wall, "refused": refused}

@@ -27,7 +27,8 @@ The names below are the ones most scripts need.
 from momentid.core.analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement, Mechanism, Structure
-from momentid.diagnosis.pipeline import Diagnosis, diagnose
+from momentid.core.version import __version__ as __version__
+from momentid.diagnosis.dispatch import Diagnosis, diagnose
 from momentid.errors import (
     IdentificationError,
     ModelError,
@@ -49,8 +50,6 @@ from momentid.lab.rig import build_spec, compile_model
 from momentid.lab.scenario import Scenario, default_scenario_path, load_scenario
 from momentid.lab.simulation import run_experiment, simulate, simulate_run
 from momentid.report.viewer import view
-
-__version__ = "0.1.0"
 
 __all__ = [
     # types

@@ -53,7 +53,7 @@ def _os_error(exc: OSError) -> str:
 
 def _refuse_implausible(experiment, result) -> None:
     """No answer is printed that the data contradict (units, swapped columns, masses in grams)."""
-    from momentid.diagnosis.plausibility import implausible
+    from momentid.estimation.plausibility import implausible
 
     reasons = implausible(experiment, result)
     if reasons:
@@ -257,7 +257,7 @@ def _cmd_sweep(args) -> int:
 
 
 def _cmd_diagnose(args) -> int:
-    from momentid.diagnosis.pipeline import diagnose, write_report
+    from momentid.diagnosis.dispatch import diagnose, write_report
     from momentid.diagnosis.report import REPORT_FILES, report_folder
     from momentid.report.files import diagnosis_html_page
     from momentid.io.exclusive import exclusive

@@ -37,7 +37,8 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from momentid.io.exclusive import write_whole
 from momentid.io.toml_reader import Table, load_toml

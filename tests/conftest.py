@@ -33,7 +33,7 @@ def load(name: str) -> mi.Scenario:
     return mi.load_scenario(SCENARIOS / f"{name}.toml")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _simulated(name: str, ideal: bool):
     overrides = {"sensors": {}} if ideal else {}   # an empty [sensors]: every channel, exact
     return simulate(mi.load_scenario(SCENARIOS / f"{name}.toml", overrides=overrides))

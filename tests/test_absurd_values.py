@@ -14,7 +14,7 @@ import pytest
 
 import momentid as mi
 from momentid.errors import ModelError, SimulationError
-from momentid.lab import plausible
+from momentid.io import plausible
 from momentid.lab.rig import build_spec, compile_model, mujoco_warnings_counted_not_printed
 
 from conftest import SCENARIOS, scenario_files

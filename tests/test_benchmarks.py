@@ -2,15 +2,20 @@
 
 from __future__ import annotations
 
+import importlib
 import json
 import math
+from pathlib import Path
 
 import numpy as np
+import pytest
 
 from benchmarks.bench import main as bench_main
 from benchmarks.bench import bench_scenario, run_benchmarks, stacked_regressor
 from momentid.lab.scenario import default_scenario_path
 from momentid.lab.simulation import simulate
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def _check_rows(rows):
@@ -71,3 +76,9 @@ def test_the_diagnosis_matrix_covers_the_library():
     named = [m for m, _, _ in MATRIX if m not in ("none", "unexplained")]
     assert sorted(set(named)) == sorted(k.name for k in mechanisms.library())
     assert all(named.count(m) == 2 for m in set(named))
+
+
+@pytest.mark.parametrize("name", sorted(p.stem for p in (ROOT / "benchmarks").glob("*.py") if p.stem != "__main__"))
+def test_every_benchmark_module_imports(name):
+    """A benchmark is run rarely (an hour and more): a module moved under it would otherwise go unseen."""
+    importlib.import_module(f"benchmarks.{name}")

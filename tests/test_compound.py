@@ -16,11 +16,11 @@ import pytest
 import momentid as mi
 from benchmarks.diagnosis_compound import FAULT_KINDS, expected, scenario
 from momentid import mechanisms
-from momentid.diagnosis.compound import STEP_SHORTLIST, shortlist
-from momentid.diagnosis.pipeline import diagnose
-from momentid.diagnosis.screening import Candidate, Domain
-from momentid.diagnosis.selection import SHORTLIST_FLOOR
-from momentid.diagnosis.workers import run_forked
+from momentid.diagnosis.added_mass.compound import STEP_SHORTLIST, shortlist
+from momentid.diagnosis.dispatch import diagnose
+from momentid.diagnosis.added_mass.screening import Candidate, Domain
+from momentid.diagnosis.added_mass.selection import SHORTLIST_FLOOR
+from momentid.core.processes import run_forked
 from momentid.diagnosis.report import write_report
 from momentid.mechanisms.place import Place, Target
 
@@ -176,7 +176,7 @@ def test_a_failed_partial_start_gives_way_to_its_two_best_newcomers(monkeypatch)
     """Beside a wrong partial start no newcomer earns its place; the two that replayed best beside it
     (storey forces at two places: not a damper of the pattern, not the same place twice) are tried
     together without it, by the descent."""
-    from momentid.diagnosis import compound
+    from momentid.diagnosis.added_mass import compound as compound
     start = compound.Entry(mechanisms.get("extra_damper"), Place(Target.STOREY, 3), {"c": 30.0})
 
     def trial(c, score):

@@ -15,8 +15,8 @@ import pytest
 
 import momentid as mi
 from momentid.core.structure import Mechanism
-from momentid.diagnosis import discovery
-from momentid.diagnosis.interpret import describe
+from momentid.diagnosis.added_mass import open_search as discovery
+from momentid.diagnosis.discovered_physics import describe
 from momentid.lab import rig
 from momentid.lab import simulation as sim
 from momentid.mechanisms.place import Place, Target

@@ -8,21 +8,15 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import fields
-
 import pytest
 
 import momentid as mi
 from momentid import mechanisms
 from momentid.cli import main
-from momentid.diagnosis.pipeline import diagnose, write_report
-from momentid.lab.scenario import ChannelFault
+from momentid.diagnosis.data_check import DataEvidence
+from momentid.diagnosis.dispatch import diagnose, write_report
 
 from conftest import SCENARIOS, load
-
-#: The sensor kind of each per-channel fault field of ``[sensors.channel.*]``.
-FAULT_KINDS = {"clock_offset": "sensor_delay", "gain": "sensor_gain", "bias": "sensor_bias"}
-
 
 def expected(name: str) -> tuple[str, dict]:
     """The answer for a hidden rig, from its own ``[truth]`` (or per-channel sensor fault): the
@@ -33,8 +27,7 @@ def expected(name: str) -> tuple[str, dict]:
         kind = mechanisms.get(mech.type)
         return ("unexplained" if kind.truth_only else mech.type), kind.place(mech.location).location
     for channel, fault in scenario.sensors.faults:
-        changed = [f.name for f in fields(ChannelFault) if getattr(fault, f.name) != f.default]
-        return FAULT_KINDS[changed[0]], {"channel": channel}
+        return fault.records[0].type, {"channel": channel}
     return "none", {}
 
 
@@ -43,13 +36,15 @@ def truth(name: str) -> dict:
     scenario = load(f"hidden/{name}")
     if scenario.truth:
         return dict(scenario.truth[0].parameters)
-    return {field: getattr(fault, field) for _, fault in scenario.sensors.faults for field in FAULT_KINDS}
+    return {mechanisms.get(r.type).setting.name: value for _, fault in scenario.sensors.faults for r in fault.records
+            for _, value in r.parameters}
 
 
 CASES = sorted(path.stem for path in (SCENARIOS / "hidden").glob("*.toml"))
-#: Hidden rigs of the open search whose blind diagnoses run under ``-m slow`` (about a minute each on
-#: 2 cores); the stiffness loss (``slip_storey2``) keeps the open search in the default run.
-SLOW_CASES = {"pounding_floor3", "boucwen_storey1"}
+#: Hidden rigs whose blind diagnoses run under ``-m slow`` (about a minute each on 2 cores): two of the
+#: open search (the stiffness loss, ``slip_storey2``, keeps it in the default run) and the tuned-mass
+#: damper (tests/test_mechanisms.py diagnoses it in the default run, in a copy of the package).
+SLOW_CASES = {"pounding_floor3", "boucwen_storey1", "tmd_floor3"}
 #: Physics outside the library, and words the open search's description must use for it.
 OPEN_CASES = {"slip_storey2": ("loses", "of its stiffness from t = 5.0 s"),
               "pounding_floor3": ("floor 3 meets a stop on the + side: gap +4.0 mm", "contact stiffness"),
@@ -107,8 +102,13 @@ def test_blind_diagnosis(recordings, diagnoses, name):
         # One hidden mechanism: exactly one entry, the verdict itself (no spurious second one).
         assert [(m.mechanism, m.location) for m in diag.mechanisms] == [(mechanism, location)], diag.summary
         assert diag.to_dict()["mechanisms"][0]["parameters"] == diag.parameters
-        # The issue's target: held-out NRMSE at least 3x lower after augmentation.
-        assert diag.nrmse_after * 3 <= diag.nrmse_before, diag.summary
+        if isinstance(diag.evidence, DataEvidence):
+            # Named from the channel alone (nothing fitted): the nominal model's replay with the fault on its
+            # reading comes down to what the 1 % sensor noise leaves.
+            assert diag.nrmse_after < diag.nrmse_before < 2 * 0.01, diag.summary
+        else:
+            # The issue's target: held-out NRMSE at least 3x lower after augmentation.
+            assert diag.nrmse_after * 3 <= diag.nrmse_before, diag.summary
 
 
 @pytest.mark.parametrize("name", _marked(sorted(OPEN_CASES)))
@@ -155,6 +155,20 @@ def test_fitted_parameters_and_uncertainty(diagnoses):
     delay = truth("delay_a2")["clock_offset"]
     # 10 ms hidden clock offset, read from a2 against zdd + q2'' (observed within 0.2 %): 2 %.
     assert abs(diag.parameters["delay"] - delay) < 0.02 * delay and 0 < diag.std["delay"] < 1e-3
+
+
+def test_a_sensor_saturation_is_named_at_its_channel_with_its_level(diagnoses):
+    """Issue 30's proof of one sensor-fault model: the kind is one file (mechanisms/sensor_saturation.py),
+    the lab clips the channel from ``[sensors.channel.a2] saturation``, and the diagnosis names it from the
+    recorded channel itself (the data check, not a refusal), at its channel, the level within the issue's 5 %
+    (observed exact: the reading is held at the level itself)."""
+    diag = diagnoses("saturation_a2")
+    assert (diag.mechanism, diag.location) == ("sensor_saturation", {"channel": "a2"}), diag.summary
+    level = truth("saturation_a2")["saturation"]
+    assert abs(diag.parameters["level"] - level) < 0.05 * level
+    assert "sensor saturation at channel a2" in diag.summary and diag.to_dict()["path"] == "data check"
+    # the report page's answer (main's report.html) on the data check, which estimates no noise: no "nan %"
+    assert "sensor saturation" in diag._repr_html_() and "nan" not in diag._repr_html_()
 
 
 def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):

@@ -36,7 +36,8 @@ ACC = (5, 6, 7)
 #: Sample intervals (us) of the DOT's output rates: 120, 60, 30, 10 and 1 Hz.
 STEPS = (8333, 16667, 33333, 100000, 1000000)
 PREAMBLES = (
-    "sep=,\nDeviceTag:,Xsens DOT\nFirmwareVersion:,2.2.1\nAppVersion:,2023.6.0\nStartTime: ,2025-04-11_11:49:50_000 PDT\n"
+    "sep=,\nDeviceTag:,Xsens DOT\nFirmwareVersion:,2.2.1\nAppVersion:,2023.6.0\n"
+    "StartTime: ,2025-04-11_11:49:50_000 PDT\n"
     "\u00a9 Movella Technologies B. V. 2005-2025\n\n",
     "DeviceTag:,left leg\nStartTime: ,2025-03-06_12:21:16_000 PST\n\n",
     "",

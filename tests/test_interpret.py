@@ -1,11 +1,11 @@
-"""What a discovered force is, in an engineer's words (momentid.diagnosis.interpret), on hand-made terms."""
+"""What a discovered force is, in an engineer's words (momentid.diagnosis.discovered_physics), on hand-made terms."""
 
 from __future__ import annotations
 
 import pytest
 
 from momentid.core.structure import Structure
-from momentid.diagnosis.interpret import LOUD, describe, linear_stiffness, physics
+from momentid.diagnosis.discovered_physics import LOUD, describe, linear_stiffness, physics
 from momentid.mechanisms.place import Place, Target
 
 FLOOR_3 = Place(Target.FLOOR_TABLE, 3)   # floor 3 against the table

@@ -11,9 +11,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis import twin_fit
+from momentid.diagnosis.modal import check as mc
+from momentid.twin import fit as twin_fit
 from momentid.lab import resim
+from momentid.lab.sensors import gain_and_delay
 from momentid.mechanisms import joint_friction as jf
 
 MASSES = np.array([0.16, 0.16, 0.142])      # kg: the shipped rig's stated floor masses
@@ -42,7 +43,9 @@ def test_slider_elements_carry_the_stiffness_and_the_power_law():
     assert np.isclose(f[1], f[2]) and np.isclose(f[2], np.sum(k * delta))   # macro-slip: all sliders at strength
     # Micro-slip: the stiffness lost grows as x^(chi+1); between two drifts inside the elements' span the
     # discretised law follows it to the resolution of 6 geometric elements (~25 % per factor 4 of drift).
-    lost = lambda x: 1.0 - jf.backbone(params, x) / (50.0 * x)
+    def lost(x):
+        return 1.0 - jf.backbone(params, x) / (50.0 * x)
+
     slope = np.log(lost(1.6e-3) / lost(0.4e-3)) / np.log(4.0)
     assert abs(slope - 0.6) < 0.15, slope
 
@@ -65,10 +68,10 @@ def _step_storey(model, zdd, substeps):
 
 def test_mujoco_sliders_follow_the_ideal_jenkins_law():
     params = {"stiffness": 60.0, "slip_drift": 1.5e-3, "exponent": -0.4}
-    rig1 = resim.RigModel(np.array([0.16]), np.array([[520.0]]), np.array([0.004]),
-                          resim.friction_records([1], [params]))
+    rig1 = twin_fit.FittedRig(np.array([0.16]), np.array([[520.0]]), np.array([0.004]),
+                          twin_fit.friction_records([1], [params]))
     substeps = 4
-    model = resim.compile_models([rig1], 1.0 / FS / substeps)[0]
+    model = resim.compile_models([rig1.rig()], 1.0 / FS / substeps)[0]
     drift, force = _step_storey(model, _table(8.0, 6.0), substeps)
     k, delta = jf.slider_elements(**params)
     z, ideal = np.zeros(k.size), np.empty(drift.size)
@@ -88,9 +91,9 @@ def test_mujoco_sliders_follow_the_ideal_jenkins_law():
 
 def test_linear_twin_is_the_modal_replay():
     zdd = _table(20.0, 2.0, seed=1)
-    twin = resim.RigModel(MASSES, K3, ZETA)
+    twin = twin_fit.FittedRig(MASSES, K3, ZETA)
     substeps = 16
-    a = resim.simulate(resim.compile_models([twin], 1.0 / FS / substeps), zdd, 1.0 / FS, substeps)[0]
+    a = resim.simulate(resim.compile_models([twin.rig()], 1.0 / FS / substeps), zdd, 1.0 / FS, substeps)[0]
     omega, zeta, residues = twin_fit.twin_modes(twin)
     exact = mc.replay(omega, zeta, residues, np.ones(3), np.zeros(3), zdd, 1.0 / FS)
     # implicitfast is second order here: 10 % over 20 s of light damping at 4 steps a sample (the modes'
@@ -101,9 +104,9 @@ def test_linear_twin_is_the_modal_replay():
 
 def test_the_written_twin_loads_in_stock_mujoco_and_simulates_the_same():
     params = {"stiffness": 40.0, "slip_drift": 5e-3, "exponent": -0.3}
-    twin = resim.RigModel(MASSES, K3, ZETA, resim.friction_records([1, 2], [params, params]))
+    twin = twin_fit.FittedRig(MASSES, K3, ZETA, twin_fit.friction_records([1, 2], [params, params]))
     substeps = resim.TIMESTEP_PER_SAMPLE
-    spec = resim.build_spec(twin, 1.0 / FS / substeps)
+    spec = resim.build_spec(twin.rig(), 1.0 / FS / substeps)
     compiled = spec.compile()
     loaded = mujoco.MjModel.from_xml_string(spec.to_xml())
     zdd = _table(6.0, 4.0, seed=2)
@@ -115,11 +118,11 @@ def test_the_written_twin_loads_in_stock_mujoco_and_simulates_the_same():
 
 
 def test_fit_twin_recovers_a_linear_rig():
-    truth = resim.RigModel(MASSES, K3, ZETA, gain=np.array([1.0, 1.01, 0.99]), offset=np.array([0.0, 0.0, 2e-3]))
+    truth = twin_fit.FittedRig(MASSES, K3, ZETA, gain=np.array([1.0, 1.01, 0.99]), offset=np.array([0.0, 0.0, 2e-3]))
     zdd = _table(12.0, 2.0, seed=3)
     clean = twin_fit.predict(truth, twin_fit.Trial("t", zdd, np.zeros((zdd.size, 3)), 1.0 / FS, 0, zdd.size, 1.0))
     tr = twin_fit.Trial("t", zdd, clean, 1.0 / FS, 0, zdd.size, float(np.sqrt(np.sum((clean - clean.mean(0)) ** 2))))
-    start = resim.RigModel(MASSES, K3 * 1.01, ZETA * 1.3)
+    start = twin_fit.FittedRig(MASSES, K3 * 1.01, ZETA * 1.3)
     fit = twin_fit.fit_twin([tr], start)
     # Noise-free data of the model's own form: the fit lands on the truth to the optimiser's tolerance.
     assert fit.nrmse["t"] < 1e-3, fit.nrmse
@@ -128,14 +131,14 @@ def test_fit_twin_recovers_a_linear_rig():
 
 
 def test_sensor_columns_of_the_fit_are_the_residual_derivatives():
-    model = resim.RigModel(MASSES, K3, ZETA, gain=np.array([1.0, 1.02, 0.97]), offset=np.array([0.0, 1e-3, -2e-3]))
+    model = twin_fit.FittedRig(MASSES, K3, ZETA, gain=np.array([1.0, 1.02, 0.97]), offset=np.array([0.0, 1e-3, -2e-3]))
     zdd = _table(4.0, 1.0, seed=5)
-    a = resim.simulate(resim.compile_models([model], 0.5 / FS), zdd, 1.0 / FS)[0]
-    tr = twin_fit.Trial("t", zdd, mc.sensors(a, np.ones(3), np.zeros(3), 1.0 / FS), 1.0 / FS, 40, zdd.size, 3.0)
+    a = resim.simulate(resim.compile_models([model.rig()], 0.5 / FS), zdd, 1.0 / FS)[0]
+    tr = twin_fit.Trial("t", zdd, gain_and_delay(a, np.ones(3), np.zeros(3), 1.0 / FS), 1.0 / FS, 40, zdd.size, 3.0)
     J = twin_fit.sensor_jacobian(model, a, tr)
 
     def residual(gain, offset):
-        read = mc.sensors(a, gain, offset, tr.dt)
+        read = gain_and_delay(a, gain, offset, tr.dt)
         return ((tr.a[tr.start:] - read[tr.start:]) / tr.norm).ravel()
 
     base = residual(model.gain, model.offset)

@@ -28,12 +28,12 @@ from momentid import mechanisms
 from momentid.core.analytic import modal_properties
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism
-from momentid.diagnosis.residuals import ResidualRow, floor_residual
-from momentid.diagnosis.screening import Domain, screen_equation, screen_storeys
+from momentid.diagnosis.added_mass.residuals import ResidualRow, floor_residual
+from momentid.diagnosis.added_mass.screening import Domain, screen_equation, screen_storeys
 from momentid.errors import ModelError, ScenarioError
 from momentid.lab import rig
 from momentid.lab import simulation as sim
-from momentid.lab.scenario import ChannelFault, Sensors, parse_scenario
+from momentid.lab.scenario import ChannelFault, parse_scenario
 from momentid.lab.sensors import measure
 from momentid.mechanisms import registry
 from momentid.mechanisms.base import GRAVITY, Place, Target, storey_to_floor
@@ -130,28 +130,68 @@ def test_flexible_added_mass_is_its_mass_on_a_spring_and_damper():
     assert np.isclose(c / (2 * m * w), mech.get("damping_ratio"), rtol=1e-12)
 
 
-#: Each sensor kind's parameter in the lab's sensor model (``[sensors.channel.*]``).
-CHANNEL_FAULTS = {"sensor_delay": "clock_offset", "sensor_gain": "gain", "sensor_bias": "bias"}
+def test_a_tuned_mass_damper_is_a_body_of_its_own_on_its_floor_in_every_run():
+    """Issue 30: a kind builds its elements at its place.  The damper hangs on floor 1 of a run without
+    added mass (``added_mass_body`` could not: it acts on added masses only); its spring and dashpot are
+    the ones stated, its body adds its mass to the rig's, and the floor keeps its own."""
+    kind = mechanisms.get("tuned_mass_damper")
+    mech = _record(kind, 1)
+    structure = _structure()
+    model = rig.compile_model(rig.build_spec(structure, None, mechanisms=(mech,)))
+    joint = model.joint("tmd1_x")
+    m = float(model.body_mass[model.body("tmd1").id])
+    k, c = float(model.jnt_stiffness[joint.id]), float(model.dof_damping[joint.dofadr[0]])
+    w = 2 * np.pi * mech.get("frequency")
+    # Exactly the stated body (round-off apart).
+    assert m == mech.get("mass") and np.isclose(np.sqrt(k / m), w, rtol=1e-12)
+    assert np.isclose(c / (2 * m * w), mech.get("damping_ratio"), rtol=1e-12)
+    assert model.body("tmd1").parentid[0] == model.body("floor1").id
+    assert float(model.body_mass[model.body("floor1").id]) == structure.masses[0]
+
+
+def test_a_tuned_mass_damper_is_screened_at_its_floor():
+    """The damper's signature in the nominal model's floor residual (noise-free sweep) is the candidate
+    that explains most, at its floor; the grid's point is within its spacing of the truth."""
+    truth = (Mechanism("tuned_mass_damper", 3, (("mass", 1.0), ("frequency", 0.9), ("damping_ratio", 0.1))),)
+    best = _best_screened(_structure(), truth)
+    assert (best.kind.name, best.location) == ("tuned_mass_damper", {"floor": 3})
+    # A grid 16 % apart in frequency, 3 damping ratios: the mass fitted at the nearest point is within 30 %
+    # (the re-simulation that sizes it is held to 10 % in tests/test_discrepancy.py).
+    assert abs(best.parameters["mass"] - 1.0) < 0.3 and abs(best.parameters["frequency"] / 0.9 - 1) < 0.16
 
 
 @pytest.mark.parametrize("name", [k.name for k in mechanisms.REGISTRY.values() if k.target is Target.CHANNEL])
-def test_sensor_kinds_match_the_lab_sensor_model_and_undo(name):
+def test_the_lab_applies_each_sensor_fault_by_its_kind(name):
+    """One model of a sensor fault: ``[sensors.channel.X]`` states it by the kind's setting, the lab's
+    sensor model applies the kind's own ``distort`` (bit for bit), and a fault that can be undone is."""
     kind = mechanisms.get(name)
-    value = kind.fitted.example
+    value = kind.setting.example
     t = np.arange(4000) / 1000.0
     x = np.sin(2 * np.pi * 2.0 * t)
     distorted = kind.distort(t, x, {kind.fitted.name: value})
-    inner = slice(100, -100)   # away from the ends, where a shifted record has no samples to read
-    # Undoing a fault by interpolation: linear interpolation of a 2 Hz sine at 1 kHz, twice, errs
-    # by ~(2 pi 2 / 1000)^2 / 8 ~ 2e-5 of its amplitude; 1e-4 bounds it.
-    assert np.max(np.abs(kind.correct(t, distorted, {kind.fitted.name: value})[inner] - x[inner])) < 1e-4
-    if name in CHANNEL_FAULTS:
-        channels = ("zdd", "z", "zd", "a1", "q1", "v1")
-        run = RunData("r", np.zeros(1), t, channels, np.column_stack([x] * len(channels)))
-        fault = ChannelFault(**{CHANNEL_FAULTS[name]: value})
-        lab = measure(run, Sensors(faults=(("a1", fault),)), seed=0, run_index=0)["a1"]
-        # The lab shifts by cubic interpolation, the kind by linear: the difference above, again.
-        assert np.max(np.abs(lab[inner] - distorted[inner])) < 1e-4
+    channels = ("zdd", "z", "zd", "a1", "q1", "v1")
+    run = RunData("r", np.zeros(1), t, channels, np.column_stack([x] * len(channels)))
+    data = tomllib.loads((SCENARIOS / "hidden" / "clean.toml").read_text())
+    data["sensors"] = {"set": "all", "channel": {"a1": {kind.setting.name: value}}}
+    sensors = parse_scenario(data, source=SCENARIOS / "hidden" / "fault.toml").sensors
+    assert sensors.fault("a1") == ChannelFault((kind.record("a1", value),))
+    assert np.array_equal(measure(run, sensors, seed=0, run_index=0)["a1"], distorted)
+    assert not np.array_equal(distorted, x)
+    if kind.reversible:
+        inner = slice(100, -100)   # away from the ends, where a shifted record has no samples to read
+        # Undoing a fault by interpolation: linear interpolation of a 2 Hz sine at 1 kHz errs by
+        # ~(2 pi 2 / 1000)^2 / 8 ~ 2e-5 of its amplitude; 1e-4 bounds it.
+        assert np.max(np.abs(kind.correct(t, distorted, {kind.fitted.name: value})[inner] - x[inner])) < 1e-4
+
+
+def test_a_channel_fault_outside_its_bounds_or_unknown_is_refused():
+    data = tomllib.loads((SCENARIOS / "hidden" / "clean.toml").read_text())
+    data["sensors"]["channel"] = {"a1": {"gain": 0.0}}
+    with pytest.raises(ScenarioError, match=r"sensors.channel.a1.gain.*positive"):
+        parse_scenario(data, source=SCENARIOS / "hidden" / "fault.toml")
+    data["sensors"]["channel"] = {"a1": {"wobble": 1.0}}
+    with pytest.raises(ScenarioError, match=r"unknown key 'sensors.channel.a1.wobble'.*clock_offset"):
+        parse_scenario(data, source=SCENARIOS / "hidden" / "fault.toml")
 
 
 def test_truth_records_are_validated_against_the_parameter_bounds():
@@ -175,22 +215,6 @@ def _worked_example(name: str) -> str:
     return re.search(rf"<!-- {re.escape(name)} -->\s*```\w+\n(.*?)```", doc, re.S).group(1)
 
 
-@pytest.fixture
-def new_kind_file(tmp_path, monkeypatch):
-    """The worked example dropped into the package (a folder on its search path) and registered."""
-    folder = tmp_path / "more_mechanisms"
-    folder.mkdir()
-    (folder / "table_dashpot.py").write_text(_worked_example("table_dashpot.py"))
-    monkeypatch.setattr(mechanisms, "__path__", [*mechanisms.__path__, str(folder)])
-    assert "table_dashpot" not in registry.REGISTRY
-    try:
-        registry.load()
-        yield registry.get("table_dashpot")
-    finally:
-        registry.REGISTRY.pop("table_dashpot", None)
-        sys.modules.pop("momentid.mechanisms.table_dashpot", None)
-
-
 def _nominal_residual(structure, truth):
     """A sweep through a rig carrying ``truth`` (noise-free) and the floor residual the nominal model
     leaves: (model, run, signals, residual (n, d), top natural frequency in Hz)."""
@@ -212,29 +236,6 @@ def _best_screened(structure, truth):
                                Domain.EQUATION), key=lambda c: c.explained)
 
 
-def test_a_new_mechanism_file_is_all_it_takes(new_kind_file):
-    kind = new_kind_file
-    assert kind in mechanisms.library() and kind in mechanisms.rig_kinds()
-    # Its hidden scenario's [truth] takes it ...
-    data = tomllib.loads(_worked_example("dashpot_floor2.toml"))
-    scenario = parse_scenario(data, source=SCENARIOS / "hidden" / "dashpot_floor2.toml")
-    assert scenario.truth == (Mechanism("table_dashpot", 2, (("c", 3.0),)),)
-    # ... the simulator applies its law in the callback, on floor 2 alone ...
-    structure = scenario.structure
-    rng = np.random.default_rng(5)
-    qpos, qvel = rng.normal(0, 3e-3, 3), rng.normal(0, 3e-2, 3)
-    got = (_storey_forces_on_floors(structure, scenario.truth, qpos, qvel, 0.0)
-           - _storey_forces_on_floors(structure, (), qpos, qvel, 0.0))
-    # Same force through MuJoCo's passive forces and the callback: round-off apart.
-    assert np.allclose(got, [0.0, -3.0 * qvel[1], 0.0], rtol=1e-9, atol=1e-9)
-    # ... and the diagnosis screens for it: in the equation residual of a rig carrying it, it is the
-    # candidate that explains the most, at its place, with its coefficient.
-    best = _best_screened(structure, scenario.truth)
-    assert (best.kind, best.place) == (kind, Place(Target.FLOOR_TABLE, 2)) and best.location == {"floor": 2}
-    # The replay's residual is the force itself, up to RK4's error at 2 ms: 1 % on the coefficient.
-    assert best.explained > 0.99 and abs(best.parameters["c"] - 3.0) < 0.03
-
-
 def _momentid(args, cwd) -> str:
     """``momentid ARGS`` in a fresh interpreter whose package is the copy in ``cwd``; its stdout."""
     env = dict(os.environ, PYTHONPATH=str(cwd))
@@ -244,20 +245,33 @@ def _momentid(args, cwd) -> str:
     return done.stdout
 
 
+def test_the_worked_example_is_the_shipped_kind_and_its_rig():
+    """docs/mechanisms.md shows the tuned-mass damper's file and hidden rig as shipped, byte for byte."""
+    shipped = ROOT / "momentid" / "mechanisms" / "tuned_mass_damper.py"
+    assert _worked_example("tuned_mass_damper.py") == shipped.read_text()
+    assert _worked_example("tmd_floor3.toml") == (SCENARIOS / "hidden" / "tmd_floor3.toml").read_text()
+
+
 def test_the_worked_example_is_diagnosed_in_a_copy_of_the_package(tmp_path):
-    # A copy of the package with the docs' file in it, and its hidden scenario: nothing else edited.
-    shutil.copytree(ROOT / "momentid", tmp_path / "momentid", ignore=shutil.ignore_patterns("__pycache__"))
-    (tmp_path / "momentid" / "mechanisms" / "table_dashpot.py").write_text(_worked_example("table_dashpot.py"))
+    """Issue 30's proof: a copy of the package without the tuned-mass damper, given the docs' file and
+    nothing else, simulates its hidden rig and names it, at its floor, sized."""
+    shutil.copytree(ROOT / "momentid", tmp_path / "momentid",
+                    ignore=shutil.ignore_patterns("__pycache__", "tuned_mass_damper.py"))
+    assert "tuned_mass_damper" not in _momentid(["diagnose", "--help"], tmp_path)   # the copy lacks it ...
+    (tmp_path / "momentid" / "mechanisms" / "tuned_mass_damper.py").write_text(_worked_example("tuned_mass_damper.py"))
     (tmp_path / "scenarios" / "hidden").mkdir(parents=True)
-    (tmp_path / "scenarios" / "hidden" / "dashpot_floor2.toml").write_text(_worked_example("dashpot_floor2.toml"))
+    (tmp_path / "scenarios" / "hidden" / "tmd_floor3.toml").write_text(_worked_example("tmd_floor3.toml"))
     shutil.copytree(ROOT / "data" / "records", tmp_path / "data" / "records")   # the scenario's table motion
-    _momentid(["run", "scenarios/hidden/dashpot_floor2.toml", "-o", "out/"], tmp_path)
-    report = json.loads(_momentid(["diagnose", "out/dashpot_floor2.mcap", "-o", "out/report", "--json"], tmp_path))
+    _momentid(["run", "scenarios/hidden/tmd_floor3.toml", "-o", "out/"], tmp_path)
+    report = json.loads(_momentid(["diagnose", "out/tmd_floor3.mcap", "-o", "out/report", "--json"], tmp_path))
     named = [(m["mechanism"], m["location"]) for m in report["mechanisms"]]
-    assert named == [("table_dashpot", {"floor": 2})], report["summary"]
-    # Sized from the damping pattern of the identified C at 1 % sensor noise: observed 0.5 % off the
-    # truth (3 N s/m); 3 %, the single-mechanism matrix's tolerance for a damper.
-    assert abs(report["parameters"]["c"] - 3.0) < 0.03 * 3.0, report["summary"]
+    assert named == [("tuned_mass_damper", {"floor": 3})], report["summary"]   # ... the one file adds it
+    assert "tuned mass damper at floor 3" in report["summary"] and "Mismatch on floor 3 alone" in report["summary"]
+    truth = {"mass": 1.0, "frequency": 0.78, "damping_ratio": 0.1}
+    for name, value in truth.items():
+        # The issue's target: 10 % (observed within 0.1 %: 1 % sensor noise, sized by re-simulation).
+        assert abs(report["parameters"][name] - value) < 0.1 * value, report["summary"]
+        assert 0 < report["std"][name] < 0.1 * value
     # The issue's target for a named mechanism: held-out NRMSE at least 3x lower.
     assert report["nrmse_after"] * 3 <= report["nrmse_before"], report["summary"]
 

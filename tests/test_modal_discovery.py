@@ -1,4 +1,4 @@
-"""The open search of the modal path (:mod:`momentid.diagnosis.modal_discovery`) on simulated
+"""The open search of the modal path (:mod:`momentid.diagnosis.modal.open_search`) on simulated
 accelerometer-only rigs: 120 Hz, no added mass, like ``tests/test_real_diagnose.py``'s, but with a
 cubic spring in storey 1 (a rig that stiffens with its drift), simulated by an independent
 fixed-step RK4 of the shear building at 8 sub-steps per sample."""
@@ -12,9 +12,9 @@ import pytest
 
 import momentid as mi
 from momentid.core.series import RunData
-from momentid.diagnosis import modal_check as mc
-from momentid.diagnosis.modal_discovery import MIN_HELD_OUT_GAIN, discover_modal
-from momentid.diagnosis.real import diagnose_modal
+from momentid.diagnosis.modal import check as mc
+from momentid.diagnosis.modal.open_search import MIN_HELD_OUT_GAIN, discover_modal
+from momentid.diagnosis.modal.path import diagnose_modal
 from momentid.diagnosis.report import write_report
 
 from test_real_diagnose import DURATION, FS, LEAD_IN, MASSES, SIGMA, STIFFNESS, lab
@@ -91,7 +91,8 @@ def test_cubic_storey_found_on_mode_1(tmp_path):
     # Its first nonlinear term is a stiffness that grows with the motion: a positive coefficient of a
     # term odd in eta (cubic, quadratic, a gap or stop) is stiffening.
     first = [t for t in found.terms if t["term"] not in ("x", "v")][0]
-    assert first["term"] in ("x3", "x_abs_x", "dead_zone", "gap_pos", "gap_neg") and first["coefficient"] > 0, found.terms
+    stiffening = ("x3", "x_abs_x", "dead_zone", "gap_pos", "gap_neg")
+    assert first["term"] in stiffening and first["coefficient"] > 0, found.terms
     assert found.beats_linear, diag.summary
     assert found.nrmse_after <= (1 - MIN_HELD_OUT_GAIN) * found.nrmse_before
     assert "it beats the linear model" in diag.summary and diag.mechanism != "none"

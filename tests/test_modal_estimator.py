@@ -72,7 +72,8 @@ def test_mode_response_derivatives(hold):
     bins = 2 * np.pi * np.linspace(0.5, 55.0, 300)
     _, dH = mode_response(hold, bins, h, w, z)
     e = 1e-7
-    numeric = [(mode_response(hold, bins, h, w * np.exp(e), z)[0] - mode_response(hold, bins, h, w * np.exp(-e), z)[0]) / (2 * e),
+    numeric = [(mode_response(hold, bins, h, w * np.exp(e), z)[0]
+                - mode_response(hold, bins, h, w * np.exp(-e), z)[0]) / (2 * e),
                (mode_response(hold, bins, h, w, z + e)[0] - mode_response(hold, bins, h, w, z - e)[0]) / (2 * e)]
     for analytic, fd in zip(dH, numeric):
         # Central differences of step 1e-7 on a peak of height ~1/(2 zeta): ~1e-8 relative round-off.

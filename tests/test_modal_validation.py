@@ -83,5 +83,6 @@ def test_every_case_of_the_committed_set():
 
     with ProcessPoolExecutor(max_workers=2) as pool:
         rows = list(pool.map(mv.evaluate, mv.draw_cases(48, 2025)))
-    failed = [(r["label"], r.get("error"), r.get("frequency_error"), r.get("damping_error")) for r in rows if not r["ok"]]
+    failed = [(r["label"], r.get("error"), r.get("frequency_error"), r.get("damping_error"))
+              for r in rows if not r["ok"]]
     assert not failed, failed

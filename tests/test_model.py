@@ -135,3 +135,38 @@ def test_callback_applies_the_storey_force_laws():
         want = rig.callback_forces(mechanisms, data.qpos[1:], data.qvel[1:], t, s)[0]
         # Same formulas, evaluated in another order: round-off apart.
         assert np.allclose(data.qfrc_applied[1:], want, rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("floor", [1, 2])
+def test_callback_forces_reach_the_floors_past_an_attachment(floor):
+    """Issue 30's bug: an attachment with a joint of its own (``flexible_added_mass``) on floor 1 or 2
+    beside any callback kind was refused ("floor joints' dofs [1, 3, 4] are not one after another").
+    Its dof sits between two floors' dofs: the callback still pushes exactly the floors, and the rig
+    simulates."""
+    from momentid.core.structure import Mechanism
+    from momentid.lab import simulation as sim
+
+    s = structure(3)
+    added = np.zeros(3)
+    added[floor - 1] = 1.5
+    mechanisms = (Mechanism("flexible_added_mass", floor, (("frequency", 6.0), ("damping_ratio", 0.05))),
+                  Mechanism("coulomb_friction", 3, (("force", 0.7),)),
+                  Mechanism("cubic_stiffness", 1, (("k3", 2e7),)))
+    model = rig.compile_model(rig.build_spec(s, added, mechanisms=mechanisms))
+    dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(3)]
+    assert dofs != [1, 2, 3]                            # the attachment's dof sits between the floors'
+    data = mujoco.MjData(model)
+    rng = np.random.default_rng(floor)
+    data.qpos[1:] = rng.normal(0, 2e-3, model.nq - 1)
+    data.qvel[1:] = rng.normal(0, 2e-3, model.nv - 1)
+    sim.CallbackForces(model, mechanisms, s)(model, data)
+    want = rig.callback_forces(mechanisms, data.qpos[dofs], data.qvel[dofs], 0.0, s)[0]
+    # Same formulas, evaluated in another order: round-off apart.
+    assert np.allclose(data.qfrc_applied[dofs], want, rtol=1e-12, atol=1e-15)
+    attachment = [i for i in range(1, model.nv) if i not in dofs]
+    assert np.all(data.qfrc_applied[attachment] == 0.0)  # no callback force on the attachment
+    scenario = load("default")
+    short = Scenario(**{**scenario.__dict__, "duration": 0.5, "structure": s, "truth": mechanisms,
+                        "runs": (Run("r1", tuple(added)),)})
+    run = simulate_run(short, short.runs[0], ground_motion_of(short))
+    assert np.all(np.isfinite(run.values))

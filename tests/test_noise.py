@@ -16,7 +16,7 @@ from momentid.core.series import Experiment
 from momentid.estimation.design import cramer_rao
 from momentid.estimation.identified import damping_models
 from momentid.lab.scenario import Instrument, Sensors, parse_scenario
-from momentid.estimation.checks import check_run
+from momentid.io.run_checks import check_run
 from momentid.lab.sensors import measure
 
 from conftest import SCENARIOS, load
@@ -59,7 +59,9 @@ def test_quantisation_bias_gain_offset_antialias_and_rate(truth):
     _, ex = truth
     sens = Sensors(groups=("zdd", "a", "q"), set="all", sample_rate=200.0, antialias=50.0,
                    accelerometer=Instrument(resolution=1e-3, bias=0.01),
-                   faults=(("a2", mi.lab.scenario.ChannelFault(gain=1.1, clock_offset=0.004)),))
+                   faults=(("a2", mi.lab.scenario.ChannelFault((
+                       mi.mechanisms.get("sensor_gain").record("a2", 1.1),
+                       mi.mechanisms.get("sensor_delay").record("a2", 0.004)))),))
     run = measure(ex.runs[0], sens, seed=0, run_index=0)
     assert run.sample_rate == pytest.approx(200.0) and run.n_samples == 2001
     steps = np.round(run["a1"] / 1e-3)

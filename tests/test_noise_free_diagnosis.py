@@ -1,7 +1,7 @@
 """Noise-free recordings are not a mismatch (issue 22 point 1).
 
 A simulated record without sensor noise satisfies every relation between its channels only to what
-its samples leave open between them (``momentid.diagnosis.consistency.inter_sample``) and to
+its samples leave open between them (``momentid.diagnosis.added_mass.kinematic_check.inter_sample``) and to
 round-off; measured against a noise level near zero, that used to read as an inconsistency of 7e9x
 and the verdict ``unexplained``.  Every shipped noise-free scenario must diagnose as ``none`` with
 consistent sensors.
@@ -16,9 +16,9 @@ import pytest
 
 import momentid as mi
 from momentid.cli import main
-from momentid.diagnosis.consistency import kinematic_check
-from momentid.diagnosis.residuals import fit_linear_model
-from momentid.diagnosis.screening import screen_replay
+from momentid.diagnosis.added_mass.kinematic_check import kinematic_check
+from momentid.diagnosis.added_mass.residuals import fit_linear_model
+from momentid.diagnosis.added_mass.screening import screen_replay
 from momentid.diagnosis.thresholds import EXCESS
 
 from conftest import scenario_files

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import momentid as mi
 from momentid.cli import main
-from momentid.core.series import Experiment, RunData, run_name_problem
+from momentid.core.series import Experiment, run_name_problem
 from momentid.errors import OutputRefusedError
 from momentid.io.outputs import MANIFEST, OwnedFolder, check_file
 from momentid.io.recording import write_experiment

@@ -17,8 +17,8 @@ COLUMNS = ["q1", "q2", "q3", "v1", "v2", "v3", "a1", "a2", "a3"]
 
 
 def test_table3_response_at_5s(simulated):
-    rows = list(csv.DictReader(l for l in data_file("reference", "paper_table3.csv").open()
-                               if not l.startswith("#")))
+    rows = list(csv.DictReader(line for line in data_file("reference", "paper_table3.csv").open()
+                               if not line.startswith("#")))
     experiment = simulated("paper_harmonic")
     assert len(rows) == len(experiment.runs) == 7
     for col in COLUMNS:
@@ -74,4 +74,5 @@ def test_scenario_model_is_the_papers():
     s = load("paper_harmonic").structure
     assert list(s.masses) == reference["model"]["masses"]
     assert list(s.storey_stiffness) == reference["model"]["storey_stiffness"]
-    assert (s.rayleigh_mu, s.rayleigh_kappa) == (reference["model"]["rayleigh_mu"], reference["model"]["rayleigh_kappa"])
+    model = reference["model"]
+    assert (s.rayleigh_mu, s.rayleigh_kappa) == (model["rayleigh_mu"], model["rayleigh_kappa"])

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from threadpoolctl import threadpool_limits
 
-from momentid.diagnosis import selection
-from momentid.diagnosis.residuals import equation_residuals, fit_linear_model
-from momentid.diagnosis.selection import screen
-from momentid.diagnosis.sensor_check import check_sensors
+from momentid.diagnosis.added_mass import selection as selection
+from momentid.diagnosis.added_mass.residuals import equation_residuals, fit_linear_model
+from momentid.diagnosis.added_mass.selection import screen
+from momentid.diagnosis.added_mass.sensor_faults import check_sensors
 
 
 def _screened(experiment):
@@ -31,16 +31,20 @@ def test_screening_on_the_workers_is_screening_in_turn(simulated, monkeypatch):
 
 def test_replays_on_the_workers_are_replays_in_turn(simulated, monkeypatch):
     """A size search replays its grid and its curvature's neighbours side by side, and a score its
-    training runs: the same numbers as one after the other."""
+    training runs: on threads (the friction's law runs natively), on forked workers, and one after the
+    other, the same numbers."""
     from momentid import mechanisms
-    from momentid.diagnosis import refit
-    from momentid.diagnosis.replay import Entry, records
+    from momentid.core import processes
+    from momentid.diagnosis.added_mass import resimulation as refit
+    from momentid.diagnosis.added_mass.augmented import Entry, records
+    from momentid.lab import native_forces
 
     experiment = simulated("hidden/friction_storey2")
     with threadpool_limits(limits=1, user_api="blas"):
         model = fit_linear_model(experiment, None)
     kind = mechanisms.get("coulomb_friction")
     entry = Entry(kind, kind.place(2), {"force": 0.2})
+    threads = []
 
     def searched():
         refitter = refit.Refitter(model, None)   # its caches empty
@@ -49,11 +53,43 @@ def test_replays_on_the_workers_are_replays_in_turn(simulated, monkeypatch):
         found = Entry(kind, entry.place, params)
         return structure, params, std, refitter.score_joint(structure, [found], records([found]))
 
+    def counted(job, tasks):
+        threads.append(len(tasks))
+        return processes.run_threaded(job, tasks)
+
+    assert native_forces.threadable(records([entry]))
+    monkeypatch.setattr(refit, "run_threaded", counted)
+    on_threads = searched()
+    assert threads   # the batches went to threads
+    monkeypatch.setattr(refit, "run_threaded", processes.run_forked)   # forked workers
     forked = searched()
-    monkeypatch.setattr(refit, "run_forked", lambda job, tasks: [job(t) for t in tasks])   # here, in turn
+    in_turn = lambda job, tasks: [job(t) for t in tasks]   # noqa: E731
+    monkeypatch.setattr(refit, "run_threaded", in_turn)
+    monkeypatch.setattr(refit, "run_forked", in_turn)
     here = searched()
     # Each replay is deterministic and single-threaded: equal, not close.
-    assert forked == here and 0.2 < forked[1]["force"] < 0.4
+    assert on_threads == forked == here and 0.2 < forked[1]["force"] < 0.4
+
+
+def test_native_and_plain_replays_share_the_threads(simulated):
+    """Replays with a native force and replays of models with none, side by side on threads (the
+    installed native callback leaves a model without forces alone): each as alone."""
+    from momentid import mechanisms
+    from momentid.core.processes import run_threaded
+    from momentid.diagnosis.added_mass import resimulation as refit
+    from momentid.diagnosis.added_mass.augmented import Entry
+
+    experiment = simulated("hidden/friction_storey2")
+    with threadpool_limits(limits=1, user_api="blas"):
+        model = fit_linear_model(experiment, None)
+    refitter = refit.Refitter(model, None)
+    friction, damper = mechanisms.get("coulomb_friction"), mechanisms.get("extra_damper")
+    trials = [(refitter.linear_structure, [Entry(friction, friction.place(2), {"force": f})]) for f in (0.2, 0.3)]
+    trials += [(refitter.linear_structure, [Entry(damper, damper.place(2), {"c": c})]) for c in (1.0, 2.0)]
+    trials += [(refitter.linear_structure, [])]
+    order = [0, 2, 1, 3, 4, 0, 4, 2]
+    alone = [refitter.misfit(*trials[i]) for i in order]
+    assert run_threaded(lambda i: refitter.misfit(*trials[i]), order) == alone
 
 
 def test_the_size_searchs_opening_is_the_one_scipy_asks_for():
@@ -64,7 +100,7 @@ def test_the_size_searchs_opening_is_the_one_scipy_asks_for():
     import numpy as np
     import scipy.optimize
 
-    from momentid.diagnosis.refit import brent_opening
+    from momentid.diagnosis.added_mass.resimulation import brent_opening
     grid = np.linspace(math.log(0.3), math.log(3.0), 11)
     for bounds, xatol in (((math.log(0.5 * 0.2), math.log(5.0 * 0.2)), 0.005), ((math.log(0.5), math.log(2.0)), 0.02),
                           ((grid[3], grid[5]), 0.005)):

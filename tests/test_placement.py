@@ -157,7 +157,8 @@ def test_a_floor_sensor_reading_another_axis_is_named_not_relabelled():
     turned[:, 2] = 0.05 * turned[:, 2] + rng.normal(0.0, 0.01, turned.shape[0])  # the transverse axis
     got = check_placement([runs[0], dataclasses.replace(runs[1], values=turned)], MASSES)
     assert [f.fault for f in got] == [Fault.GAIN]
-    assert re.match(r"run 'r1': floor 2's sensor reads 0\.0\d of the table's motion", got[0].message) and not got[0].fixable
+    assert re.match(r"run 'r1': floor 2's sensor reads 0\.0\d of the table's motion", got[0].message)
+    assert not got[0].fixable
 
 
 def test_runs_settle_a_swap_the_first_mode_cannot_and_two_runs_only_disagree():
@@ -211,7 +212,8 @@ def _validate(cases, seed: int) -> tuple[int, int, int, int]:
         runs = []
         for k in range(3):
             x = record(rig, rate, float(rng.choice([20.0, 60.0, 120.0])),
-                       Sensors(noise=float(rng.choice([0.002, 0.01, 0.03])), gains=tuple(rng.uniform(0.95, 1.05, d + 1)),
+                       Sensors(noise=float(rng.choice([0.002, 0.01, 0.03])),
+                               gains=tuple(rng.uniform(0.95, 1.05, d + 1)),
                                seed=int(rng.integers(10 ** 6))))
             runs.append(RunData(name=f"r{k}", added_mass=np.zeros(d), time=np.arange(x.shape[0]) / rate,
                                 channels=("zdd", *(f"a{j + 1}" for j in range(d))), values=x))

@@ -157,7 +157,7 @@ def test_a_background_job_not_asked_for_is_killed_when_the_block_ends():
 def _borrower(task: str):
     """``short``: its pid.  ``long``: the pids of two jobs it runs with run_forked, retried until a
     core of the pool is idle (the short task's worker, with no task left) and helpers ran them."""
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     if task == "short":
         return [os.getpid()]
     deadline = time.monotonic() + 60
@@ -171,7 +171,7 @@ def _borrower(task: str):
 
 def test_a_worker_borrows_the_core_of_a_worker_with_no_task_left():
     from momentid.core import processes
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     short, long = run_forked(_borrower, ["short", "long"])
     # The long task's jobs ran in helpers of its own (not in itself, not in the short task's worker)
     # once the short task's worker was idle; without a lent core they would run in the worker itself
@@ -181,3 +181,19 @@ def test_a_worker_borrows_the_core_of_a_worker_with_no_task_left():
     assert processes._IDLE is None
     with processes.helpers_allowed() as allowed:
         assert allowed   # the command itself may always start helpers
+
+
+def test_a_count_includes_the_threads_and_forked_workers():
+    """``counters.counting``: what the jobs add on threads and in forked workers comes back to the count;
+    nothing is counted outside the block."""
+    from momentid.core import counters
+    from momentid.core.processes import run_forked, run_threaded
+
+    counters.add(counters.REPLAYS, 5)   # not counting: no effect
+    with counters.counting() as replays:
+        run_forked(lambda n: counters.add(counters.REPLAYS, n), [1, 2, 3])
+        run_threaded(lambda n: counters.add(counters.REPLAYS, n), [10, 20])
+        with counters.counting() as inner:
+            counters.add(counters.REPLAYS, 100)
+            assert inner() == 100
+        assert replays() == 136

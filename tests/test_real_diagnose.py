@@ -18,9 +18,10 @@ import momentid as mi
 from momentid.cli import main
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
-from momentid.diagnosis.pipeline import diagnose
-from momentid.diagnosis.real import AMPLITUDE_DEPENDENCE, diagnose_modal
-from momentid.diagnosis.result import Diagnosis, ModalEvidence
+from momentid.diagnosis.dispatch import diagnose
+from momentid.diagnosis.modal.path import AMPLITUDE_DEPENDENCE, diagnose_modal
+from momentid.diagnosis.modal.words import ModalEvidence
+from momentid.diagnosis.result import Diagnosis
 from momentid.diagnosis.verdict import Verdict
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.estimation.linear import discretize, outputs, simulate_linear
@@ -67,7 +68,7 @@ def lab(*runs) -> Experiment:
 
 
 def consistent(diag: Diagnosis) -> None:
-    """The verdict follows the rule of momentid.diagnosis.real from the reported numbers."""
+    """The verdict follows the rule of momentid.diagnosis.modal.path from the reported numbers."""
     assert isinstance(diag, Diagnosis) and isinstance(diag.evidence, ModalEvidence)
     assert np.isfinite(diag.nrmse_before) and np.isfinite(diag.nrmse_after) and diag.noise_nrmse > 0
     if diag.nrmse_before <= EXCESS * diag.noise_nrmse:

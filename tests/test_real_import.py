@@ -21,7 +21,7 @@ from scipy import signal
 from momentid.cli import main
 from momentid.core.structure import LabStatement
 from momentid.errors import ScenarioError, SensorDataError
-from momentid.io.align import ALIGN_BAND, Alignment, MIN_ALIGN_CORRELATION
+from momentid.io.align import ALIGN_BAND, MIN_ALIGN_CORRELATION
 from momentid.io.formats.xsens_dot import read_xsens_dot
 from momentid.io.importer import import_folder
 from momentid.io.recording import read_recording, write_experiment
@@ -138,7 +138,7 @@ def test_unsynchronised_trial_is_aligned_from_the_data_and_its_reversed_sensor_f
     assert all(r.time[-1] < records[0].time[0] or r.time[0] > records[0].time[-1] for r in records[1:])
     band = signal.butter(4, ALIGN_BAND, btype="band", fs=run.sample_rate, output="sos")
     table = signal.sosfiltfilt(band, run["zdd"])
-    for k, channel in enumerate(CHANNELS[1:], start=1):
+    for channel in CHANNELS[1:]:
         report = sensor(run, channel)
         assert report["alignment"] == "data" and report["correlation"] >= MIN_ALIGN_CORRELATION
         floor = signal.sosfiltfilt(band, run[channel])

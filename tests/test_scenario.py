@@ -40,7 +40,8 @@ def test_minimal_scenario_and_defaults(tmp_path):
 
 
 def test_damping_ratios_give_rayleigh_coefficients(tmp_path):
-    sc = mi.load_scenario(write(tmp_path, "rayleigh_mu = 0.05\nrayleigh_kappa = 0.001", "damping_ratios = [0.02, 0.05]"))
+    sc = mi.load_scenario(write(tmp_path, "rayleigh_mu = 0.05\nrayleigh_kappa = 0.001",
+                                "damping_ratios = [0.02, 0.05]"))
     s = sc.structure
     modes = mi.modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix())
     # The two modes' damping ratios are reproduced to round-off of a 2x2 solve and an eigensolve.
@@ -54,13 +55,15 @@ def test_damping_ratios_give_rayleigh_coefficients(tmp_path):
         ("masses = [10.0, 12.0]", "masses = [10.0, -1.0]", "structure.masses[1]", "positive"),
         ("masses = [10.0, 12.0]", "masses = [10.0, 0.0]", "structure.masses[1]", "positive"),
         ("masses = [10.0, 12.0]", 'masses = "heavy"', "structure.masses", "array"),
-        ("storey_stiffness = [2000.0, 1500.0]", "storey_stiffness = [2000.0]", "structure.storey_stiffness", "2 numbers"),
+        ("storey_stiffness = [2000.0, 1500.0]", "storey_stiffness = [2000.0]", "structure.storey_stiffness",
+         "2 numbers"),
         ("duration = 0.5", 'duration = "long"', "scenario.duration", "a number"),
         ("duration = 0.5", "duration = 0.50001", "scenario.duration", "whole number of samples"),
         ('type = "harmonic"', 'type = "earthquake"', "excitation.type", "one of"),
         ("added_mass = [0.5, 0.5]", "added_mass = [0.5, -0.5]", "runs[1].added_mass[1]", ">= 0"),
         ("added_mass = [0.5, 0.5]", "added_mass = [0.5]", "runs[1].added_mass", "2 numbers"),
-        ("rayleigh_mu = 0.05", "rayleigh_mu = 0.05\ndamping_ratios = [0.01, 0.01]", "structure.damping.damping_ratios", "not both"),
+        ("rayleigh_mu = 0.05", "rayleigh_mu = 0.05\ndamping_ratios = [0.01, 0.01]",
+         "structure.damping.damping_ratios", "not both"),
         ("angular_frequency = 6.2832", "angular_frequency = 6.2832\nfrequency = 1.0", "excitation", "exactly one"),
     ],
 )

@@ -21,7 +21,7 @@ from momentid.cli import main
 from momentid.core.analytic import modal_properties
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement
-from momentid.diagnosis.modal_check import replay as modal_replay
+from momentid.diagnosis.modal.check import replay as modal_replay
 from momentid.lab import rig
 from momentid.lab.scenario import parse_scenario
 from momentid.twin import (ExtraMode, SensorModel, TwinParameters, build_twin, model_matrices, read_twin,
@@ -262,7 +262,8 @@ def test_cli_writes_the_folder(tmp_path, experiment, twin, capsys, monkeypatch):
     text = capsys.readouterr().out
     assert "small" in text and "large" in text and "NRMSE" in text and "twin written to" in text
     names = sorted(p.name for p in out.iterdir())
-    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "report.html", "transfer.png", "twin.json", "twin.xml"]
+    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "report.html", "transfer.png", "twin.json",
+                     "twin.xml"]
     model = mujoco.MjModel.from_xml_path(str(out / "twin.xml"))
     assert model.nsensor > 0
     data = json.loads((out / "twin.json").read_text())
@@ -396,7 +397,8 @@ def test_shipped_twin_file_matches_its_readme():
     mujoco.mj_step(model, data, 1000)
     assert all(w.number == 0 for w in data.warning)
     modes = modal_properties(*model_matrices(model))
-    rows = re.findall(r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \|$", (ROOT / "models" / "twin" / "README.md").read_text(), re.M)
+    readme = (ROOT / "models" / "twin" / "README.md").read_text()
+    rows = re.findall(r"^\| (\d) \| ([\d.]+) \| ([\d.]+) \|$", readme, re.M)
     assert len(rows) == 3
     for i, f, z in rows:                        # the README's 4 and 3 decimals
         assert modes.frequency[int(i) - 1] == pytest.approx(float(f), abs=5e-5)

@@ -1,5 +1,5 @@
 """`momentid diagnose` of accelerometer-only recordings on the rig's MuJoCo twin
-(momentid.diagnosis.twin_diagnose, rig_state, twin_words)."""
+(momentid.diagnosis.twin.path, rig_state, twin_words)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 
 from momentid.cli import main
-from momentid.diagnosis.pipeline import diagnose
-from momentid.diagnosis.rig_state import OFF_TREND_SIGMAS, check_state
+from momentid.diagnosis.dispatch import diagnose
+from momentid.estimation.rig_state import OFF_TREND_SIGMAS, check_state
 from momentid.diagnosis.thresholds import EXCESS
-from momentid.diagnosis.result import Diagnosis, TwinEvidence
-from momentid.diagnosis.twin_diagnose import default_hold_out
+from momentid.diagnosis.result import Diagnosis
+from momentid.diagnosis.twin.words import TwinEvidence
+from momentid.diagnosis.twin.path import default_hold_out
 from momentid.diagnosis.verdict import Verdict
 from momentid.io.recording import write_experiment
 

@@ -12,8 +12,8 @@ import html
 import math
 from collections.abc import Iterable, Sequence
 
-__all__ = ["Raw", "escape", "count", "channel_words", "table", "matrix_table", "word_lines", "warnings_list", "summary", "pm", "percent_pm",
-           "SUMMARY_CSS", "REFUSED"]
+__all__ = ["Raw", "escape", "count", "channel_words", "table", "matrix_table", "word_lines", "warnings_list", "summary",
+           "pm", "percent_pm", "SUMMARY_CSS", "REFUSED"]
 
 #: How a damping ratio that is not an answer is marked (the words of the text table).
 REFUSED = "NOT AN ANSWER"

@@ -11,6 +11,12 @@ Who may start workers: the command (:func:`may_fork`); a worker only while it ho
 pool that has no task left (:func:`lending`, :func:`helpers_allowed`), so that the last, longest
 task of a batch does not run on one core while the other waits.
 
+Independent jobs of seconds each (a diagnosis's candidates, a compound step's newcomers, the per-run
+modal fits, the twin's folds) run on :data:`WORKERS` forked processes through :func:`run_forked`: the
+job and its inputs are inherited by the fork, not pickled, and each job returns everything the caller
+needs from it as a value; nothing else comes back from a worker.  Results are the same as one after
+the other (each job is deterministic and single-threaded).
+
 A command (:func:`momentid.cli.main`) handles SIGTERM like Ctrl-C (:func:`sigterm_as_interrupt`:
 outputs are closed as on an interrupt, and it exits 143), and a reader of its output that goes away
 ends it quietly (:func:`quiet_broken_pipe`: exit 141, no text).
@@ -27,11 +33,14 @@ import signal
 import sys
 import threading
 import time
-from concurrent.futures import ProcessPoolExecutor
-from typing import Callable, Iterator
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
+from collections.abc import Callable, Iterator, Sequence
 
-__all__ = ["borrow", "die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork", "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt",
-           "quiet_broken_pipe"]
+from threadpoolctl import threadpool_limits
+
+__all__ = ["borrow", "die_with_parent", "forked_pool", "helpers_allowed", "in_background", "lending", "may_fork",
+           "NESTING", "PARENT_POLL_S", "Terminated", "sigterm_as_interrupt", "quiet_broken_pipe", "run_forked",
+           "run_threaded", "WORKERS"]
 
 #: Processes fork helpers of their own above this depth: the command (depth 0), not its workers (a
 #: diagnosis trial's errors-in-variables fit parallelised inside a worker measured no faster: the
@@ -273,3 +282,81 @@ def quiet_broken_pipe() -> int:
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
     return 128 + signal.SIGPIPE
+
+
+#: Worker processes: the 2 cores a lab laptop has.
+WORKERS = 2
+
+#: (job, tasks) of the running :func:`run_forked`, set before the pool forks (read by the workers).
+_JOB: tuple | None = None
+
+
+def _call(i: int):
+    job, tasks = _JOB
+    with threadpool_limits(limits=1, user_api="blas"):   # small dense products: threads only add waiting
+        return job(tasks[i])
+
+
+def run_forked(job: Callable, tasks: Sequence) -> list:
+    """``[job(task) for task in tasks]``, on :data:`WORKERS` forked processes when there are several
+    and this process may start them (:func:`helpers_allowed`: the command,
+    or a worker's task while a core of its pool is idle).  The cores of workers with no task left
+    are lent to the tasks still running (:func:`lending`).
+
+    Parameters
+    ----------
+    job : callable
+        One task -> a picklable result: everything the caller needs from the job.
+    tasks : sequence
+        The jobs' inputs (not pickled: the workers inherit them).
+
+    Returns
+    -------
+    list
+        The results, in the order of ``tasks``.
+    """
+    if len(tasks) < 2:
+        return [job(task) for task in tasks]
+    with helpers_allowed() as allowed:
+        if not allowed:
+            return [job(task) for task in tasks]
+        return _forked(job, tasks)
+
+
+def _forked(job: Callable, tasks: Sequence) -> list:
+    global _JOB
+    outer, _JOB = _JOB, (job, tasks)   # (a worker's own task is the outer job: restored after)
+    n = min(WORKERS, len(tasks))
+    try:
+        with lending() as idle, forked_pool(n) as pool:   # workers that die with the diagnosis
+            futures = [pool.submit(_call, i) for i in range(len(tasks))]
+            for done, _ in enumerate(as_completed(futures), start=1):
+                idle(n - min(n, len(tasks) - done))   # workers with no task left lend their cores
+            return [f.result() for f in futures]
+    finally:
+        _JOB = outer
+
+
+def run_threaded(job: Callable, tasks: Sequence) -> list:
+    """``[job(task) for task in tasks]``, on :data:`WORKERS` threads when there are several and this
+    process may use more cores (:func:`helpers_allowed`, as :func:`run_forked`): for jobs that spend
+    their time where the GIL is released (a MuJoCo rollout with no Python callback), threads start no
+    process and copy nothing.  Results in the order of ``tasks``, the same as one after the other
+    (each job deterministic, single-threaded, and touching nothing another one uses).
+    """
+    if len(tasks) < 2:
+        return [job(task) for task in tasks]
+    with helpers_allowed() as allowed:
+        if not allowed:
+            return [job(task) for task in tasks]
+        pool = ThreadPoolExecutor(min(WORKERS, len(tasks)))
+        try:
+            with threadpool_limits(limits=1, user_api="blas"):
+                return list(pool.map(job, tasks))
+        except BaseException:
+            # Interrupted (Ctrl-C, SIGTERM): the tasks not started are dropped; those running end with
+            # their replay
+            pool.shutdown(wait=False, cancel_futures=True)
+            raise
+        finally:
+            pool.shutdown(wait=True)

@@ -68,7 +68,7 @@ class Structure:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
 
     @classmethod
-    def from_dict(cls, data: dict) -> "Structure":
+    def from_dict(cls, data: dict) -> Structure:
         return cls(
             masses=tuple(float(x) for x in data["masses"]),
             storey_stiffness=tuple(float(x) for x in data["storey_stiffness"]),

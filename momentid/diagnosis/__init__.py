@@ -1,31 +1,27 @@
 """Diagnosis: what physics the linear model leaves out, where, and how much.
 
-:func:`~momentid.diagnosis.pipeline.diagnose` runs the stages, one module each:
+:func:`~momentid.diagnosis.dispatch.diagnose` asks the recorded channels first (stage 0,
+:mod:`~momentid.diagnosis.data_check`: a fault a channel shows by itself), then takes the recording's path,
+one subpackage each, around shared stages:
 
-- :mod:`~momentid.diagnosis.residuals`: the linear model and its equation residual (stages 1-2);
-- :mod:`~momentid.diagnosis.sensor_check` (on :mod:`~momentid.diagnosis.consistency`): the sensors
-  checked against each other, model-free (stage 3);
-- :mod:`~momentid.diagnosis.locate`: where (storey, run, time, amplitude, band) the misfit lives (4);
-- :mod:`~momentid.diagnosis.screening`: every registered mechanism's signature fitted (5);
-- :mod:`~momentid.diagnosis.refit`, :mod:`~momentid.diagnosis.replay` and
-  :mod:`~momentid.diagnosis.selection`: the candidates re-simulated, the best sized and accepted or
-  not (6); :mod:`~momentid.diagnosis.compound`: further mechanisms (6b);
-- :mod:`~momentid.diagnosis.result` and :mod:`~momentid.diagnosis.verdict`: the :class:`Diagnosis`
-  every recording gets, its :class:`Verdict`; :mod:`~momentid.diagnosis.report`: its summary and
-  report folder (7);
-- :mod:`~momentid.diagnosis.twin_diagnose` (with :mod:`~momentid.diagnosis.rig_state`,
-  :mod:`~momentid.diagnosis.twin_fit`, :mod:`~momentid.diagnosis.twin_folds` and
-  :mod:`~momentid.diagnosis.twin_words`): recordings without added mass, with stated floor masses and
-  three trials or more, on the rig's MuJoCo twin (the same result);
-- :mod:`~momentid.diagnosis.real`: the other recordings without added mass (the modal path, the same
-  result);
-- :mod:`~momentid.diagnosis.thresholds`: the decision thresholds every stage shares.
+- :mod:`~momentid.diagnosis.added_mass`: a rig identified with added masses (stages 1-8 of
+  ``docs/diagnosis.md``: linear model and residuals, sensors against each other, where, screening,
+  choice by re-simulation, further mechanisms, report, open search);
+- :mod:`~momentid.diagnosis.twin`: accelerometer-only recordings with stated floor masses and three
+  trials or more, on the rig's MuJoCo twin (fitted by :mod:`momentid.twin.fit`);
+- :mod:`~momentid.diagnosis.modal`: the other accelerometer-only recordings, on the modal model.
+
+Shared by every path: :mod:`~momentid.diagnosis.result` and :mod:`~momentid.diagnosis.verdict` (the
+:class:`Diagnosis` every recording gets, its :class:`Verdict`), :mod:`~momentid.diagnosis.thresholds`
+(the decision thresholds), :mod:`~momentid.diagnosis.report` (the report folder) and
+:mod:`~momentid.diagnosis.figures`; the open searches' :mod:`~momentid.diagnosis.function_library` and
+:mod:`~momentid.diagnosis.discovered_physics` (what a discovered force is, physically).
 
 The mechanisms themselves live in :mod:`momentid.mechanisms`, one module per kind; the stages know
-them by their contract (where they act, their signatures), never by name.
+them by their contract (where they act, their signatures, how they are sized), never by name.
 """
 
-from momentid.diagnosis.pipeline import Diagnosis, diagnose, write_report
+from momentid.diagnosis.dispatch import Diagnosis, diagnose, write_report
 from momentid.diagnosis.verdict import Verdict
 
 __all__ = ["Diagnosis", "Verdict", "diagnose", "write_report"]

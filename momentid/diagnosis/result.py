@@ -13,162 +13,53 @@ contract, ``report.json`` and ``--json``):
   run itself (``nrmse_linear_own``: the best a model without the missing physics can do on it);
 - the open search's law (``discovered``), the augmented MJCF, the curves of the held-out run, and
   what reading the recording recovered (``notes``);
-- the **evidence** of the path that produced it: :class:`AddedMassEvidence` (a rig identified with
-  added masses: residuals, screening, selection, localisation) or :class:`ModalEvidence`
-  (accelerometers only: the modal model's per-channel misfit, its training fits, the amplitude
-  model) or :class:`TwinEvidence` (accelerometers only, on the rig's calibrated MuJoCo twin: the
-  rig-state check, the training trials, the fitted twins, the reference figure, ``twin.xml``).
+- the **evidence** of the path that produced it (an :class:`Evidence`, which words and draws it):
+  :class:`~momentid.diagnosis.added_mass.words.AddedMassEvidence` (a rig identified with added masses:
+  residuals, screening, selection, localisation) or :class:`~momentid.diagnosis.modal.words.ModalEvidence`
+  (accelerometers only: the modal model's per-channel misfit, its training fits, the amplitude model) or
+  :class:`~momentid.diagnosis.twin.words.TwinEvidence` (accelerometers only, on the rig's calibrated MuJoCo
+  twin: the rig-state check, the training trials, the fitted twins, the reference figure, ``twin.xml``).
 """
 
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Union
+from pathlib import Path
 
 from momentid.diagnosis.verdict import Named, Verdict
 
-if TYPE_CHECKING:
-    from momentid.diagnosis.discovery import Discovery
-    from momentid.diagnosis.locate import Localisation
-    from momentid.diagnosis.modal_check import AmplitudeModel
-    from momentid.diagnosis.modal_discovery import ModalDiscovery
-    from momentid.diagnosis.rig_state import StateCheck
-    from momentid.diagnosis.screening import Candidate
-    from momentid.diagnosis.selection import Selection
-
-__all__ = ["Diagnosis", "AddedMassEvidence", "ModalEvidence", "TwinEvidence", "Evidence"]
+__all__ = ["Diagnosis", "Evidence"]
 
 
-@dataclass(frozen=True)
-class AddedMassEvidence:
-    """What a diagnosis on an identified M, C, K (runs with added mass) shows beside its verdict.
+class Evidence(abc.ABC):
+    """What a diagnosis path shows beside its verdict: each path's own type (a frozen dataclass) says it
+    in words, draws it and lists it in ``report.json``; the report folder asks it, never its type."""
 
-    Attributes
-    ----------
-    run : str
-        The run the before/after replay is shown on.
-    held : bool
-        Whether ``run`` was held out (with two runs there is none to hold out: the last is shown).
-    excess_equation, excess_replay : dict
-        Per floor: equation residual RMS over the noise-only RMS; per channel: replay residual over noise.
-    candidates : tuple of Candidate
-        The best screened candidates, best first.
-    parameter_pattern : dict
-        The damping-pattern fits of the identified C.
-    sensor_check : dict
-        The kinematic check ``a_j = zdd + q_j''``: excess per floor, the best fits.
-    selection : Selection
-        What stage 6 (and a compound diagnosis) re-simulated and why it decided.
-    localisation : Localisation
-        Where the mismatch is: storey, runs, time windows, amplitude, bands, shape, in words.
-    """
+    @abc.abstractmethod
+    def words(self, diag: Diagnosis) -> str:
+        """The report's text (``summary.txt``, ``--json``'s ``summary``) of ``diag``, which holds this evidence."""
 
-    run: str
-    held: bool
-    excess_equation: dict
-    excess_replay: dict
-    candidates: tuple[Candidate, ...]
-    parameter_pattern: dict
-    sensor_check: dict
-    selection: Selection
-    localisation: Localisation
+    @abc.abstractmethod
+    def plot_replay(self, diag: Diagnosis, path: Path) -> None:
+        """``replay.png``: the held-out run recorded and as the linear and augmented models replay it."""
 
+    @abc.abstractmethod
     def to_dict(self) -> dict:
-        return {"excess_equation": self.excess_equation, "excess_replay": self.excess_replay,
-                "parameter_pattern": self.parameter_pattern, "sensor_check": self.sensor_check,
-                "selection": self.selection.to_dict(), "localisation": self.localisation.to_dict(),
-                "candidates": [c.to_dict() for c in self.candidates], "path": "added mass"}
+        """This evidence's entries of ``report.json`` (with ``path``: which diagnosis produced it)."""
 
+    def models(self) -> dict[str, str]:
+        """MuJoCo models (file name -> MJCF) the report holds beside ``model_augmented.xml``; none by default."""
+        return {}
 
-@dataclass(frozen=True)
-class ModalEvidence:
-    """What a diagnosis of accelerometer-only recordings (no added mass) shows beside its verdict.
-
-    Attributes
-    ----------
-    channel_nrmse : dict
-        Per floor sensor: held-out NRMSE before and after.
-    training : dict
-        The pooled modal model of the training runs: modes, damping, sensor gains and clock offsets.
-    candidate : dict
-        The amplitude model tried: its trend, its prediction for the held-out run, the share explained.
-    findings : tuple of str
-        Sensor findings and the recording's stated limits.
-    trend : AmplitudeModel or None
-        The fitted amplitude model (None when it could not be fitted).
-    amplitude : float or None
-        The held-out run's response amplitude (m/s^2).
-    searched : bool
-        Whether the open search ran (a run held out, a mismatch, at least two training runs).
-    """
-
-    channel_nrmse: dict
-    training: dict
-    candidate: dict
-    findings: tuple[str, ...]
-    trend: AmplitudeModel | None = None
-    amplitude: float | None = None
-    searched: bool = False
-
-    def to_dict(self) -> dict:
-        return {"channel_nrmse": self.channel_nrmse, "training": self.training, "candidate": self.candidate,
-                "findings": list(self.findings), "path": "modal (no added mass)"}
-
-
-@dataclass(frozen=True)
-class TwinEvidence:
-    """What a diagnosis of accelerometer-only recordings on the rig's MuJoCo twin shows beside its
-    verdict (:func:`momentid.diagnosis.twin_diagnose.diagnose_twin`).
-
-    Attributes
-    ----------
-    training : tuple of str
-        The training trials (of the held-out trial's rig state unless it was named from another).
-    state : StateCheck
-        Which trials belong to one rig state (:mod:`momentid.diagnosis.rig_state`).
-    excluded : tuple of str
-        One sentence per trial left out as another rig state.
-    channel_nrmse : dict
-        Per floor sensor: held-out NRMSE of the linear twin, the linear refit and the augmented twin.
-    fits : dict
-        The fitted twins (linear refit, augmented, the held-out trial's own) and their training NRMSE.
-    reference : dict
-        Amplitude-dependent viscous damping: its held-out NRMSE and slopes (a figure, not an answer).
-    twin_xml : str
-        The linear twin's MJCF (``twin.xml``; loads in stock MuJoCo).
-    seconds : dict
-        Wall-clock seconds per stage, and the CPU seconds of the whole.
-    fold : Fold
-        The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin_folds.Fold`).
-    per_run : tuple of ModalIdentification
-        Each trial's own modal identification (the rig-state check's and the amplitude reference's
-        points), in recording order.
-    """
-
-    training: tuple[str, ...]
-    state: StateCheck
-    excluded: tuple[str, ...]
-    channel_nrmse: dict
-    fits: dict
-    reference: dict
-    twin_xml: str
-    seconds: dict = field(default_factory=dict)
-    fold: object = field(default=None, repr=False, compare=False)
-    per_run: tuple = field(default=(), repr=False, compare=False)
-
-    def to_dict(self) -> dict:
-        return {"training": list(self.training), "reference": self.reference, "rig_state": self.state.to_dict(),
-                "excluded": list(self.excluded), "channel_nrmse": self.channel_nrmse, "fits": self.fits,
-                "seconds": self.seconds, "path": "twin (no added mass)"}
-
-
-#: The evidence types of the diagnosis paths.
-Evidence = Union[AddedMassEvidence, ModalEvidence, TwinEvidence]
+    def figures(self, diag: Diagnosis, folder: Path) -> list[str]:
+        """Draw this path's own figures into ``folder``; returns their file names (none by default)."""
+        return []
 
 
 @dataclass(frozen=True)
 class Diagnosis:
-    """Result of :func:`~momentid.diagnosis.pipeline.diagnose` for every kind of recording
+    """Result of :func:`~momentid.diagnosis.dispatch.diagnose` for every kind of recording
     (``report.json`` is :meth:`to_dict`; see the module docstring).
 
     Attributes
@@ -187,7 +78,8 @@ class Diagnosis:
         The held-out run (with a note when none could be held out).
     nrmse_before, nrmse_after, noise_nrmse : float
         The held-out run's NRMSE through the linear and the augmented model, and of sensor noise alone.
-    evidence : AddedMassEvidence, ModalEvidence or TwinEvidence
+    evidence : Evidence
+        The path's own (added mass, modal or twin), which words the summary.
     nrmse_linear_refit, nrmse_linear_own : float or None
         Held-out NRMSE of the linear model refitted on the training runs as the augmented one was,
         and of a linear model fitted to the held-out run itself; None where the path does not
@@ -215,16 +107,15 @@ class Diagnosis:
     evidence: Evidence
     nrmse_linear_refit: float | None = None
     nrmse_linear_own: float | None = None
-    discovered: Discovery | ModalDiscovery | None = None
+    discovered: object | None = None
     augmented_xml: str = ""
     curves: dict = field(default_factory=dict, repr=False)
     notes: tuple[str, ...] = ()
 
     @property
     def summary(self) -> str:
-        """The report's text (:func:`momentid.diagnosis.report.summary`)."""
-        from momentid.diagnosis.report import summary
-        return summary(self)
+        """The report's text, in its path's words (:meth:`Evidence.words`)."""
+        return self.evidence.words(self)
 
     def _repr_html_(self) -> str:
         """A notebook's summary: the words of the report page's answer

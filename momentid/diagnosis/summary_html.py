@@ -44,7 +44,9 @@ def diagnosis_headline(diag) -> str:
         head = f"Unexplained mismatch at {location_words(diag.location)}"
     if math.isfinite(diag.nrmse_before) and math.isfinite(diag.nrmse_after):
         head += (f"; held-out {diag.held_out}: NRMSE {100 * diag.nrmse_before:.2f} % (linear) -> "
-                 f"{100 * diag.nrmse_after:.2f} %, sensor noise alone {100 * diag.noise_nrmse:.2f} %")
+                 f"{100 * diag.nrmse_after:.2f} %")
+        if math.isfinite(diag.noise_nrmse):   # the data check runs no noise estimate
+            head += f", sensor noise alone {100 * diag.noise_nrmse:.2f} %"
     return head + "."
 
 

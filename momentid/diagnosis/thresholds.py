@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-__all__ = ["EXCESS", "EXPLAINED", "ACCEPTED", "NOTHING_TO_EXPLAIN", "BLOCK_S"]
+__all__ = ["EXCESS", "EXPLAINED", "ACCEPTED", "NOTHING_TO_EXPLAIN", "BLOCK_S", "removed_share"]
 
 #: A residual above this multiple of its noise-only level counts as a mismatch: equation and replay
-#: residual RMS (:mod:`~momentid.diagnosis.residuals`), storey/run/window excess
-#: (:mod:`~momentid.diagnosis.locate`) and the kinematic check's weighted residual power per
-#: frequency bin (:mod:`~momentid.diagnosis.consistency`).  Noise alone gives ratios near 1; 1.3
+#: residual RMS (:mod:`~momentid.diagnosis.added_mass.residuals`), storey/run/window excess
+#: (:mod:`~momentid.diagnosis.added_mass.locate`) and the kinematic check's weighted residual power per
+#: frequency bin (:mod:`~momentid.diagnosis.added_mass.kinematic_check`).  Noise alone gives ratios near 1; 1.3
 #: leaves room for the scatter of the estimates and the approximations of the noise propagation.
 EXCESS = 1.3
 
@@ -25,3 +25,16 @@ NOTHING_TO_EXPLAIN = 1.02
 #: Length (s) of the alternate time blocks of screening: fitted on even blocks, scored on odd ones.
 #: 1 s: several periods of the slowest mode, so a block's samples are not the neighbours' echo.
 BLOCK_S = 1.0
+
+
+def removed_share(before: float, after: float, noise: float) -> float:
+    """Share of ``before``'s misfit power above noise that ``after`` removes (<= 1; 0 when ``before`` is
+    at the noise): what the accelerometer-only paths (modal, twin) compare with :data:`EXPLAINED`.
+
+    Parameters
+    ----------
+    before, after, noise : float
+        Held-out NRMSE of the linear model, of the candidate, and of sensor noise alone (1).
+    """
+    excess = before ** 2 - noise ** 2
+    return float((before ** 2 - after ** 2) / excess) if excess > 0 else 0.0

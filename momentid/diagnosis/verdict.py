@@ -16,7 +16,7 @@ class Verdict(enum.Enum):
     UNEXPLAINED = "unexplained"      # a mismatch no candidate of the library explains
     MECHANISM = "mechanism"          # a named mechanism
     #: The held-out trial is of another rig state than the training trials (another day, sensors or
-    #: joints re-mounted: :mod:`momentid.diagnosis.rig_state`): its misfit is not evidence of physics.
+    #: joints re-mounted: :mod:`momentid.estimation.rig_state`): its misfit is not evidence of physics.
     ANOTHER_RIG_STATE = "another_rig_state"
 
 

@@ -546,8 +546,7 @@ def _periodic_refusal(runs, f_mode: float) -> str:
         level = float(np.median(power[between])) if between.any() else 0.0
         ratio = min(at) / max(level, 1e-300) if at else np.inf
         return (f"the table's motion in run {run.name!r} is periodic at {f0:.4g} Hz and never leaves the mode at "
-                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and "
-                f"{(k + 1) * f0:.4g} Hz), "
-                f"and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
+                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} "
+                f"Hz), and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
                 f"the detuning, not the damping")
     return ""

@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass, replace
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 
@@ -117,7 +117,7 @@ def _designed_runs(scenario: Scenario, runs) -> tuple[list[RunData], dict]:
     zdd = ground_motion_of(scenario).acceleration(t)
     groups = [g for g in scenario.sensors.groups if g in ("a", "q", "v")]
     out, sigma = [], {}
-    for k, run in enumerate(runs):
+    for run in runs:
         dm = np.asarray(run.added_mass, float)
         model = discretize(s.mass_matrix() + np.diag(dm), s.damping_matrix(dm), s.stiffness_matrix(), 1 / fs)
         y = outputs(model, simulate_linear(model, zdd))

@@ -226,7 +226,7 @@ def equation_form(experiment, selected, layout, eq_name, times, band, names, not
     experiment : Experiment
         For its source (messages) and the memory check.
     selected : sequence of RunData
-        The runs, already checked (:func:`momentid.estimation.checks.check_run`).
+        The runs, already checked (:func:`momentid.io.run_checks.check_run`).
     layout : Layout
     eq_name : {"equation", "difference"}
     times : sequence of float or None

@@ -54,7 +54,7 @@ from momentid.estimation.identified import (MAX_NOISE_EXCESS, DampingFit, Identi
                                             identification_result)
 from momentid.estimation.layout import Layout, equation_form_bytes, require_equation_memory
 from momentid.estimation.reconstruct import Prefilter, suggest_band
-from momentid.estimation.checks import check_run
+from momentid.io.run_checks import check_run
 
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
            "MAX_CONDITION", "MAX_NOISE_EXCESS", "Layout", "equation_form_bytes", "require_equation_memory",

@@ -327,7 +327,8 @@ def _unidentified(model: ModalModel, fit: ModalFit, sample_rates, names):
         fixed[g[weak_g]] = True
         fixed[t[weak_t]] = True
         if weak_g.any():
-            notes.append(f"run {run!r}: the gain of floor sensor(s) {', '.join(f'a{j + 1}' for j in np.flatnonzero(weak_g))} "
+            weak = ", ".join(f"a{j + 1}" for j in np.flatnonzero(weak_g))
+            notes.append(f"run {run!r}: the gain of floor sensor(s) {weak} "
                          f"is not determined by the data (standard error above {GAIN_STD_LIMIT:.0%}): fixed at 1")
         if weak_t.any():
             notes.append(f"run {run!r}: the clock offset of floor sensor(s) "
@@ -343,7 +344,7 @@ def fit_modal(model: ModalModel, runs, frequency_hz, *, masses=None, stated=None
     Starts: the picked resonances (:data:`START_DAMPING`), and the subspace estimate's poles nearest
     to them when it finds all ``d``; each completed by :func:`linear_start`.  See :func:`refine`.
     The first-order hold by default: the diagnosis replays this fit by an exact first-order-hold
-    simulation (:mod:`momentid.diagnosis.modal_check`), which it must match; ``identify`` uses
+    simulation (:mod:`momentid.diagnosis.modal.check`), which it must match; ``identify`` uses
     :func:`momentid.estimation.modal_select.select_modes` and the band-limited response.
 
     Parameters
@@ -366,7 +367,8 @@ def fit_modal(model: ModalModel, runs, frequency_hz, *, masses=None, stated=None
     f_max = fit_band(frequency_hz, fs)
     spectra_list = modal_spectra(runs, model.d, f_max, stated)
     f0 = np.sort(np.asarray(frequency_hz, float))
-    starts = [("picked peaks", linear_start(model, spectra_list, 2 * np.pi * f0, np.full(model.n, START_DAMPING), hold))]
+    starts = [("picked peaks",
+               linear_start(model, spectra_list, 2 * np.pi * f0, np.full(model.n, START_DAMPING), hold))]
     if model.n == model.d:
         starts.append(("shear building at the picked peaks", shear_start(model, f0, masses)))
     longest = max(runs, key=lambda r: r.n_samples)

@@ -229,7 +229,7 @@ class Likelihood:
         How the table acceleration behaves between samples.
     """
 
-    def __init__(self, model: ModalModel, spectra_list, free=None, base=None, hold: "Hold" = None):
+    def __init__(self, model: ModalModel, spectra_list, free=None, base=None, hold: Hold = None):
         self.model = model
         self.hold = Hold.BAND_LIMITED if hold is None else hold
         self.runs = [_Run(sp) for sp in spectra_list]
@@ -267,7 +267,7 @@ class Likelihood:
 class _State:
     """Everything one run's residual computes that its Jacobian reuses."""
 
-    def __init__(self, model: ModalModel, theta, run: _Run, k: int, hold: "Hold"):
+    def __init__(self, model: ModalModel, theta, run: _Run, k: int, hold: Hold):
         d, n = model.d, model.n
         w, z, R = model.omega(theta), model.zeta(theta), model.residues(theta)
         gain, offset = model.sensors(theta, k)

@@ -274,8 +274,9 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
             if source == "neighbour":
                 local = _local_share(model, fit, spectra_list, f_c, z_c, rates, f_max)
                 if local < NEIGHBOUR_MIN_SHARE:
-                    notes.append(f"a mode near {f_c:.4g} Hz was tried and rejected: it removes {max(local, 0.0):.0%} of the "
-                                 f"misfit above the noise level (a residual beside a mode that one more linear mode "
+                    notes.append(f"a mode near {f_c:.4g} Hz was tried and rejected: it removes "
+                                 f"{max(local, 0.0):.0%} of the misfit above the noise level (a residual beside a "
+                                 f"mode that one more linear mode "
                                  f"barely lowers is the rig's nonlinearity)")
                     continue
             trial = _with_mode(model, fit, spectra_list, f_c, z_c, rates, f_max)

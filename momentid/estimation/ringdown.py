@@ -293,10 +293,10 @@ def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMA
     micro-slip adds damping as ``E^(chi + 1)``, ``chi`` in (-1, 0]) are fitted.  The laws whose ``zeta1``
     is positive beyond ``slope_sigmas`` (Newey-West) standard errors are the evidence of an
     amplitude-dependent damping (a damping that falls with amplitude is not believed: on a linear rig
-    that is what leakage of the band-pass and beats with another mode fake); ``zeta0`` is then their mean,
-    and its variance their mean variance plus the variance between
-    them (a ring-down that never reaches small amplitudes leaves the laws' extrapolations apart, and
-    ``zeta0`` as uncertain).  When none is, the damping is constant.
+    that is what leakage of the band-pass and beats with another mode fake); ``zeta0`` is then their
+    mean, and its variance their mean variance plus the variance between them (a ring-down that never
+    reaches small amplitudes leaves the laws' extrapolations apart, and ``zeta0`` as uncertain).  When
+    none is, the damping is constant.
 
     Parameters
     ----------

@@ -328,7 +328,7 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         No noise source, fewer resonances than storeys, a singular fit, or a floor sensor whose gain
         the data put outside 0.5-2 of the table's.
     """
-    from momentid.estimation.checks import check_run
+    from momentid.io.run_checks import check_run
 
     selected = experiment.select(runs)
     if not selected:
@@ -485,8 +485,8 @@ class AmplitudeTrend:
 
 def identify_per_run(experiment: Experiment, runs=None) -> tuple:
     """:func:`identify_modal` on every run on its own, on the machine's cores (forked workers, see
-    :func:`momentid.diagnosis.workers.run_forked`); tuple of results in run order."""
-    from momentid.diagnosis.workers import run_forked
+    :func:`momentid.core.processes.run_forked`); tuple of results in run order."""
+    from momentid.core.processes import run_forked
 
     names = [r.name for r in experiment.select(runs)]
     return tuple(run_forked(lambda name: identify_modal(experiment, runs=[name]), names))

@@ -115,11 +115,11 @@ def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, orders, horizon: int
     y = np.asarray(y, float)
     u = u - u.mean(axis=0)
     y = y - y.mean(axis=0)
-    l = y.shape[1]
+    outs = y.shape[1]
     n_max = max(orders)
-    i = horizon or int(np.clip(np.ceil(2 * n_max / l) + 2, MIN_HORIZON, MAX_HORIZON))
+    i = horizon or int(np.clip(np.ceil(2 * n_max / outs) + 2, MIN_HORIZON, MAX_HORIZON))
     j = u.shape[0] - 2 * i + 1
-    if j < 4 * i * (1 + l):
+    if j < 4 * i * (1 + outs):
         return [np.zeros(0, complex) for _ in orders]
     scale_u, scale_y = np.std(u) or 1.0, np.std(y, axis=0)
     scale_y[scale_y == 0] = 1.0
@@ -128,7 +128,7 @@ def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, orders, horizon: int
     gram = H @ H.T / j
     gram += 1e-10 * np.trace(gram) / gram.shape[0] * np.eye(gram.shape[0])
     L = scipy.linalg.cholesky(gram, lower=True)
-    fu, past = i, 2 * i + i * l
+    fu, past = i, 2 * i + i * outs
     L32 = L[past:, fu:past]
     U, s, _ = np.linalg.svd(L32, full_matrices=False)
     out = []
@@ -137,7 +137,7 @@ def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, orders, horizon: int
             out.append(np.zeros(0, complex))
             continue
         gamma = U[:, :n] * np.sqrt(s[:n])[None, :]
-        A = np.linalg.lstsq(gamma[:-l], gamma[l:], rcond=None)[0]
+        A = np.linalg.lstsq(gamma[:-outs], gamma[outs:], rcond=None)[0]
         z = np.linalg.eigvals(A)
         z = z[(np.abs(z) > 1e-12) & (z.imag > 0)]
         out.append(np.log(z) / dt)

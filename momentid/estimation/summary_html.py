@@ -69,7 +69,8 @@ def modal_html(result) -> str:
     body = modes_table(result)
     if result.extra_modes:
         body += html.table(["", "frequency (Hz)", "damping ratio (%)", "seen by"],
-                           [["extra", pm(m.frequency, m.frequency_std), percent_pm(m.damping_ratio, m.damping_ratio_std),
+                           [["extra", pm(m.frequency, m.frequency_std),
+                             percent_pm(m.damping_ratio, m.damping_ratio_std),
                              ", ".join(map(html.channel_words, m.seen_by)) or "no sensor beyond 3 standard errors"]
                             for m in result.extra_modes],
                            caption=f"Resonances beyond the {html.count(result.storeys, 'storey mode')} "

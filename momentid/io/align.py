@@ -151,7 +151,7 @@ class SensorReport:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "SensorReport":
+    def from_dict(cls, data: dict) -> SensorReport:
         fields = dict(data, alignment=Alignment(data["alignment"]), notes=tuple(data.get("notes", ())))
         fields["clock_error"] = float("nan") if fields["clock_error"] is None else fields["clock_error"]
         return cls(**fields)
@@ -226,8 +226,8 @@ def _lag(table: np.ndarray, floor: np.ndarray, near: float | None = None,
     """Lag L (samples, sub-sample) with ``floor[i + L] ~ table[i]`` and the correlation there.
 
     With ``near`` (a lag the shared clock gives), only lags within ``reach`` samples (default
-    :data:`CLOCK_AGREEMENT` + 1) of it are candidates and each is normalised by the two records' energy over the samples they
-    share at that lag: a record that stops early (a table sensor that died halfway) is then judged on
+    :data:`CLOCK_AGREEMENT` + 1) of it are candidates and each is normalised by the two records' energy over the samples
+    they share at that lag: a record that stops early (a table sensor that died halfway) is then judged on
     what it recorded, not against a lag where a periodic motion matches more samples.
     """
     xc = signal.correlate(floor, table, mode="full", method="fft")

@@ -24,7 +24,8 @@ import contextlib
 import errno
 import os
 from pathlib import Path
-from typing import BinaryIO, Iterator
+from typing import BinaryIO
+from collections.abc import Iterator
 
 from momentid.errors import OutputBusyError
 

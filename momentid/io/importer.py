@@ -46,6 +46,7 @@ from momentid.io.formats import ExportFormat, Layout, get_format
 from momentid.io.formats.base import repair_missing
 from momentid.io.formats.csv_run import csv_error, read_csv_run
 from momentid.io.placement import check_placement, corrected
+from momentid.io.run_checks import check_clipping
 from momentid.io.rate import check_model_rate, check_plausible_rate, resonances_near_nyquist
 from momentid.io.structure_table import MASS_RANGE, parse_structure
 from momentid.io.toml_reader import Table, load_toml
@@ -237,8 +238,6 @@ def _not_copied(record, run: str, role: str, seen: dict) -> None:
 
 def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) -> RunData:
     """The run of sensor files aligned as ``aligned``, checked (clipping, resonances near Nyquist)."""
-    from momentid.estimation.checks import check_clipping  # estimation imports io: here, not at the top
-
     for j, (ch, f) in enumerate(zip(channels, spec.files)):  # before the placement check reads the shapes
         check_clipping(f"{f}: run {spec.name!r}", ch, aligned.values[:, j])
     notes = list(aligned.notes)

@@ -179,7 +179,8 @@ def _resonance(f: np.ndarray, S: np.ndarray, halves: list[np.ndarray], power: np
     below, above = _half_power(S, top, p)
     centre = _shape(S[p])
     return Resonance(frequency=float(f[p]), shape=shape, scatter=np.abs(parts[0] - parts[1]) / 2,
-                     single=min(mac(centre, below), mac(centre, above)), power_ratio=float(power[p].max() / max(power[p].min(), 1e-300)),
+                     single=min(mac(centre, below), mac(centre, above)),
+                     power_ratio=float(power[p].max() / max(power[p].min(), 1e-300)),
                      power=float(top[p]))
 
 

@@ -30,7 +30,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 from momentid.errors import OutputRefusedError
 from momentid.io.exclusive import exclusive, partial_path
@@ -219,15 +219,15 @@ class OwnedFolder:
             raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
                                f"and no {MANIFEST}, the list of the files momentid wrote there (a folder written "
                                f"by momentid before it kept that list, or files of yours: it cannot tell which)",
-                               f"a new folder, or --force to overwrite these files once you know they are not "
-                               f"yours (the folder keeps the list from then on)")
+                               "a new folder, or --force to overwrite these files once you know they are not "
+                               "yours (the folder keeps the list from then on)")
         owner = manifest.get(name, {}).get("command")
         whose = (f"`momentid {owner}` wrote it" if owner and owner != self.command
                  else "it was changed since momentid wrote it" if owner
                  else "momentid did not write it")
         raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
-                           f"but {whose}", f"a new or empty folder, or one this command wrote before "
-                                           f"(--force overwrites such files)")
+                           f"but {whose}", "a new or empty folder, or one this command wrote before "
+                                           "(--force overwrites such files)")
 
     def check(self, names: Iterable[str] = ()) -> None:
         """Before the work: the folder can be made and written, and holds no file of ``names`` that is

@@ -225,9 +225,9 @@ def _cross_term(shapes: list[np.ndarray], masses) -> float:
         return float("nan")
     d = len(masses)
     P = np.column_stack([s for _, s in shapes[:d]])
-    O = P.T @ np.diag(masses) @ P
-    norm = np.sqrt(np.outer(np.diag(O), np.diag(O)))
-    off = np.abs(O) / norm
+    gram = P.T @ np.diag(masses) @ P
+    norm = np.sqrt(np.outer(np.diag(gram), np.diag(gram)))
+    off = np.abs(gram) / norm
     np.fill_diagonal(off, 0.0)
     return float(off.max())
 

@@ -155,7 +155,7 @@ class RecordingWriter:
             self._kept_beside()
             raise
 
-    def __enter__(self) -> "RecordingWriter":
+    def __enter__(self) -> RecordingWriter:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> bool:

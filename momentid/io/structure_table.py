@@ -18,7 +18,7 @@ from momentid.core.resources import require_memory
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError
 from momentid.io.toml_reader import Table
-from momentid.lab.plausible import MASS_RANGE  # one range for scenarios, imports and recordings
+from momentid.io.plausible import MASS_RANGE  # one range for scenarios, imports and recordings
 
 __all__ = ["parse_structure", "implausible_mass", "DEFAULT_STOREY_HEIGHT", "DEFAULT_BASE_MASS", "MASS_RANGE",
            "MODEL_BYTES_PER_STOREY2"]

@@ -187,7 +187,7 @@ class Table:
             self._fail(self.key(name), value, "an array of strings")
         return tuple(value)
 
-    def table(self, name: str, default: Any = _MISSING) -> "Table | None":
+    def table(self, name: str, default: Any = _MISSING) -> Table | None:
         value = self._get(name, default)
         if value is None:
             return None
@@ -195,7 +195,7 @@ class Table:
             self._fail(self.key(name), value, "a table")
         return Table(value, self.file, self.key(name))
 
-    def tables(self, name: str) -> list["Table"]:
+    def tables(self, name: str) -> list[Table]:
         value = self._get(name, _MISSING)
         if not isinstance(value, list) or not value or not all(isinstance(v, dict) for v in value):
             self._fail(self.key(name), value, f"one or more [[{self.key(name)}]] tables")

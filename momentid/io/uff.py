@@ -137,8 +137,10 @@ def function(kind: int, number: int, frequency_step: float, values, *, response_
     is_complex = np.iscomplexobj(values)
     lines = [_id(t) for t in list(ids)[:5]] + [_id("")] * (5 - min(len(ids), 5))
     body = "".join(lines)
-    body += f"{kind:>5}{number:>10}{1:>5}{0:>10} {'NONE':<10}{response_node:>10}{X:>4} {'NONE':<10}{reference_node:>10}{X:>4}\n"
-    body += f"{6 if is_complex else 4:>10}{values.size:>10}{1:>10}" + _e13(0.0) + _e13(frequency_step) + _e13(0.0) + "\n"
+    body += (f"{kind:>5}{number:>10}{1:>5}{0:>10} {'NONE':<10}{response_node:>10}{X:>4} "
+             f"{'NONE':<10}{reference_node:>10}{X:>4}\n")
+    body += (f"{6 if is_complex else 4:>10}{values.size:>10}{1:>10}"
+             + _e13(0.0) + _e13(frequency_step) + _e13(0.0) + "\n")
     numerator = _ACCELERATION if kind == FRF else _GENERAL
     denominator = _ACCELERATION if kind == FRF else 0
     body += f"{_FREQUENCY:>10}{0:>5}{0:>5}{0:>5} {'Frequency':<20} {'Hz':<20}\n"

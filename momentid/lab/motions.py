@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Union
 
 __all__ = ["Harmonics", "RecordedMotion", "BandLimitedNoise", "Chirp", "Tracking", "Excitation"]
 
@@ -71,7 +70,7 @@ class Chirp:
     taper: float = 1.0
 
 
-Excitation = Union[Harmonics, RecordedMotion, BandLimitedNoise, Chirp]
+Excitation = Harmonics | RecordedMotion | BandLimitedNoise | Chirp
 
 
 @dataclass(frozen=True)

@@ -24,9 +24,10 @@ TABLE_INERTIA_RATIO`` (a stiff servo table).
 from __future__ import annotations
 
 import contextlib
+from dataclasses import replace
 
-import numpy as np
 import mujoco
+import numpy as np
 
 from momentid import mechanisms as registry
 from momentid.errors import ModelError
@@ -34,10 +35,14 @@ from momentid.core.structure import Structure
 from momentid.mechanisms.base import drifts, storey_to_floor
 from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 from momentid.mechanisms.place import Place, Target
+from momentid.lab.native_forces import add_program, state_actuator
+from momentid.lab.rig_model import RigModel
+from momentid.lab.tendons import put_tendon
 
 __all__ = ["build_spec", "compile_model", "sensor_layout", "callback_forces", "storey_to_floor", "drifts",
            "FRICTION_SMOOTHING", "TABLE_INERTIA_RATIO", "needs_callback", "CALLBACK_MECHANISMS", "stateful",
-           "state_actuator", "mujoco_warnings_counted_not_printed", "add_storey_elements", "empty_spec"]
+           "state_actuator", "mujoco_warnings_counted_not_printed", "add_elements", "empty_spec", "RigModel",
+           "SENSOR_GROUPS"]
 
 _PLATEN = (0.6, 0.4, 0.025)      # base half-sizes (m), drawing only
 _SLAB = (0.25, 0.2, 0.01)        # floor slab half-sizes (m), drawing only
@@ -74,76 +79,107 @@ def stateful(mechanisms) -> tuple:
     return tuple(m for m in mechanisms if registry.get(m.type).has_state(dict(m.parameters)))
 
 
-def state_actuator(k: int) -> str:
-    """Name of the actuator holding the internal state of the ``k``-th (0-based) stateful mechanism."""
-    return f"state{k + 1}"
+#: The rig's sensors by group, in the order they are added: the table's acceleration, displacement and
+#: velocity, then every floor's absolute acceleration, displacement and velocity relative to the table.
+SENSOR_GROUPS = ("zdd", "z", "zd", "a", "q", "v")
 
 
-def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
-               name: str = "shear_building", mechanisms=()) -> mujoco.MjSpec:
-    """Build the MJCF specification of the rig for one run.
+def build_spec(rig: RigModel | Structure, added_mass=None, *, timestep: float = 1e-3,
+               name: str = "shear_building", mechanisms=(), integrator=mujoco.mjtIntegrator.mjINT_RK4,
+               sensors: tuple[str, ...] = SENSOR_GROUPS) -> mujoco.MjSpec:
+    """Build the MJCF specification of a rig for one run: the one builder of every rig momentid simulates.
 
     Parameters
     ----------
-    structure : Structure
-        Floor masses, storey stiffnesses and heights, Rayleigh coefficients.
+    rig : RigModel or Structure
+        The rig (:class:`~momentid.lab.rig_model.RigModel`: masses, tendons, joint damping, added masses,
+        mechanisms), or a shear building, whose rig is ``RigModel.shear(rig, added_mass, mechanisms)``.
     added_mass : array_like, shape (d,), optional
-        Masses bolted to floors 1..d in this run (kg); zeros by default.
+        With a Structure: masses bolted to floors 1..d in this run (kg); zeros by default.
     timestep : float
-        Integrator step (s); the integrator is RK4.
+        Integrator step (s).
     name : str
         The MJCF model name.
     mechanisms : sequence of Mechanism
-        Physics beyond the linear model (a scenario's ``[truth]``), each of a
-        kind registered in :mod:`momentid.mechanisms`.  A kind changes the MJCF
-        through its hooks (``storey_tendon``: the storey tendon's stiffness and
-        damping, e.g. ``extra_damper``, ``p_delta``; ``added_mass_body``: the
-        added mass's body, e.g. ``flexible_added_mass``); the ``callback``
-        kinds' forces across their place (a storey, a floor against the table,
-        two floors) are applied by the simulator in a control callback
-        (:func:`callback_forces`, :func:`needs_callback`); a force with memory
-        (``has_state``) keeps its state in the activation of a force-free
-        actuator (:func:`state_actuator`).
+        With a Structure: physics beyond the linear model (a scenario's ``[truth]``), each of a kind
+        registered in :mod:`momentid.mechanisms`.  A kind changes the MJCF through its hooks
+        (``storey_tendon``: the storey tendon's stiffness and damping, e.g. ``extra_damper``,
+        ``p_delta``; ``added_mass_body``: the added mass's body, e.g. ``flexible_added_mass``;
+        ``elements``: bodies, joints and tendons of its own at its place, e.g. ``joint_friction``,
+        ``tuned_mass_damper``); the
+        ``callback`` kinds' forces across their place (a storey, a floor against the table, two
+        floors) are applied by the simulator in a control callback (:func:`callback_forces`,
+        :func:`needs_callback`); a force with memory (``has_state``) keeps its state in the activation
+        of a force-free actuator (:func:`state_actuator`).
+    integrator : mujoco.mjtIntegrator
+        RK4 (the lab, the twin) or implicitfast (the re-simulation of a fitted rig, :mod:`momentid.lab.resim`).
+    sensors : tuple of str
+        The sensor groups of :data:`SENSOR_GROUPS` to add, in that order.
 
     Returns
     -------
     mujoco.MjSpec
         Compile it with :func:`compile_model` (or ``spec.compile()``).
+
+    Raises
+    ------
+    ModelError
+        A number of storeys outside 1..200, a non-positive timestep, invalid added masses or mechanism
+        records, or added masses and mechanisms given beside a RigModel (which holds its own).
     """
-    d = structure.storeys
+    if isinstance(rig, RigModel):
+        if added_mass is not None or mechanisms:
+            raise ModelError("build_spec: a RigModel holds its added masses and mechanisms: expected neither "
+                             "beside it")
+        model = rig
+    else:
+        model = RigModel.shear(rig, added_mass, mechanisms)
+    d = model.storeys
     if not 1 <= d <= _MAX_STOREYS:
         raise ModelError(f"structure has {d} storeys: expected 1..{_MAX_STOREYS}")
-    dm = np.zeros(d) if added_mass is None else np.asarray(added_mass, float)
-    if dm.shape != (d,) or np.any(dm < 0) or not np.all(np.isfinite(dm)):
-        raise ModelError(f"added_mass = {dm.tolist()}: expected {d} finite values >= 0 (kg)")
     if not timestep > 0:
         raise ModelError(f"timestep = {timestep!r}: expected a positive number of seconds")
-    for mech in mechanisms:
+    for mech in model.mechanisms:
         registry.validate(mech, d)
+    spec = empty_spec(name, timestep, integrator)
+    add_program(spec, model.mechanisms)   # the callback forces' program for the native callbacks
+    base, table = _base(spec, model)
+    floors = _floors(spec, model, base)
+    _tendons(spec, model)
+    add_elements(spec, model.mechanisms, [base] + floors, timestep)
+    _actuators(spec, model, table.armature + model.base_mass)
+    _sensors(spec, d, sensors)
+    return spec
 
-    spec = empty_spec(name, timestep, mujoco.mjtIntegrator.mjINT_RK4)
-    mu, kappa = structure.rayleigh_mu, structure.rayleigh_kappa
 
+def _base(spec: mujoco.MjSpec, model: RigModel):
+    """The table's platen on its slide joint ``base_x``, with the armature of a stiff servo table."""
     base = spec.worldbody.add_body(name="base", pos=[0, 0, _PLATEN[2]])
-    base.mass = structure.base_mass
-    base.inertia = _inertia(structure.base_mass, _PLATEN)
+    base.mass = model.base_mass
+    base.inertia = _inertia(model.base_mass, _PLATEN)
     table = base.add_joint(name="base_x", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
-    rig_mass = structure.base_mass + float(np.sum(structure.masses)) + float(np.sum(dm))
+    rig_mass = model.base_mass + float(np.sum(model.masses)) + float(np.sum(model.added_mass))
     table.armature = TABLE_INERTIA_RATIO * rig_mass
     base.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(_PLATEN), rgba=[0.35, 0.35, 0.4, 1],
                   contype=0, conaffinity=0)
     base.add_site(name="base_imu", pos=[0, 0, 0])
+    return base, table
 
+
+def _floors(spec: mujoco.MjSpec, model: RigModel, base) -> list:
+    """Every floor a child of the table on its own slide joint ``q<i>``, an added mass welded to it
+    (``added<i>``, changed by the ``added_mass_body`` hook of a mechanism at that floor)."""
     height = _PLATEN[2]
     floors = []
-    for i in range(d):
-        height += structure.storey_heights[i]
-        m_i = structure.masses[i]
+    dm = model.added_mass
+    for i in range(model.storeys):
+        height += model.storey_heights[i]
+        m_i = float(model.masses[i])
         floor = base.add_body(name=f"floor{i + 1}", pos=[0, 0, height - _PLATEN[2]])
         floor.mass = m_i
         floor.inertia = _inertia(m_i, _SLAB)
         joint = floor.add_joint(name=f"q{i + 1}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
-        joint.damping = [mu * (m_i + dm[i]), 0.0, 0.0]
+        joint.damping = [float(model.joint_damping[i]), 0.0, 0.0]
         floor.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=list(_SLAB),
                        rgba=[0.8, 0.6, 0.3, 1], contype=0, conaffinity=0)
         floor.add_site(name=f"floor{i + 1}_imu", pos=[0, 0, 0])
@@ -152,62 +188,67 @@ def build_spec(structure: Structure, added_mass=None, *, timestep: float = 1e-3,
             extra = floor.add_body(name=f"added{i + 1}", pos=[0, 0, _SLAB[2] + 0.02])
             extra.mass = dm[i]
             extra.inertia = _inertia(dm[i], (0.05, 0.05, 0.02))
-            for mech in mechanisms:
+            for mech in model.mechanisms:
                 kind = registry.get(mech.type)
                 if kind.place(mech.location) == Place(Target.FLOOR, i + 1):
                     kind.added_mass_body(mech, extra, dm[i])
             extra.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.05, 0.05, 0.02],
                            rgba=[0.2, 0.4, 0.8, 1], contype=0, conaffinity=0)
+    return floors
 
-    for i in range(d):
-        k_i = structure.storey_stiffness[i]
-        tendon = spec.add_tendon(name=f"storey{i + 1}")
-        tendon.wrap_joint(f"q{i + 1}", 1.0)
-        if i > 0:
-            tendon.wrap_joint(f"q{i}", -1.0)
-        c_i = kappa * k_i
-        for mech in mechanisms:
-            kind = registry.get(mech.type)
-            if kind.place(mech.location) == Place(Target.STOREY, i + 1):
-                above = sum(structure.masses[j] + dm[j] for j in range(i, d))
-                k_i, c_i = kind.storey_tendon(mech, k_i, c_i, above, structure.storey_heights[i])
-        tendon.stiffness = [k_i, 0.0, 0.0]
-        tendon.damping = [c_i, 0.0, 0.0]
-        tendon.springlength = [0.0, 0.0]
-    add_storey_elements(spec, mechanisms, [base] + floors, timestep)
 
-    # act = commanded table acceleration (m/s^2), ctrl = its rate (m/s^3); force = inertia x act
+def _tendons(spec: mujoco.MjSpec, model: RigModel) -> None:
+    """The rig's tendons, each storey's changed by the ``storey_tendon`` hooks of its mechanisms."""
+    d, dm = model.storeys, model.added_mass
+    for t in model.tendons:
+        k, c = t.stiffness, t.damping
+        if t.upper == t.lower + 1:
+            i = t.lower
+            for mech in model.mechanisms:
+                kind = registry.get(mech.type)
+                if kind.place(mech.location) == Place(Target.STOREY, i + 1):
+                    above = sum(model.masses[j] + dm[j] for j in range(i, d))
+                    k, c = kind.storey_tendon(mech, k, c, above, model.storey_heights[i])
+        put_tendon(spec, replace(t, stiffness=k, damping=c))
+
+
+def _actuators(spec: mujoco.MjSpec, model: RigModel, gear: float) -> None:
+    """The table drive (``table``: act = commanded table acceleration, m/s^2; ctrl = its rate, m/s^3;
+    force = inertia x act) and one force-free actuator per force with memory, whose activation holds
+    its state (its rate is the simulator's act_dyn callback's; RK4 integrates it with the motion)."""
     spec.add_actuator(name="table", target="base_x", trntype=mujoco.mjtTrn.mjTRN_JOINT,
-                      dyntype=mujoco.mjtDyn.mjDYN_INTEGRATOR,
-                      gear=[table.armature + structure.base_mass, 0, 0, 0, 0, 0],
+                      dyntype=mujoco.mjtDyn.mjDYN_INTEGRATOR, gear=[gear, 0, 0, 0, 0, 0],
                       ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
                       actlimited=mujoco.mjtLimited.mjLIMITED_FALSE)
-    # A force with memory keeps its internal state in the activation of a force-free actuator whose
-    # rate the simulator's act_dyn callback returns (RK4 integrates it with the motion).
-    for k, mech in enumerate(stateful(mechanisms)):
+    for k, mech in enumerate(stateful(model.mechanisms)):
         floor = registry.get(mech.type).place(mech.location).level
         spec.add_actuator(name=state_actuator(k), target=f"q{floor}", trntype=mujoco.mjtTrn.mjTRN_JOINT,
                           dyntype=mujoco.mjtDyn.mjDYN_USER, gainprm=[0.0] * _GAIN_PARAMETERS,
                           ctrllimited=mujoco.mjtLimited.mjLIMITED_FALSE,
                           actlimited=mujoco.mjtLimited.mjLIMITED_FALSE)
 
-    def sensor(kind, name, target, objtype):
-        spec.add_sensor(name=name, type=kind, objname=target, objtype=objtype)
 
-
+def _sensors(spec: mujoco.MjSpec, d: int, groups: tuple[str, ...]) -> None:
+    """The sensor ``groups`` (of :data:`SENSOR_GROUPS`, in its order): ``zdd``, ``z``, ``zd`` on the table,
+    ``a<i>``, ``q<i>``, ``v<i>`` on every floor."""
+    unknown = set(groups) - set(SENSOR_GROUPS)
+    if unknown:
+        raise ModelError(f"sensor groups {sorted(unknown)}: expected some of {', '.join(SENSOR_GROUPS)}")
     site, joint = mujoco.mjtObj.mjOBJ_SITE, mujoco.mjtObj.mjOBJ_JOINT
     acc, pos, vel = (mujoco.mjtSensor.mjSENS_ACCELEROMETER, mujoco.mjtSensor.mjSENS_JOINTPOS,
                      mujoco.mjtSensor.mjSENS_JOINTVEL)
-    sensor(acc, "zdd", "base_imu", site)
-    sensor(pos, "z", "base_x", joint)
-    sensor(vel, "zd", "base_x", joint)
-    for i in range(d):
-        sensor(acc, f"a{i + 1}", f"floor{i + 1}_imu", site)
-    for i in range(d):
-        sensor(pos, f"q{i + 1}", f"q{i + 1}", joint)
-    for i in range(d):
-        sensor(vel, f"v{i + 1}", f"q{i + 1}", joint)
-    return spec
+    table = {"zdd": (acc, "base_imu", site), "z": (pos, "base_x", joint), "zd": (vel, "base_x", joint)}
+    floor = {"a": (acc, "floor{}_imu", site), "q": (pos, "q{}", joint), "v": (vel, "q{}", joint)}
+    for group in SENSOR_GROUPS:
+        if group not in groups:
+            continue
+        if group in table:
+            kind, target, objtype = table[group]
+            spec.add_sensor(name=group, type=kind, objname=target, objtype=objtype)
+            continue
+        kind, target, objtype = floor[group]
+        for i in range(d):
+            spec.add_sensor(name=f"{group}{i + 1}", type=kind, objname=target.format(i + 1), objtype=objtype)
 
 
 def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
@@ -221,30 +262,28 @@ def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
     return spec
 
 
-def add_storey_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:
-    """Add the MJCF elements of the ``mjcf_elements`` storey kinds among ``mechanisms`` (e.g.
-    ``joint_friction``'s sliders) to ``spec``.
+def add_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:
+    """Add the MJCF elements the ``mjcf_elements`` kinds among ``mechanisms`` build at their places
+    (:meth:`~momentid.mechanisms.base.MechanismKind.elements`: ``joint_friction``'s sliders across a
+    storey, ``tuned_mass_damper``'s body hung on a floor) to ``spec``.
 
     ``bodies`` are the base and the floors, in order (``bodies[i]`` is below storey ``i + 1``); the floor
-    joints are ``q<i>``.  The mass the elements put on a floor is taken off that floor's own, so that
-    the floor masses stay as stated.  The constraint solver becomes PGS (see the comment below).
+    joints are ``q<i>``.  The mass a kind's elements take off a floor (it says which) is taken off that
+    floor's own, so that the floor masses stay as stated.
     """
     for mech in mechanisms:
         kind = registry.get(mech.type)
-        place = kind.place(mech.location)
-        if not (kind.mjcf_elements and place.target is Target.STOREY):
+        if not kind.mjcf_elements:
             continue
-        # PGS: the table's huge armature (TABLE_INERTIA_RATIO) swamps the Newton solver's convergence test,
-        # which then stops before the sliders' friction constraints hold; PGS solves them one by one.
-        spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
-        below, above = place.nodes
-        lower = bodies[below]
-        added = kind.storey_elements(spec, mech, lower, f"q{above}", f"q{below}" if below > 0 else None, timestep)
-        if below > 0:
-            if not lower.mass > added:
-                raise ModelError(f"{mech.type} at {place.words}: its elements weigh {added:.3g} kg, more than "
-                                 f"floor {below} ({lower.mass:.3g} kg): expected a smaller timestep")
-            lower.mass = lower.mass - added
+        place = kind.place(mech.location)
+        for level, taken in kind.elements(spec, mech, place, bodies, timestep).items():
+            if level == 0:
+                continue
+            body = bodies[level]
+            if not body.mass > taken:
+                raise ModelError(f"{mech.type} at {place.words}: its elements weigh {taken:.3g} kg, more than "
+                                 f"floor {level} ({body.mass:.3g} kg): expected a smaller timestep")
+            body.mass = body.mass - taken
 
 
 def callback_forces(mechanisms, q: np.ndarray, v: np.ndarray, time: float = 0.0,

@@ -20,7 +20,7 @@ import numpy as np
 from momentid import mechanisms
 from momentid.core.structure import Mechanism, Structure
 from momentid.io.structure_table import parse_structure
-from momentid.lab.plausible import check_added_mass, check_excitation, check_structure
+from momentid.io.plausible import check_added_mass, check_excitation, check_structure
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import ScenarioError
 from momentid.lab.motions import BandLimitedNoise, Chirp, Excitation, Harmonics, RecordedMotion, Tracking
@@ -100,11 +100,23 @@ class Instrument:
 
 @dataclass(frozen=True)
 class ChannelFault:
-    """Per-channel departures: gain factor, bias and clock offset (s, + = late)."""
+    """A channel's sensor faults (``[sensors.channel.X]``): one record per registered sensor-fault kind
+    stated there (:class:`~momentid.mechanisms.base.SensorFault`: its ``setting`` is the key), which
+    :func:`momentid.lab.sensors.measure` applies at each kind's stage with the kind's own ``distort``."""
 
-    gain: float = 1.0
-    bias: float = 0.0
-    clock_offset: float = 0.0
+    records: tuple[Mechanism, ...] = ()
+
+    def apply(self, stage, time: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``x`` (n,) at ``time`` (n,) (s) with this channel's faults of ``stage`` applied, in their order."""
+        for record in self.records:
+            kind = mechanisms.get(record.type)
+            if kind.stage is stage:
+                x = kind.distort(time, x, dict(record.parameters))
+        return x
+
+    def to_dict(self) -> dict:
+        """``{setting: value}``, as ``[sensors.channel.X]`` states it."""
+        return {mechanisms.get(r.type).setting.name: v for r in self.records for _, v in r.parameters}
 
 
 #: Sensor sets: which channel groups a lab records.
@@ -138,7 +150,7 @@ class Sensors:
         every channel before sampling (0 = none).
     accelerometer, displacement, velocity : Instrument
     faults : tuple of (channel, ChannelFault)
-        Per-channel gain, bias and clock offset.
+        Per-channel sensor faults (``[sensors.channel.X]``).
     """
 
     groups: tuple[str, ...] = SENSOR_SETS["all"]
@@ -175,7 +187,7 @@ class Sensors:
 
     def to_dict(self) -> dict:
         out = asdict(self)
-        out["faults"] = {name: asdict(f) for name, f in self.faults}
+        out["faults"] = {name: f.to_dict() for name, f in self.faults}
         out["groups"] = list(self.groups)
         out["ideal"] = self.ideal
         return out
@@ -458,20 +470,31 @@ def _parse_sensors(sens: Table, storeys: int, sample_rate: float) -> Sensors:
     for name in list(ch_tab.data):
         if name not in names:
             raise ch_tab.error(name, f"a channel name ({', '.join(names)})")
-        t = ch_tab.table(name)
-        fault = ChannelFault(gain=t.number("gain", 1.0, positive=True), bias=t.number("bias", 0.0),
-                             clock_offset=t.number("clock_offset", 0.0))
-        t.finish()
-        faults.append((name, fault))
+        faults.append((name, _parse_channel_fault(ch_tab.table(name), name)))
     ch_tab.finish()
     sens.finish()
     return Sensors(groups=tuple(groups), set=kind, sample_rate=rate, antialias=antialias,
                    faults=tuple(faults), **instruments)
 
 
+def _parse_channel_fault(tab: Table, channel: str) -> ChannelFault:
+    """``[sensors.channel.X]``: each key the setting of a registered sensor-fault kind, within its bounds."""
+    records = []
+    for kind in mechanisms.sensor_settings().values():
+        setting = kind.setting
+        positive = setting.low == 0 and setting.low_open
+        value = tab.number(setting.name, None, positive=positive, nonnegative=setting.low == 0 and not positive)
+        if value is not None:
+            if not setting.admits(value):
+                raise tab.error(setting.name, setting.expected())
+            records.append(kind.record(channel, value))
+    tab.finish()
+    return ChannelFault(tuple(records))
+
+
 def _parse_structure(tab: Table) -> Structure:
     """The scenario's ``[structure]``: a full nominal model (:func:`momentid.io.structure_table.parse_structure`)
-    within the plausible ranges of :mod:`momentid.lab.plausible`."""
+    within the plausible ranges of :mod:`momentid.io.plausible`."""
     structure = parse_structure(tab, require_model=True)
     check_structure(tab, structure)
     return structure

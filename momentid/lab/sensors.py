@@ -3,18 +3,23 @@
 The simulator produces every channel exactly at the simulation rate;
 :func:`measure` turns that into what the scenario's instruments record:
 
-1. per-channel clock offset (the channel reads the true signal at ``t - offset``);
+1. the channel's faults on the true signal (a clock offset: the channel reads it at ``t - offset``);
 2. the anti-alias filter (a causal 4th-order Butterworth, the same on every
    channel, so linear equations between channels still hold exactly);
 3. sampling at the sensor rate;
-4. gain and bias;
+4. the channel's gain fault, the instrument's bias, the channel's offset faults;
 5. white noise (absolute RMS, noise density over the sampled band, or a
    fraction of the channel's own RMS, added in quadrature), seeded per run and
    channel so results do not depend on the order runs are simulated in;
-6. quantisation and clipping at full scale.
+6. quantisation and clipping at the instrument's full scale, then the channel's range faults (a
+   saturation).
+
+A channel's faults are the registered sensor-fault kinds a scenario's ``[sensors.channel.X]`` states
+(:class:`~momentid.lab.scenario.ChannelFault`), each applied by its kind's own ``distort`` at its stage:
+the one model of a sensor fault, which the diagnosis names.
 
 The other side, inspecting recorded data before identification, is
-:func:`momentid.estimation.checks.check_run`.
+:func:`momentid.io.run_checks.check_run`.
 """
 
 from __future__ import annotations
@@ -25,9 +30,10 @@ import numpy as np
 import scipy.signal
 
 from momentid.core.series import RunData
+from momentid.mechanisms.base import SensorStage
 from momentid.lab.scenario import Instrument, Sensors
 
-__all__ = ["measure", "noise_std", "ANTIALIAS_ORDER"]
+__all__ = ["measure", "noise_std", "gain_and_delay", "ANTIALIAS_ORDER"]
 
 #: Order of the causal Butterworth anti-alias filter (``[sensors] antialias``):
 #: 24 dB/octave, the usual analogue front end of a data logger.
@@ -63,16 +69,6 @@ def noise_std(instrument: Instrument, x: np.ndarray, sample_rate: float) -> floa
                          + (instrument.relative_noise * np.sqrt(np.mean(x ** 2))) ** 2))
 
 
-def _shift(t: np.ndarray, x: np.ndarray, offset: float) -> np.ndarray:
-    """``x`` read ``offset`` seconds late (cubic interpolation, held before t0)."""
-    if offset == 0:
-        return x
-    from scipy.interpolate import CubicSpline
-    spline = CubicSpline(t, x)
-    tq = np.clip(t - offset, t[0], t[-1])
-    return spline(tq)
-
-
 def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> RunData:
     """Apply the sensor model to a run of true channels.
 
@@ -105,10 +101,12 @@ def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> Run
     for j, name in enumerate(names):
         inst = sensors.instrument(name)
         fault = sensors.fault(name)
-        x = _shift(run.time, run[name], fault.clock_offset)
+        x = fault.apply(SensorStage.SIGNAL, run.time, run[name])
         if sos is not None:
             x = scipy.signal.sosfilt(sos, x)
-        x = fault.gain * x[::step] + inst.bias + fault.bias
+        time = run.time[::step]
+        x = fault.apply(SensorStage.GAIN, time, x[::step]) + inst.bias
+        x = fault.apply(SensorStage.OFFSET, time, x)
         sigma = noise_std(inst, x, fs)
         if sigma > 0:
             rng = np.random.default_rng(np.random.SeedSequence([seed, run_index, everything.index(name)]))
@@ -117,5 +115,27 @@ def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> Run
             x = inst.resolution * np.round(x / inst.resolution)
         if inst.range:
             x = np.clip(x, -inst.range, inst.range)
-        out[:, j] = x
+        out[:, j] = fault.apply(SensorStage.RANGE, time, x)
     return replace(run, time=run.time[::step].copy(), channels=names, values=out)
+
+
+def gain_and_delay(a: np.ndarray, gain, offset, dt: float, *, undo: bool = False) -> np.ndarray:
+    """Floor accelerations ``a`` (n, d) as the floor sensors read them: each channel times its gain and
+    delayed by its clock offset (fractional, in the frequency domain, zero-padded so that the delay does
+    not wrap around); ``undo=True`` is the inverse (a recording with its sensors' gains and offsets undone).
+
+    Parameters
+    ----------
+    a : ndarray, shape (n, d)
+        Accelerations (m/s^2).
+    gain, offset : array_like, shape (d,)
+        Gain (1) and clock offset (s, positive: lags) of each channel.
+    dt : float
+        Sample interval (s).
+    """
+    n = a.shape[0]
+    spectrum = np.fft.rfft(a, 2 * n, axis=0)
+    w_bins = 2 * np.pi * np.fft.rfftfreq(2 * n, dt)
+    gain, offset = np.asarray(gain, float)[None, :], np.asarray(offset, float)[None, :]
+    spectrum *= np.exp(1j * w_bins[:, None] * offset) / gain if undo else gain * np.exp(-1j * w_bins[:, None] * offset)
+    return np.fft.irfft(spectrum, 2 * n, axis=0)[:n]

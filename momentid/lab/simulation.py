@@ -18,24 +18,24 @@ from __future__ import annotations
 import contextlib
 import math
 from pathlib import Path
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import mujoco
 import numpy as np
 from mujoco import rollout as _rollout
 
 from momentid import mechanisms as mechanisms_registry
-from momentid.lab import rig
-from momentid.lab.plausible import implausible
-from momentid.mechanisms.place import Target
+from momentid.lab import native_forces, rig
+from momentid.io.plausible import implausible
+from momentid.core import counters
 from momentid.core.series import Experiment, RunData
 from momentid.errors import SimulationError
 from momentid.lab.excitation import GroundMotion, ground_motion
 from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
 from momentid.lab.sensors import measure
 
-__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay", "CallbackForces", "initial_state",
-           "table_jerk"]
+__all__ = ["simulate_run", "simulate", "run_experiment", "ground_motion_of", "replay", "CallbackForces",
+           "initial_state", "table_jerk"]
 
 _CHUNK_STEPS = 50_000   # steps per rollout call: bounded memory, progress between calls
 
@@ -88,11 +88,10 @@ class CallbackForces:
     def __init__(self, model: mujoco.MjModel, mechanisms, structure=None):
         self.mechanisms = tuple(m for m in mechanisms if mechanisms_registry.get(m.type).callback)
         d = sum(1 for j in range(model.njnt) if model.joint(j).name.startswith("q"))
+        # The floor joints' dofs: one after another, unless a body on a floor below the top has a joint of
+        # its own (an attachment's), whose dof then sits between its floor's and the next floor's.
         dofs = [int(model.jnt_dofadr[model.joint(f"q{i + 1}").id]) for i in range(d)]
-        if dofs != list(range(dofs[0], dofs[0] + d)):
-            raise SimulationError(f"the floor joints' dofs {dofs} are not one after another: expected the "
-                                  f"chain of momentid.lab.rig.build_spec")
-        self._floors = slice(dofs[0], dofs[0] + d)
+        self._floors = np.array(dofs)
         self.terms = []   # (law on floats, upper dof, lower dof or -1, activation address or -1)
         self.rates: dict[int, tuple] = {}   # state actuator id -> (rate law, top, below, params, act address)
         for m in self.mechanisms:
@@ -109,9 +108,8 @@ class CallbackForces:
                 adr = int(model.actuator_actadr[act.id])
                 self.rates[act.id] = (kind.state_rate, top, below, p, adr)
             self.terms.append((kind.link_law(p, place, k), top, below, adr))
-        lo = self._floors.start
-        self._pushed = [(i, i - lo) for i in sorted({i for _, top, below, _ in self.terms for i in (top, below)
-                                                      if i >= 0})]   # (dof, index in the floors' forces)
+        self._pushed = sorted({i for _, top, below, _ in self.terms for i in (top, below) if i >= 0})
+        self._n_dofs = model.nv
         self._bound = None   # (data, its qpos, qvel, qfrc_applied, act): the arrays of the last data seen
 
     def _bind(self, data) -> tuple:
@@ -125,19 +123,19 @@ class CallbackForces:
 
     def __call__(self, model, data) -> None:
         _, qpos, qvel, out, act = self._bind(data)
-        q, v, t, lo = qpos.tolist(), qvel.tolist(), data.time, self._floors.start
-        forces = [0.0] * (self._floors.stop - lo)
+        q, v, t = qpos.tolist(), qvel.tolist(), data.time
+        forces = [0.0] * self._n_dofs       # by dof
         for law, top, below, adr in self.terms:
             if below >= 0:
                 x, xd = q[top] - q[below], v[top] - v[below]
             else:
                 x, xd = q[top], v[top]
             f = law(x, xd, t) if adr < 0 else law(x, xd, t, state=float(act[adr]))
-            forces[top - lo] -= f           # the link resists its stretch on its upper floor ...
+            forces[top] -= f                # the link resists its stretch on its upper floor ...
             if below >= 0:                  # ... and on its lower one
-                forces[below - lo] += f
-        for i, j in self._pushed:
-            out[i] = forces[j]
+                forces[below] += f
+        for i in self._pushed:
+            out[i] = forces[i]
 
     def state_rate(self, model, data, actuator: int) -> float:
         """``mjcb_act_dyn``: the rate of a state actuator's activation (a force's internal state)."""
@@ -194,12 +192,21 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     out = np.empty((n_steps // every, len(index)))
     data = mujoco.MjData(model)
     chunk = every * max(1, _CHUNK_STEPS // every)
-    callback = CallbackForces(model, mechanisms, structure) if rig.needs_callback(mechanisms) else None
-    act_dyn = callback.state_rate if callback is not None and callback.rates else None
+    callback = act_dyn = None
+    if rig.needs_callback(mechanisms):
+        native = native_forces.load_program(model, mechanisms, structure)
+        callback = None if native else CallbackForces(model, mechanisms, structure)
+        act_dyn = callback.state_rate if callback is not None and callback.rates else None
     # the table's jerk drives actuator 0; state actuators (forces with memory) take no control
     control = jerk[:, None] if model.nu == 1 else np.column_stack([jerk] + [np.zeros(n_steps)] * (model.nu - 1))
     warnings: dict[str, int] = {}
-    with _control_callback(callback, act_dyn):
+    if not rig.needs_callback(mechanisms):
+        callbacks = native_forces.plain()
+    elif callback is None:
+        callbacks = native_forces.installed()
+    else:
+        callbacks = _control_callback(callback, act_dyn)
+    with callbacks:
         for start in range(0, n_steps, chunk):
             stop = min(n_steps, start + chunk)
             states, sensors = _rollout.rollout(model, data, state[None], control[None, start:stop])
@@ -322,7 +329,7 @@ def _stability_check(scenario: Scenario) -> None:
     s = scenario.structure
     wrong = implausible(s)   # a Scenario built in code, past the reader's ranges: its matrices would overflow
     if wrong is not None:
-        raise SimulationError(f"{scenario.source}: structure.{wrong} (momentid.lab.plausible)")
+        raise SimulationError(f"{scenario.source}: structure.{wrong} (momentid.io.plausible)")
     f_max = float(modal_properties(s.mass_matrix(), s.damping_matrix(), s.stiffness_matrix()).frequency.max())
     w_h = 2 * math.pi * f_max * scenario.timestep
     if w_h > 1.0:   # RK4 is stable to w h ~ 2.8; past 1 it is not accurate either
@@ -376,17 +383,18 @@ def _parallel_runs(scenario: Scenario, motion: GroundMotion, workers: int,
                    progress: Callable[[int], None]) -> Iterator[RunData]:
     """Simulate the runs ``workers`` at a time; yield them in run order.
 
-    A linear rig has no Python inside the step and ``mujoco.rollout`` releases
-    the GIL, so the runs go to threads.  A rig with callback physics is
-    GIL-bound; its runs go to forked processes that inherit the scenario and
-    motion (not pickled).  Either way each run is exactly
+    A linear rig, or one whose callback forces run as native code
+    (:func:`momentid.lab.native_forces.applies`), has no Python inside the
+    step and ``mujoco.rollout`` releases the GIL, so the runs go to threads.
+    A rig with Python callback physics is GIL-bound; its runs go to forked
+    processes that inherit the scenario and motion (not pickled).  Either way each run is exactly
     :func:`simulate_run`, so the numbers equal the serial path's bit for bit.
     """
     from concurrent.futures import ThreadPoolExecutor
 
     from momentid.core.processes import forked_pool
 
-    forked = rig.needs_callback(scenario.truth)
+    forked = rig.needs_callback(scenario.truth) and not native_forces.applies(scenario.truth)
     with contextlib.ExitStack() as stack:
         if forked:   # workers that die with this process, killed when it is interrupted
             pool = stack.enter_context(forked_pool(workers, _set_forked_job, (scenario, motion)))
@@ -541,6 +549,7 @@ def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -
     """
     zdd = np.asarray(run["zdd"] if zdd is None else zdd, float)
     h = 1.0 / run.sample_rate
+    counters.add(counters.REPLAYS)
     spec = rig.build_spec(structure, run.added_mass, timestep=h, name="replay", mechanisms=mechanisms)
     model = rig.compile_model(spec)
     layout = rig.sensor_layout(model)

@@ -6,12 +6,14 @@ MuJoCo or sensor effect, screening signature, refit, report wording) and registe
 diagnosis screens with them.  See ``docs/mechanisms.md``.
 """
 
+import sys
+
 from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit
 from momentid.mechanisms.place import Place, Target
 from momentid.mechanisms.registry import (REGISTRY, get, library, load, names, open_search_kind, register, rig_kinds,
-                                          validate)
+                                          sensor_settings, validate)
 
-load()
+load(sys.modules[__name__])
 
 __all__ = ["GRAVITY", "MechanismKind", "Param", "Place", "Refit", "Target", "REGISTRY", "get", "library", "load",
-           "names", "open_search_kind", "register", "rig_kinds", "validate"]
+           "names", "open_search_kind", "register", "rig_kinds", "sensor_settings", "validate"]

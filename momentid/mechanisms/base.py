@@ -8,8 +8,8 @@ It declares, in one place, everything the rest of the project needs to know abou
   or a sensor channel; :mod:`momentid.mechanisms.place`), **parameters** with their SI units and
   physical bounds (a scenario's ``[truth]`` record is validated against them);
 - how it changes the **MuJoCo model** (:meth:`MechanismKind.storey_tendon`,
-  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.storey_elements`), or the **storey force** or **link force** (a floor
-  against the table, or two floors) the simulator applies in its control callback
+  :meth:`MechanismKind.added_mass_body`, :meth:`MechanismKind.elements`), or the **storey force** or **link
+  force** (a floor against the table, or two floors) the simulator applies in its control callback
   (:meth:`MechanismKind.storey_force`, :meth:`MechanismKind.floor_force`), with an internal
   state the simulator integrates when the force has memory (:meth:`MechanismKind.has_state`,
   :meth:`MechanismKind.state_rate`), or the **sensor model**
@@ -38,17 +38,20 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, replace
-from typing import Callable, ClassVar
+from typing import ClassVar
+from collections.abc import Callable
 
 import numpy as np
 
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.errors import ModelError
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Place, Target
+from momentid.mechanisms.sizing import Sized, Sizer, size_correction
 
 __all__ = ["GRAVITY", "Target", "Place", "Refit", "Param", "MechanismKind", "SensorFault", "Screened",
-           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts"]
+           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance", "SensorStage"]
 
 GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
 
@@ -60,17 +63,21 @@ class Refit(enum.Enum):
     linear model, then its size searched by re-simulation.  ``ATTACHMENT``: a change of the rig the
     identified model partly absorbed, kept on the lab's nominal model.  ``DAMPING_PATTERN``: a linear
     term the identified C holds, read from its pattern.  ``CORRECT_DATA``: a sensor fault, undone on
-    the recordings, which are then re-identified.
+    the recordings, which are then re-identified.  ``SEARCH``: several parameters searched together by
+    re-simulation (a tuned-mass damper's mass, frequency and damping).
 
-    A kind states the rest of what its refit needs: :meth:`MechanismKind.force_signal` (``RESIMULATE``),
-    :meth:`MechanismKind.attachment_matrices` (``ATTACHMENT``), :meth:`MechanismKind.damping_pattern`
-    (``DAMPING_PATTERN``), :meth:`MechanismKind.correct` (``CORRECT_DATA``).
+    Each kind sizes itself (:meth:`MechanismKind.size`, :mod:`momentid.mechanisms.sizing`); the value
+    groups kinds for the stages that screen and combine them.  A kind states the rest of what its
+    sizing needs: :meth:`MechanismKind.force_signal` (``RESIMULATE``), :meth:`MechanismKind.attachment_matrices`
+    (``ATTACHMENT``), :meth:`MechanismKind.damping_pattern` (``DAMPING_PATTERN``),
+    :meth:`MechanismKind.correct` (``CORRECT_DATA``).
     """
 
     RESIMULATE = "resimulate"
     ATTACHMENT = "attachment"
     DAMPING_PATTERN = "damping pattern"
     CORRECT_DATA = "correct data"
+    SEARCH = "search"
 
 
 @dataclass(frozen=True)
@@ -215,6 +222,14 @@ def one_coefficient(name: str) -> Callable[[np.ndarray, np.ndarray], tuple[dict,
     return lambda c, e: ({name: float(c[0])}, {name: float(e[0])})
 
 
+def registered_instance(cls: type) -> MechanismKind:
+    """The registry's instance of the kind ``cls`` (what an unpickled kind becomes)."""
+    instance = cls.__dict__.get("registered")
+    if instance is None:
+        raise ModelError(f"{cls.__qualname__} is not a registered mechanism kind")
+    return instance
+
+
 class MechanismKind:
     """Base class of a mechanism kind; see the module docstring for the contract.
 
@@ -232,10 +247,10 @@ class MechanismKind:
     fitted: ClassVar[Param | None] = None
     #: Built into rigs but outside the diagnosis library (its answer is "unexplained").
     truth_only: ClassVar[bool] = False
-    #: The open search's law at its target (:mod:`momentid.diagnosis.discovery` builds its records).
+    #: The open search's law at its target (:mod:`momentid.diagnosis.added_mass.open_search` builds its records).
     open_search: ClassVar[bool] = False
     #: Fitted by re-simulation on a real rig's MuJoCo twin (the accelerometer-only diagnosis,
-    #: :mod:`momentid.diagnosis.twin_diagnose`), whatever ``truth_only`` says of the added-mass one.
+    #: :mod:`momentid.diagnosis.twin.path`), whatever ``truth_only`` says of the added-mass one.
     real_rig: ClassVar[bool] = False
     #: A force the MJCF cannot express (a storey force, or a link force between a floor and the table
     #: or two floors), applied by the simulator's control callback.
@@ -252,19 +267,21 @@ class MechanismKind:
     dissipative: ClassVar[bool] = False
     #: A linear storey spring (a loss of stiffness) the identified K takes in, in every run alike: an
     #: identified model shows it only through what the added masses change; the lab's nominal model
-    #: shows it whole (see :func:`~momentid.diagnosis.screening.linear_springs_left`).
+    #: shows it whole (see :func:`~momentid.diagnosis.added_mass.screening.linear_springs_left`).
     linear_spring: ClassVar[bool] = False
-    #: A storey kind that adds bodies, joints and tendons of its own to the MJCF
-    #: (:meth:`storey_elements`), e.g. ``joint_friction``'s sliders.
+    #: A kind that adds bodies, joints and tendons of its own to the MJCF at its place (:meth:`elements`),
+    #: e.g. ``joint_friction``'s sliders across a storey, ``tuned_mass_damper``'s body hung on a floor.
     mjcf_elements: ClassVar[bool] = False
     #: One line for the docs and ``describe``.
     summary: ClassVar[str] = ""
 
+    #: The registry's one instance of this kind (set by :func:`~momentid.mechanisms.registry.register`).
+    registered: ClassVar[MechanismKind | None] = None
+
     def __reduce__(self):
         # One instance per kind: a kind sent to or from another process (a diagnosis's worker) is the
         # registry's instance there, so that kinds compare by identity everywhere.
-        from momentid.mechanisms.registry import get
-        return get, (self.name,)
+        return registered_instance, (type(self),)
 
     # ---------------------------------------------------------------- where
 
@@ -307,13 +324,15 @@ class MechanismKind:
         """
         return stiffness, damping
 
-    def storey_elements(self, spec, mech: Mechanism, lower_body, upper_joint: str, lower_joint: str | None,
-                        timestep: float) -> float:
-        """For ``mjcf_elements`` kinds: add the storey's own bodies, joints and tendons to ``spec``
-        (``mujoco.MjSpec``), riding on ``lower_body`` (the body below the storey); ``upper_joint`` and
-        ``lower_joint`` name the slide joints of the floors above and below (None: the table).  Returns
-        the mass (kg) added onto ``lower_body``."""
-        return 0.0
+    def elements(self, spec, mech: Mechanism, place: Place, bodies, timestep: float) -> dict[int, float]:
+        """For ``mjcf_elements`` kinds: add the bodies, joints and tendons of ``mech`` at ``place`` to
+        ``spec`` (``mujoco.MjSpec``): across a storey (riding on the body below it), hung on a floor, ...
+
+        ``bodies`` are the table's (``bodies[0]``) and the floors' ``mujoco.MjsBody`` (``bodies[j]``: floor
+        ``j``, on the slide joint ``q<j>``); ``timestep`` is the integrator's step (s).  Returns the mass
+        (kg) the elements take off each level (``{level: kg}``): a body riding on a floor and counted in
+        its stated mass."""
+        return {}
 
     def added_mass_body(self, mech: Mechanism, body, mass: float) -> None:
         """Change the MJCF body (``mujoco.MjsBody``) of the added mass ``mass`` (kg) on ``mech``'s floor."""
@@ -349,6 +368,19 @@ class MechanismKind:
         """
         law = self.storey_force if place.target is Target.STOREY else self.floor_force
         return lambda x, v, t, **state: law(params, x, v, t, stiffness, **state)
+
+    def native_law(self) -> NativeLaw | None:
+        """For ``callback`` kinds: the force law (and its state's rate) as native code, which the simulator
+        calls from MuJoCo's step with no Python (:mod:`momentid.mechanisms.native`), taking
+        :meth:`native_parameters`; the same law as :meth:`storey_force` / :meth:`floor_force` to round-off.
+        None: the simulator calls the Python law (:meth:`link_law`)."""
+        return None
+
+    def native_parameters(self, params: dict, stiffness: float | None) -> list[float]:
+        """The parameter vector :meth:`native_law` takes: the values of :attr:`params` in order, then the
+        storey's ``stiffness`` (N/m) when the kind ``needs_stiffness``."""
+        values = [float(params[p.name]) for p in self.params]
+        return values + [float(stiffness)] if self.needs_stiffness else values
 
     def has_state(self, params: dict) -> bool:
         """True when the force has memory: one internal state the simulator integrates with the
@@ -401,7 +433,7 @@ class MechanismKind:
 
     def from_kinematic(self, fit) -> tuple[dict, dict, float] | None:
         """For ``kinematic`` kinds: (parameters, standard errors, share explained) of this fault from the
-        kinematic check's fit on one channel (:class:`~momentid.diagnosis.consistency.SensorFit`)."""
+        kinematic check's fit on one channel (:class:`~momentid.diagnosis.added_mass.kinematic_check.SensorFit`)."""
         return None
 
     def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above) -> np.ndarray:
@@ -409,6 +441,12 @@ class MechanismKind:
         the place's stretch (m) and its rate (m/s), each (n,), and the added mass (kg) it carries
         (:meth:`~momentid.mechanisms.place.Place.above`)."""
         raise NotImplementedError(f"{self.name} has no force signal")
+
+    def size(self, sizer: Sizer, place: Place, params: dict, std: dict) -> Sized:
+        """How the diagnosis sizes a screened candidate of this kind at ``place``, from its screened
+        ``params`` and their standard errors ``std``: the model it sits on and its parameters
+        (:mod:`momentid.mechanisms.sizing`: a kind names its way among its bases, or brings its own)."""
+        raise ModelError(f"{self.name} is not sized by the diagnosis: it is not in its library")
 
     def damping_pattern(self, place: Place, storeys: int) -> np.ndarray:
         """For ``DAMPING_PATTERN`` kinds: its term (d, d) in the damping matrix C per unit of the fitted
@@ -446,15 +484,50 @@ class MechanismKind:
         return f"Best explanation: {self.name.replace('_', ' ')} at {place.words}: {p}."
 
 
-class SensorFault(MechanismKind):
-    """A fault of one sensor channel, undone on the recordings (``Refit.CORRECT_DATA``).
+class SensorStage(enum.Enum):
+    """Where in a channel's front end a sensor fault acts (:func:`momentid.lab.sensors.measure` applies
+    every fault of ``[sensors.channel.X]`` at its stage, in this order)."""
 
-    A subclass states its fault's term in the floor equations on a floor's accelerometer or
-    displacement channel (:meth:`channel_signature`); screening fits it on every channel.
+    SIGNAL = "signal"    # on the true signal, before the anti-alias filter and the sampling (a clock offset)
+    GAIN = "gain"        # on the sampled signal, before the instrument's own bias (a sensitivity)
+    OFFSET = "offset"    # after the instrument's own bias (an offset)
+    RANGE = "range"      # on the reading, noise and quantisation included (a saturation)
+
+
+class SensorFault(MechanismKind):
+    """A fault of one sensor channel: one model, the lab's and the diagnosis's.
+
+    The lab applies it from a scenario's ``[sensors.channel.X]`` (the key :attr:`setting`, at its
+    :attr:`stage`) through :meth:`distort`; the diagnosis undoes it on the recordings
+    (:meth:`correct`, ``Refit.CORRECT_DATA``) when it can be undone (:attr:`reversible`).  A subclass
+    states its fault's term in the floor equations on a floor's accelerometer or displacement channel
+    (:meth:`channel_signature`), which screening fits on every channel, or what a look at the recorded
+    channel alone finds (:meth:`inspect`).
     """
 
     target = Target.CHANNEL
     refit = Refit.CORRECT_DATA
+    #: The key of ``[sensors.channel.X]`` that states this fault in a scenario, with its unit and bounds
+    #: (its value is the fault's :attr:`fitted` parameter).
+    setting: ClassVar[Param]
+    #: Where in the channel's front end the lab applies it.
+    stage: ClassVar[SensorStage] = SensorStage.OFFSET
+    #: The fault can be undone on a recording (:meth:`correct`); one that cannot is applied to the
+    #: model's readings instead when the diagnosis replays it.
+    reversible: ClassVar[bool] = True
+
+    def record(self, channel: str, value: float) -> Mechanism:
+        """This fault on ``channel`` at ``value`` (its :attr:`setting`) as the lab applies it."""
+        return Mechanism(self.name, channel, ((self.fitted.name, float(value)),))
+
+    def inspect(self, run: RunData, channel: str) -> tuple[dict, float] | None:
+        """What the recorded ``channel`` of ``run`` shows of this fault by itself, with no model: its
+        parameters and the share of the channel's samples it holds, or None (the default: a fault only
+        the model-based checks see)."""
+        return None
+
+    def size(self, sizer, place, params, std):
+        return size_correction(self, sizer, place, params, std)
 
     def channel_signature(self, signals: EquationSignals, group: str, floor: int):
         """The fault's term on channel ``group`` (``"a"`` or ``"q"``) of ``floor`` (0-based) in the

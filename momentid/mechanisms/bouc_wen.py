@@ -17,9 +17,12 @@ Truth only: hidden scenarios carry it to test the diagnosis's open search.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
 __all__ = ["BoucWen", "bouc_wen_rate", "bouc_wen_state"]
@@ -52,6 +55,17 @@ def bouc_wen_state(velocity: np.ndarray, dt: float, yield_drift, exponent, beta:
     return z
 
 
+def _native_force(p, x, v, t, s):   # p: alpha, yield_drift, exponent, beta, stiffness
+    return (1.0 - p[0]) * p[4] * (s - x)
+
+
+def _native_rate(p, s, x, v):
+    u = math.pow(abs(s / p[1]), p[2])
+    w = v * s
+    sign = 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
+    return v * (1.0 - u * (p[3] * sign + (1.0 - p[3])))
+
+
 @register
 class BoucWen(MechanismKind):
     name = "bouc_wen"
@@ -75,3 +89,6 @@ class BoucWen(MechanismKind):
 
     def storey_force(self, params, drift, drift_velocity, time, stiffness, state=0.0):
         return (1.0 - params["alpha"]) * stiffness * (state - drift)
+
+    def native_law(self):
+        return NativeLaw(_native_force, _native_rate)

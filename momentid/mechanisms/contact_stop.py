@@ -7,7 +7,7 @@ on the floor's velocity; it only pushes (its force is clipped at zero when the f
 faster than the spring relaxes).  ``pounding`` is the one-sided case on the + side.
 
 Truth only: hidden scenarios carry it to test the diagnosis's open search (physics outside the
-library, :mod:`momentid.diagnosis.discovery`).
+library, :mod:`momentid.diagnosis.added_mass.open_search`).
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import numpy as np
 
 from momentid.errors import ModelError
 from momentid.mechanisms.base import MechanismKind, Param
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Target
 from momentid.mechanisms.registry import register
 
@@ -27,6 +28,16 @@ def _push(penetration, velocity, stiffness: float, damping: float):
     if isinstance(penetration, float):
         return max(stiffness * penetration + damping * velocity, 0.0) if penetration > 0.0 else 0.0
     return np.where(penetration > 0, np.maximum(stiffness * penetration + damping * velocity, 0.0), 0.0)
+
+
+def _native_force(p, x, v, t, s):
+    gap_pos, gap_neg, k, c = p[0], p[1], p[2], p[3]
+    force = 0.0
+    if gap_pos > 0.0 and x - gap_pos > 0.0:
+        force += max(k * (x - gap_pos) + c * v, 0.0)
+    if gap_neg > 0.0 and -x - gap_neg > 0.0:
+        force -= max(k * (-x - gap_neg) - c * v, 0.0)
+    return force
 
 
 @register
@@ -59,3 +70,6 @@ class ContactStop(MechanismKind):
         if params["gap_neg"] > 0.0:
             force = force - _push(-displacement - params["gap_neg"], -velocity, k, c)
         return force
+
+    def native_law(self):
+        return NativeLaw(_native_force)

@@ -7,7 +7,9 @@ import math
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import ResimulatedForce
 
 __all__ = ["CoulombFriction", "FRICTION_SMOOTHING", "SCREENING_SMOOTHING", "smooth_sign"]
 
@@ -30,11 +32,16 @@ def smooth_sign(x):
     return math.tanh(x) if isinstance(x, float) else np.tanh(x)
 
 
+def _native_force(p, x, v, t, s):
+    return p[0] * math.tanh(v / FRICTION_SMOOTHING)
+
+
 @register
-class CoulombFriction(MechanismKind):
+class CoulombFriction(ResimulatedForce, MechanismKind):
     name = "coulomb_friction"
     target = Target.STOREY
-    params = (Param("force", "N", "friction force, opposes the storey drift velocity", low=0.0, low_open=True, example=0.3),)
+    params = (Param("force", "N", "friction force, opposes the storey drift velocity", low=0.0, low_open=True,
+                    example=0.3),)
     fitted = params[0]
     callback = True
     refit = Refit.RESIMULATE
@@ -47,6 +54,9 @@ class CoulombFriction(MechanismKind):
     def link_law(self, params, place, stiffness):
         force, tanh = params["force"], math.tanh   # storey_force on floats, without its calls
         return lambda x, v, t: force * tanh(v / FRICTION_SMOOTHING)
+
+    def native_law(self):
+        return NativeLaw(_native_force)
 
     def screen_equation(self, signals, fit, place):
         velocity = signals.stretch_rate(place)

@@ -3,13 +3,19 @@
 from __future__ import annotations
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import ResimulatedForce
 
 __all__ = ["CubicStiffness"]
 
 
+def _native_force(p, x, v, t, s):
+    return p[0] * x * x * x
+
+
 @register
-class CubicStiffness(MechanismKind):
+class CubicStiffness(ResimulatedForce, MechanismKind):
     name = "cubic_stiffness"
     target = Target.STOREY
     params = (Param("k3", "N/m^3", "cubic stiffness, + hardening / - softening", example=3.5e7),)
@@ -24,6 +30,9 @@ class CubicStiffness(MechanismKind):
     def link_law(self, params, place, stiffness):
         k3 = params["k3"]   # storey_force on floats, without its call
         return lambda x, v, t: k3 * x * x * x
+
+    def native_law(self):
+        return NativeLaw(_native_force)
 
     def screen_equation(self, signals, fit, place):
         return fit([signals.columns(signals.stretch(place) ** 3, place)], signals.linear_confounds(place), place,

@@ -1,5 +1,5 @@
 """A force discovered from the data: a sparse sum of terms of one storey's drift, or of one floor's
-displacement against the table (the diagnosis's open search, :mod:`momentid.diagnosis.discovery`).
+displacement against the table (the diagnosis's open search, :mod:`momentid.diagnosis.added_mass.open_search`).
 
 The force (N, positive resists ``x``) is ``sum_i c_i phi_i(x, v, t, z)`` over the terms of
 :data:`TERMS`, with ``x`` the storey drift or floor displacement (m), ``v`` its rate (m/s), ``t``
@@ -13,12 +13,14 @@ Truth only: the diagnosis builds these records itself, it never names them as a 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Target
 from momentid.mechanisms.bouc_wen import bouc_wen_rate
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
 __all__ = ["Term", "TERMS", "HYSTERETIC_BETA", "term_signal", "law", "DataDrivenStorey", "DataDrivenFloor"]
@@ -142,9 +144,55 @@ def _summed(params: dict, active, x, v, time, state):
     return float(total) if isinstance(x, float) else total
 
 
+_PARAMS = tuple(p for t in TERMS for p in (Param(t.coefficient, t.unit, f"coefficient of {t.meaning}",
+                                                 example=_EXAMPLES.get(t.name, 0.0)),) + t.shapes)
+_AT = {p.name: i for i, p in enumerate(_PARAMS)}   # a parameter's place in the native law's vector
+(_X, _V, _XAX, _X3, _VAV, _SV, _SVS, _DZ, _DZD, _GP, _GPD, _GN, _GND, _HY, _HYY, _HYN, _SW, _SWT) = (
+    _AT[n] for n in ("c_x", "c_v", "c_x_abs_x", "c_x3", "c_v_abs_v", "c_sign_v", "sign_v_scale", "c_dead_zone",
+                     "dead_zone_delta", "c_gap_pos", "gap_pos_delta", "c_gap_neg", "gap_neg_delta", "c_hysteretic",
+                     "hysteretic_yield", "hysteretic_exponent", "c_switch", "switch_time"))
+
+
+def _native_force(p, x, v, t, s):
+    """:func:`law` on floats as native code (:mod:`momentid.mechanisms.native`): every term of a coefficient
+    other than 0, in :data:`TERMS`' order."""
+    f = 0.0
+    if p[_X] != 0.0:
+        f += p[_X] * x
+    if p[_V] != 0.0:
+        f += p[_V] * v
+    if p[_XAX] != 0.0:
+        f += p[_XAX] * (x * abs(x))
+    if p[_X3] != 0.0:
+        f += p[_X3] * (x * x * x)
+    if p[_VAV] != 0.0:
+        f += p[_VAV] * (v * abs(v))
+    if p[_SV] != 0.0:
+        f += p[_SV] * math.tanh(v / p[_SVS])
+    if p[_DZ] != 0.0:
+        beyond = abs(x) - p[_DZD]
+        if beyond > 0.0:
+            f += p[_DZ] * (beyond if x > 0.0 else -beyond if x < 0.0 else 0.0)
+    if p[_GP] != 0.0 and x - p[_GPD] > 0.0:
+        f += p[_GP] * (x - p[_GPD])
+    if p[_GN] != 0.0 and x + p[_GND] < 0.0:
+        f += p[_GN] * (x + p[_GND])
+    if p[_HY] != 0.0:
+        f += p[_HY] * s
+    if p[_SW] != 0.0 and t >= p[_SWT]:
+        f += p[_SW] * x
+    return f
+
+
+def _native_rate(p, s, x, v):
+    u = math.pow(abs(s / p[_HYY]), p[_HYN])
+    w = v * s
+    sign = 1.0 if w > 0.0 else -1.0 if w < 0.0 else 0.0
+    return v * (1.0 - u * (HYSTERETIC_BETA * sign + (1.0 - HYSTERETIC_BETA)))
+
+
 class _DataDriven(MechanismKind):
-    params = tuple(p for t in TERMS for p in (Param(t.coefficient, t.unit, f"coefficient of {t.meaning}",
-                                                    example=_EXAMPLES.get(t.name, 0.0)),) + t.shapes)
+    params = _PARAMS
     truth_only = True
     open_search = True
     callback = True
@@ -159,6 +207,9 @@ class _DataDriven(MechanismKind):
     def state_rate(self, params, state, displacement, velocity):
         return bouc_wen_rate(state, velocity, params["hysteretic_yield"], params["hysteretic_exponent"],
                              HYSTERETIC_BETA)
+
+    def native_law(self):
+        return NativeLaw(_native_force, _native_rate)
 
     def storey_force(self, params, drift, drift_velocity, time, stiffness, state=0.0):
         return law(params, drift, drift_velocity, time, state)

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import Dashpot
 
 __all__ = ["ExtraDamper"]
 
 
 @register
-class ExtraDamper(MechanismKind):
+class ExtraDamper(Dashpot, MechanismKind):
     name = "extra_damper"
     target = Target.STOREY
     params = (Param("c", "N*s/m", "viscous damper across the storey", low=0.0, low_open=True, example=3.0),)

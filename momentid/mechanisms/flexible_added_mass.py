@@ -7,8 +7,10 @@ import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import Attachment
 
-__all__ = ["FlexibleAddedMass", "GRID_DAMPING_RATIO", "GRID_LOW_OVER_TOP_MODE", "GRID_HIGH_OVER_SAMPLE_RATE", "GRID_POINTS"]
+__all__ = ["FlexibleAddedMass", "GRID_DAMPING_RATIO", "GRID_LOW_OVER_TOP_MODE", "GRID_HIGH_OVER_SAMPLE_RATE",
+           "GRID_POINTS"]
 
 #: Damping ratio of the attachment oscillators on the screening grid (a lightly damped bolt-on).
 GRID_DAMPING_RATIO = 0.05
@@ -22,7 +24,7 @@ GRID_POINTS = 24
 
 
 @register
-class FlexibleAddedMass(MechanismKind):
+class FlexibleAddedMass(Attachment, MechanismKind):
     name = "flexible_added_mass"
     target = Target.FLOOR
     params = (Param("frequency", "Hz", "natural frequency of the added mass on its attachment",

@@ -5,7 +5,7 @@ drift ``x`` exceeds the slack ``gap`` either way; beyond it the brace adds its `
 ``stiffness sign(x) max(|x| - gap, 0)``.
 
 Truth only: hidden scenarios carry it to test the diagnosis's open search (physics outside the
-library, :mod:`momentid.diagnosis.discovery`).
+library, :mod:`momentid.diagnosis.added_mass.open_search`).
 """
 
 from __future__ import annotations
@@ -13,10 +13,18 @@ from __future__ import annotations
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Target
 from momentid.mechanisms.registry import register
 
 __all__ = ["GapBrace"]
+
+
+def _native_force(p, x, v, t, s):
+    beyond = abs(x) - p[0]
+    if beyond > 0.0:
+        return p[1] * (beyond if x > 0.0 else -beyond)
+    return 0.0
 
 
 @register
@@ -36,3 +44,6 @@ class GapBrace(MechanismKind):
         if isinstance(drift, float):
             return params["stiffness"] * (beyond if drift > 0 else -beyond) if beyond > 0.0 else 0.0
         return params["stiffness"] * np.sign(drift) * np.maximum(beyond, 0.0)
+
+    def native_law(self):
+        return NativeLaw(_native_force)

@@ -21,14 +21,15 @@ Each slider's mass and damping make its own spring-mass oscillation fast and dam
 step (:data:`SLIDER_STEP_PHASE`, :data:`SLIDER_DAMPING_RATIO`).  MuJoCo integrates the sliders'
 springs explicitly, so a slipping element lags the ideal Jenkins element by about one step: at 2 ms
 steps and drifts of 3-4 slip drifts the joint's force is off the ideal law by 13 % of its RMS (7 % at
-1 ms, about 25 % at 4 ms; tests/test_joint_friction.py).  A twin fitted through MuJoCo is sized with this element, at its
-own step.  Use a step of at most :data:`MAX_TIMESTEP`.
+1 ms, about 25 % at 4 ms; tests/test_joint_friction.py).  A twin fitted through MuJoCo is sized with this element, at
+its own step.  Use a step of at most :data:`MAX_TIMESTEP`.
 """
 
 from __future__ import annotations
 
 import math
 
+import mujoco
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Target
@@ -158,8 +159,8 @@ class JointFriction(MechanismKind):
               Param("exponent", "1", "chi of the slip-drift density delta^chi (micro-slip: stiffness loss and "
                     "damping grow as A^(chi+1))", low=-0.95, high=2.0, example=-0.4))
     #: The added-mass diagnosis has no screening signature for it yet (it would call it "unexplained"); the
-    #: real rig's twin fits it by re-simulation (:mod:`momentid.diagnosis.twin_fit`, used by
-    #: :mod:`momentid.diagnosis.twin_diagnose`: ``momentid diagnose`` of accelerometer-only recordings).
+    #: real rig's twin fits it by re-simulation (:mod:`momentid.twin.fit`, used by
+    #: :mod:`momentid.diagnosis.twin.path`: ``momentid diagnose`` of accelerometer-only recordings).
     truth_only = True
     real_rig = True
     mjcf_elements = True
@@ -169,9 +170,14 @@ class JointFriction(MechanismKind):
     def storey_tendon(self, mech, stiffness, damping, weight_above, height):
         return stiffness - dict(mech.parameters)["stiffness"], damping
 
-    def storey_elements(self, spec, mech, lower_body, upper_joint, lower_joint, timestep):
-        return add_sliders(spec, dict(mech.parameters), mech.location, lower_body, upper_joint, lower_joint,
-                           timestep)
+    def elements(self, spec, mech, place, bodies, timestep):
+        # PGS: the table's huge armature swamps the Newton solver's convergence test, which then stops
+        # before the sliders' friction constraints hold; PGS solves them one by one.
+        spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
+        below, above = place.nodes
+        taken = add_sliders(spec, dict(mech.parameters), mech.location, bodies[below], f"q{above}",
+                            f"q{below}" if below > 0 else None, timestep)
+        return {below: taken}
 
     def describe(self, place, params, std):
         slip = float(backbone(params, params["slip_drift"]))

@@ -15,12 +15,13 @@ import numpy as np
 from momentid.core.structure import Mechanism
 from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit, Target, one_coefficient
 from momentid.mechanisms.registry import register
+from momentid.mechanisms.sizing import ResimulatedForce
 
 __all__ = ["PDelta"]
 
 
 @register
-class PDelta(MechanismKind):
+class PDelta(ResimulatedForce, MechanismKind):
     name = "p_delta"
     target = Target.STOREY
     params = (Param("factor", "1", "share of the full gravity P-Delta of the weight above", low=0.0,

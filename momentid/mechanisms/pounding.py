@@ -6,7 +6,7 @@ penetration and a dashpot ``damping`` on the floor's velocity; it only pushes (t
 clipped at zero when the floor pulls away faster than the spring relaxes).
 
 Truth only: hidden scenarios carry it to test the diagnosis's open search (physics outside the
-library, :mod:`momentid.diagnosis.discovery`).
+library, :mod:`momentid.diagnosis.added_mass.open_search`).
 """
 
 from __future__ import annotations
@@ -14,9 +14,17 @@ from __future__ import annotations
 import numpy as np
 
 from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
 __all__ = ["Pounding"]
+
+
+def _native_force(p, x, v, t, s):
+    penetration = x - p[0]
+    if penetration <= 0.0:
+        return 0.0
+    return max(p[1] * penetration + p[2] * v, 0.0)
 
 
 @register
@@ -39,3 +47,6 @@ class Pounding(MechanismKind):
             return max(params["stiffness"] * penetration + params["damping"] * velocity, 0.0)
         push = params["stiffness"] * penetration + params["damping"] * velocity
         return np.where(penetration > 0, np.maximum(push, 0.0), 0.0)
+
+    def native_law(self):
+        return NativeLaw(_native_force)

@@ -17,13 +17,13 @@ from momentid.mechanisms.base import MechanismKind
 from momentid.mechanisms.place import Target
 
 __all__ = ["REGISTRY", "register", "load", "get", "names", "library", "real_rig_kinds", "rig_kinds", "open_search_kind",
-           "validate"]
+           "validate", "sensor_settings"]
 
 #: name -> kind, in the order the package's modules are imported (alphabetical).
 REGISTRY: dict[str, MechanismKind] = {}
 
 #: Modules of the package that declare no kind.
-_INFRASTRUCTURE = {"base", "place", "registry"}
+_INFRASTRUCTURE = {"base", "place", "registry", "sizing"}
 
 
 def register(cls: type[MechanismKind]) -> type[MechanismKind]:
@@ -33,14 +33,12 @@ def register(cls: type[MechanismKind]) -> type[MechanismKind]:
     known = REGISTRY.get(cls.name)
     if known is not None and type(known).__qualname__ != cls.__qualname__:
         raise ModelError(f"mechanism {cls.name!r} registered twice ({type(known).__module__} and {cls.__module__})")
-    REGISTRY[cls.name] = cls()
+    REGISTRY[cls.name] = cls.registered = cls()
     return cls
 
 
-def load(package: ModuleType | None = None) -> dict[str, MechanismKind]:
-    """Import every module of ``package`` (default: :mod:`momentid.mechanisms`) so its kinds register."""
-    if package is None:
-        package = importlib.import_module("momentid.mechanisms")
+def load(package: ModuleType) -> dict[str, MechanismKind]:
+    """Import every module of ``package`` (:mod:`momentid.mechanisms` loads itself) so its kinds register."""
     for info in sorted(pkgutil.iter_modules(package.__path__), key=lambda m: m.name):
         if info.name not in _INFRASTRUCTURE and not info.name.startswith("_"):
             importlib.import_module(f"{package.__name__}.{info.name}")
@@ -73,6 +71,11 @@ def real_rig_kinds() -> tuple[MechanismKind, ...]:
 def rig_kinds() -> tuple[MechanismKind, ...]:
     """The kinds a rig's model can carry (a scenario's ``[truth]``): every kind but the sensor faults."""
     return tuple(k for k in REGISTRY.values() if k.target is not Target.CHANNEL)
+
+
+def sensor_settings() -> dict[str, MechanismKind]:
+    """The sensor-fault kinds by the key that states each in a scenario's ``[sensors.channel.X]``."""
+    return {k.setting.name: k for k in REGISTRY.values() if k.target is Target.CHANNEL and hasattr(k, "setting")}
 
 
 def open_search_kind(target: Target) -> MechanismKind:

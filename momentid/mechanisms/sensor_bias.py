@@ -14,6 +14,7 @@ __all__ = ["SensorBias"]
 class SensorBias(SensorFault):
     name = "sensor_bias"
     fitted = Param("bias", "channel unit", "constant offset of the reading", example=0.01)
+    setting = fitted
     summary = "x(t) + bias recorded as x(t)"
 
     def distort(self, time, x, params):

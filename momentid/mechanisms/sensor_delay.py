@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from momentid.mechanisms.base import Param, SensorFault, one_coefficient
+from momentid.mechanisms.base import Param, SensorFault, SensorStage, one_coefficient
 from momentid.mechanisms.registry import register
 
 __all__ = ["SensorDelay"]
@@ -14,11 +14,18 @@ __all__ = ["SensorDelay"]
 class SensorDelay(SensorFault):
     name = "sensor_delay"
     fitted = Param("delay", "s", "how late the channel reads (+ = late)", example=0.01)
+    setting = Param("clock_offset", "s", "how late the channel's clock reads (+ = late)", example=0.01)
+    stage = SensorStage.SIGNAL
     kinematic = True
     summary = "x(t - delay) recorded as x(t)"
 
     def distort(self, time, x, params):
-        return np.interp(time - params["delay"], time, x)
+        # The true signal read late: cubic interpolation, held before the first sample.
+        delay = params["delay"]
+        if delay == 0:
+            return x
+        from scipy.interpolate import CubicSpline
+        return CubicSpline(time, x)(np.clip(time - delay, time[0], time[-1]))
 
     def correct(self, time, x, params):
         return np.interp(time + params["delay"], time, x)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from momentid.mechanisms.base import Param, SensorFault
+from momentid.mechanisms.base import Param, SensorFault, SensorStage
 from momentid.mechanisms.registry import register
 
 __all__ = ["SensorGain"]
@@ -24,6 +24,8 @@ def _from_replay(c, e):
 class SensorGain(SensorFault):
     name = "sensor_gain"
     fitted = Param("gain", "1", "reading / true signal", example=1.05)
+    setting = Param("gain", "1", "reading / true signal", low=0.0, low_open=True, example=1.05)
+    stage = SensorStage.GAIN
     kinematic = True
     summary = "gain x(t) recorded as x(t)"
 

@@ -7,9 +7,16 @@ outside its library.
 from __future__ import annotations
 
 from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
 __all__ = ["StiffnessLoss"]
+
+
+def _native_force(p, x, v, t, s):
+    if t < p[1]:
+        return 0.0
+    return -p[0] * p[2] * x
 
 
 @register
@@ -29,3 +36,6 @@ class StiffnessLoss(MechanismKind):
         if time < params["time"]:
             return 0.0 * drift
         return -params["fraction"] * stiffness * drift
+
+    def native_law(self):
+        return NativeLaw(_native_force)

@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 
 from momentid.core import html
-from momentid.diagnosis.result import AddedMassEvidence, ModalEvidence, TwinEvidence
+from momentid.diagnosis.added_mass.words import AddedMassEvidence
+from momentid.diagnosis.modal.words import ModalEvidence
+from momentid.diagnosis.twin.words import TwinEvidence
 from momentid.diagnosis.summary_html import mechanism_words
 from momentid.diagnosis.verdict import Verdict
 from momentid.mechanisms.place import location_words
@@ -198,12 +200,14 @@ def diagnosis_page(diag, made: Provenance, source: str = "") -> Page:
     page.table("The held-out check", html.table(
         ["model", "held-out NRMSE (%)", "x the noise alone"],
         [[w, f"{100 * v:.2f}", f"{v / diag.noise_nrmse:.1f}" if diag.noise_nrmse > 0 else ""] for w, v in checks]
-        + [["sensor noise alone", f"{100 * diag.noise_nrmse:.2f}", "1.0"]]),
+        + ([["sensor noise alone", f"{100 * diag.noise_nrmse:.2f}", "1.0"]] if math.isfinite(diag.noise_nrmse)
+           else [])),
         note="Floor-acceleration (or displacement) NRMSE of the held-out run after its quiet lead-in.")
     if diag.curves:
         page.section("Per sensor", lambda: html.table(
             ["sensor", *_model_labels(diag).values()],
-            [[html.channel_words(s), *(f"{100 * v:.2f}" for v in row.values())] for s, row in _per_sensor(diag).items()],
+            [[html.channel_words(s), *(f"{100 * v:.2f}" for v in row.values())]
+             for s, row in _per_sensor(diag).items()],
             caption="Held-out NRMSE (%) of each floor sensor"))
     rows = _mechanism_rows(diag)
     if rows:
@@ -237,12 +241,12 @@ def diagnosis_page(diag, made: Provenance, source: str = "") -> Page:
                         unit=unit))
     _trend_figure(page, diag)
     if isinstance(evidence, AddedMassEvidence):
-        from momentid.diagnosis.locate import localisation_figure
+        from momentid.diagnosis.added_mass.locate import localisation_figure
         page.figure("Where the equation residual stands above noise: by storey, run, time and drift amplitude.",
                     lambda: localisation_figure(evidence.localisation.to_dict()))
     if diag.discovered is not None:
-        from momentid.diagnosis.discovery import discovered_figure
-        from momentid.diagnosis.modal_discovery import ModalDiscovery, modal_discovered_figure
+        from momentid.diagnosis.added_mass.open_search import discovered_figure
+        from momentid.diagnosis.modal.open_search import ModalDiscovery, modal_discovered_figure
         draw = modal_discovered_figure if isinstance(diag.discovered, ModalDiscovery) else discovered_figure
         page.figure("The open search's force, from the data and from the law it found (a data-driven model, not a "
                     "named mechanism).", lambda: draw(diag.discovered))

@@ -120,6 +120,7 @@ def frf_uff(experiment, runs) -> str:
                        f"run {measured.run}",
                        f"Welch, Hann segments of {measured.segment} samples, {lead}",
                        "node 0 table, node j floor j; acceleration over acceleration (1)"]
+                ordinate = f"floor {j + 1} / table" if kind == uff.FRF else "coherence"
                 sets.append(uff.function(kind, number, step, values, response_node=j + 1, reference_node=0,
-                                         ids=ids, ordinate=f"floor {j + 1} / table" if kind == uff.FRF else "coherence"))
+                                         ids=ids, ordinate=ordinate))
     return "".join(sets)

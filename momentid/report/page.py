@@ -101,7 +101,7 @@ def _versions() -> tuple:
     import numpy
     import scipy
 
-    from momentid import __version__
+    from momentid.core.version import __version__
 
     return (("momentid", __version__), ("MuJoCo", mujoco.__version__), ("Python", platform.python_version()),
             ("NumPy", numpy.__version__), ("SciPy", scipy.__version__), ("matplotlib", matplotlib.__version__))

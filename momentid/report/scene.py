@@ -48,9 +48,9 @@ class Scene:
     notes : list of str
         What could not be shown, and why.
     overlay : object, optional
-        A layer shown beside each run and in the side column (the twin: :class:`momentid.twin.overlay.TwinOverlay`):
-        ``spatial_views(scene, run)``, ``series_views(scene, run)``, ``side_views()`` give its blueprint views,
-        ``log(rec, scene, run)`` and ``log_static(rec)`` its data.
+        A layer shown beside each run and in the side column (the twin:
+        :class:`momentid.report.twin_overlay.TwinOverlay`): ``spatial_views(scene, run)``, ``series_views(scene, run)``,
+        ``side_views()`` give its blueprint views, ``log(rec, scene, run)`` and ``log_static(rec)`` its data.
     """
 
     experiment: Experiment

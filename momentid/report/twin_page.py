@@ -46,7 +46,8 @@ def twin_page(twin, experiment, made: Provenance) -> Page:
             [[f"extra mode {k + 1}", f"{e.frequency:.4f}", f"{100 * e.damping_ratio:.3f}",
               *(f"{x:+.3g}" for x in e.residues)] for k, e in enumerate(p.extra_modes)]))
     page.table("Sensor models", html.table(
-        ["trial", *(f"floor {j + 1} gain (1)" for j in range(d)), *(f"floor {j + 1} clock offset (ms)" for j in range(d)),
+        ["trial", *(f"floor {j + 1} gain (1)" for j in range(d)),
+         *(f"floor {j + 1} clock offset (ms)" for j in range(d)),
          *(f"floor {j + 1} bias (m/s²)" for j in range(d))], _sensor_rows(twin)),
         note="Each floor sensor against the table's: the twin reads its floors through these.")
     t = twin.timing

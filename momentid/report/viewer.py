@@ -36,15 +36,14 @@ Entity paths::
     /identification/modes             markdown table of frequencies and damping ratios
     /identification/rel_error         BarChart of the relative errors
 
-This module draws and sends (:func:`blueprint`, :func:`log_rig`, :func:`log_scene`,
+This module draws and sends (:func:`blueprint`, :func:`log_scene`,
 :func:`write_rrd`, :func:`show`, :func:`view`); what is shown is computed in
-:mod:`momentid.report.scene` (re-exported here) and the text panels are written by
-:mod:`momentid.report.panels`.
+:mod:`momentid.report.scene` (re-exported here), the rig is drawn by :mod:`momentid.report.rig_drawing`
+and the text panels are written by :mod:`momentid.report.panels`.
 """
 
 from __future__ import annotations
 
-import math
 import os
 import shutil
 import socket
@@ -57,22 +56,18 @@ from momentid.core.series import Experiment, RunData, channel_unit
 from momentid.errors import ViewerError
 from momentid.io.exclusive import write_whole
 from momentid.report.panels import experiment_markdown, modes_markdown, parameters_markdown
+from momentid.report.rig_drawing import (BASE_COLOR, PALETTE, RIG_RATE, TIMELINE, log_rig, rig_samples,
+                                         run_path)
 from momentid.report.scene import (DISPLACEMENT_HIGHPASS, Scene, auto_exaggeration, check_result,
-                                   displacements_from_accelerations, load_result, nice_number, prepare)
+                                   displacements_from_accelerations, load_result, prepare)
 
-__all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result", "check_result", "prepare", "blueprint",
-           "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig", "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
+__all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result",
+           "check_result", "prepare", "blueprint", "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig",
+           "TIMELINE", "APPLICATION_ID", "RIG_RATE"]
 
-#: The timeline of every run: seconds of experiment time.
-TIMELINE = "time"
+#: The rerun application every recording is sent as.
 APPLICATION_ID = "momentid"
-#: The 3D rig is drawn at most this often (Hz): every k-th sample, exact at those instants
-#: (the viewer animates at screen rate; the time series keep every sample).
-RIG_RATE = 100.0
-_PALETTE = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
-            (140, 86, 75), (227, 119, 194), (188, 189, 34), (23, 190, 207), (127, 127, 127)]
-_BASE_COLOR = (110, 110, 110)
-_TABLE_COLOR = (120, 120, 130)
+
 #: Time-series views of a run tab: (title, base channel, floor prefix).
 _SERIES_VIEWS = (
     ("base acceleration zdd", "zdd", None),
@@ -82,14 +77,8 @@ _SERIES_VIEWS = (
 )
 
 
-def _run_path(run: str) -> str:
-    import rerun as rr
-
-    return f"/runs/{rr.escape_entity_path_part(run)}"
-
-
 def _series_paths(scene: Scene, run: RunData, base: str | None, prefix: str | None) -> list[str]:
-    root = _run_path(run.name)
+    root = run_path(run.name)
     chans = [base] if base else []
     chans += [f"{prefix}{i + 1}" for i in range(scene.experiment.storeys)] if prefix else []
     return [f"{root}/sensors/{c}" for c in chans if run.has(c)]
@@ -110,7 +99,7 @@ def blueprint(scene: Scene):
     total = float(scene.heights.sum())
     tabs = []
     for run in scene.experiment.runs:
-        root = _run_path(run.name)
+        root = run_path(run.name)
         eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[0.9 * total, -1.9 * total, 0.8 * total],
                                 look_target=[0.0, 0.0, 0.45 * total], eye_up=[0.0, 0.0, 1.0])
         views = [rrb.TimeSeriesView(name=f"{run.name}: {title} ({channel_unit(base or prefix + '1')})",
@@ -152,61 +141,6 @@ def blueprint(scene: Scene):
                          rrb.TimePanel(state="collapsed", timeline=TIMELINE, play_state="paused"), auto_views=False)
 
 
-def rig_samples(run: RunData) -> np.ndarray:
-    """Indices of the samples the 3D rig is drawn at (at most :data:`RIG_RATE` per second)."""
-    rate = run.sample_rate
-    step = max(1, int(math.floor(rate / RIG_RATE))) if math.isfinite(rate) else 1
-    return np.arange(0, run.n_samples, step)
-
-
-def log_rig(rec, scene: Scene, run: RunData, root: str | None = None, motion=None) -> None:
-    """Draw the rig of ``run`` moving: table and floors, at ``root`` (default ``/runs/<run>/rig``),
-    with ``motion = (z, q)`` (table displacement (n,), floors relative to it (n, d), m; default: the
-    recording's, :meth:`Scene.drawn`)."""
-    import rerun as rr
-
-    d, X = scene.experiment.storeys, scene.exaggeration
-    h = scene.heights
-    level = np.concatenate([[0.0], np.cumsum(h)])
-    w = float(h.max())
-    root = root or f"{_run_path(run.name)}/rig"
-    idx = rig_samples(run)
-    n = idx.size
-    time = rr.TimeColumn(TIMELINE, duration=run.time[idx])
-    zero = np.zeros(n)
-    z, q = scene.drawn(run) if motion is None else motion
-    z = zero if z is None else z[idx]
-    q = np.zeros((n, d)) if q is None else q[idx]
-    rec.log(root, rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-    rec.log(f"{root}/base", rr.Boxes3D(centers=[[0, 0, -0.04 * w]], half_sizes=[[0.9 * w, 0.6 * w, 0.04 * w]],
-                                       colors=[_TABLE_COLOR], labels=[f"shake table (x{X:g})"],
-                                       fill_mode="solid"), static=True)
-    rec.send_columns(f"{root}/base", indexes=[time],
-                     columns=rr.Transform3D.columns(translation=np.column_stack([X * z, zero, zero])))
-    posts = np.array([[sx * 0.45 * w, sy * 0.3 * w] for sx in (-1, 1) for sy in (-1, 1)])
-    for i in range(d):
-        color = _PALETTE[i % len(_PALETTE)]
-        below = q[:, i - 1] if i else zero
-        rec.log(f"{root}/base/floor{i + 1}",
-                rr.Boxes3D(half_sizes=[[0.5 * w, 0.35 * w, 0.03 * w]], colors=[color], fill_mode="solid",
-                           labels=[f"floor {i + 1}"]), static=True)
-        rec.send_columns(f"{root}/base/floor{i + 1}", indexes=[time], columns=rr.Transform3D.columns(
-            translation=np.column_stack([X * q[:, i], zero, np.full(n, level[i + 1])])))
-        rec.log(f"{root}/base/storey{i + 1}",
-                rr.Boxes3D(centers=np.column_stack([posts, np.full(4, h[i] / 2)]),
-                           half_sizes=[[0.01 * w, 0.01 * w, h[i] / 2]] * 4, colors=[color], fill_mode="solid"),
-                static=True)
-        shear = np.tile(np.eye(3), (n, 1, 1))
-        shear[:, 0, 2] = X * (q[:, i] - below) / h[i]
-        rec.send_columns(f"{root}/base/storey{i + 1}", indexes=[time], columns=rr.Transform3D.columns(
-            translation=np.column_stack([X * below, zero, np.full(n, level[i])]), mat3x3=shear))
-    peak = float(np.max(np.abs(z[:, None] + q), initial=0.0))  # of the drawn samples
-    true = nice_number(peak) if peak > 0 else 0.01 / X
-    rec.log(f"{root}/scale", rr.Arrows3D(origins=[[-0.5 * w, -0.7 * w, 0.0]], vectors=[[X * true, 0.0, 0.0]],
-                                         colors=[_BASE_COLOR], labels=[f"{true * 1e3:g} mm x{X:g}"]),
-            static=True)
-
-
 def _log_series(rec, entity: str, time, values: np.ndarray, name: str, color) -> None:
     import rerun as rr
 
@@ -218,8 +152,8 @@ def _channel_label(channel: str) -> tuple[str, tuple]:
     group = channel.rstrip("0123456789")
     if group != channel:
         i = int(channel[len(group):])
-        return f"{channel}: floor {i} ({channel_unit(channel)})", _PALETTE[(i - 1) % len(_PALETTE)]
-    return f"{channel}: table ({channel_unit(channel)})", _BASE_COLOR
+        return f"{channel}: floor {i} ({channel_unit(channel)})", PALETTE[(i - 1) % len(PALETTE)]
+    return f"{channel}: table ({channel_unit(channel)})", BASE_COLOR
 
 
 def log_scene(rec, scene: Scene) -> None:
@@ -237,10 +171,10 @@ def log_scene(rec, scene: Scene) -> None:
     if scene.comparison is not None:
         errors = np.array([e.rel_error for e in scene.comparison.entries])
         rec.log("/identification/rel_error",
-                rr.BarChart(errors, abscissa=np.arange(1, errors.size + 1, dtype=float), color=_PALETTE[3]),
+                rr.BarChart(errors, abscissa=np.arange(1, errors.size + 1, dtype=float), color=PALETTE[3]),
                 static=True)
     for run in scene.experiment.runs:
-        root = _run_path(run.name)
+        root = run_path(run.name)
         log_rig(rec, scene, run)
         if scene.overlay is not None:
             scene.overlay.log(rec, scene, run)
@@ -250,17 +184,17 @@ def log_scene(rec, scene: Scene) -> None:
             _log_series(rec, f"{root}/sensors/{channel}", time, run[channel], name, color)
         if run.name in scene.reconstructed:
             z, q = scene.reconstructed[run.name]
-            _log_series(rec, f"{root}/reconstructed/z", time, z, "z: table (m)", _BASE_COLOR)
+            _log_series(rec, f"{root}/reconstructed/z", time, z, "z: table (m)", BASE_COLOR)
             for i, column in enumerate(q.T):
                 _log_series(rec, f"{root}/reconstructed/q{i + 1}", time, column, f"q{i + 1}: floor {i + 1} (m)",
-                            _PALETTE[i % len(_PALETTE)])
+                            PALETTE[i % len(PALETTE)])
         residual = scene.residuals.get(run.name, np.empty((0, 0)))
         # the weak form of accelerometer-only runs loses half its kernel at each end: centred in the run
         head = (run.n_samples - residual.shape[0]) // 2
         residual_time = rr.TimeColumn(TIMELINE, duration=run.time[head:head + residual.shape[0]])
         for i, column in enumerate(residual.T):
             _log_series(rec, f"{root}/residual/r{i + 1}", residual_time, column, f"floor {i + 1} (N)",
-                        _PALETTE[i % len(_PALETTE)])
+                        PALETTE[i % len(PALETTE)])
 
 
 def write_rrd(experiment, path, **options) -> Path:
@@ -375,7 +309,7 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
         Port of the viewer to connect to or spawn.
     twin : str or Path, optional
         A folder of ``momentid twin``: each run's twin floor accelerations beside the recorded ones
-        and the twin moving (:mod:`momentid.twin.overlay`); the recording is then not identified again.
+        and the twin moving (:mod:`momentid.report.twin_overlay`); the recording is then not identified again.
 
     Returns
     -------
@@ -403,7 +337,7 @@ def view(recording, *, save=None, result=None, exaggeration: float | None = None
     scene = prepare(experiment, result=result, exaggeration=exaggeration, run=run,
                     identify_options=identify_options, identify=twin is None)
     if twin is not None:
-        from momentid.twin.overlay import TwinOverlay
+        from momentid.report.twin_overlay import TwinOverlay
 
         scene.overlay = TwinOverlay.from_folder(twin, experiment)
     if save is not None:

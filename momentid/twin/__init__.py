@@ -14,7 +14,8 @@ Build it from a recording, or piece by piece::
 Modules: :mod:`~momentid.twin.parameters` (what the twin is made of, K and C as tendons),
 :mod:`~momentid.twin.spec` (the MJCF), :mod:`~momentid.twin.replay` (drive, sensor model, NRMSE),
 :mod:`~momentid.twin.build` (identification, refusals, the :class:`Twin`),
-:mod:`~momentid.twin.files` (the folder), :mod:`~momentid.twin.plots`, :mod:`~momentid.twin.overlay` (rerun).
+:mod:`~momentid.twin.files` (the folder), :mod:`~momentid.twin.plots`, :mod:`~momentid.report.twin_overlay` (its layer
+in the rerun viewer).
 """
 
 from momentid.twin.build import Twin, build_twin, check_recording, refusals

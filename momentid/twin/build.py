@@ -23,7 +23,8 @@ from momentid.twin.parameters import TwinParameters, from_identification
 from momentid.twin.replay import Replay, replay_run
 from momentid.twin.spec import Timing, model_matrices, timing, twin_spec
 
-__all__ = ["Twin", "build_twin", "default_runs", "check_recording", "refusals", "check_xml", "MIN_TRIALS", "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
+__all__ = ["Twin", "build_twin", "default_runs", "check_recording", "refusals", "check_xml", "MIN_TRIALS",
+           "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
 
 #: Trials a twin is calibrated on at least: one trial cannot tell the rig from that trial.
 MIN_TRIALS = 2
@@ -87,7 +88,7 @@ class Twin:
 
     def to_dict(self) -> dict:
         """``twin.json``: parameters, sensors, the MJCF's own modes, every trial's NRMSE (SI units)."""
-        from momentid.twin.parameters import tendon_layout
+        from momentid.lab.tendons import tendon_layout
 
         p = self.parameters
         return {
@@ -177,7 +178,7 @@ def _is_gain_warning(text: str, runs) -> bool:
 
 def _modal_refusals(result) -> tuple[list, list]:
     """``(reasons to refuse, warnings the twin accepts)`` of a ModalIdentification."""
-    from momentid.diagnosis.plausibility import GAIN_RANGE
+    from momentid.estimation.plausibility import GAIN_RANGE
 
     reasons = [f"mode {i + 1} at {f:.4g} Hz is unstable (damping ratio {z:.3g})"
                for i, (f, z) in enumerate(zip(result.frequency, result.linear_damping_ratio)) if not z > 0]
@@ -259,8 +260,8 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
     IdentificationError, SensorDataError
         What :func:`check_recording` and :func:`refusals` refuse, with the reasons in one line.
     """
-    from momentid.diagnosis.plausibility import implausible
-    from momentid.diagnosis.workers import run_forked
+    from momentid.estimation.plausibility import implausible
+    from momentid.core.processes import run_forked
     from momentid.estimation.identification import identify
 
     left_out: tuple = ()
@@ -291,7 +292,7 @@ def build_twin(experiment: Experiment, runs=None) -> Twin:
 def default_runs(experiment: Experiment) -> tuple:
     """The trials a twin is calibrated on by default, and a note per trial left out.
 
-    Every trial, but those the rig-state check (:func:`momentid.diagnosis.rig_state.check_state`, on
+    Every trial, but those the rig-state check (:func:`momentid.estimation.rig_state.check_state`, on
     each trial's own modal fit) sets apart as another rig state: a twin of two rig states is the
     twin of neither.  Naming such a trial in ``runs`` calibrates on it all the same.
 
@@ -301,7 +302,7 @@ def default_runs(experiment: Experiment) -> tuple:
         ``(names or None, notes)``: None (all trials) when no trial is set apart or the check cannot
         run (fewer than ``MIN_OTHERS + 1`` trials, added masses, a trial its own fit refuses).
     """
-    from momentid.diagnosis.rig_state import MIN_OTHERS, check_state
+    from momentid.estimation.rig_state import MIN_OTHERS, check_state
     from momentid.estimation.scaled import identify_per_run
 
     if len(experiment.runs) < MIN_OTHERS + 1 or any(np.any(r.added_mass) for r in experiment.runs):

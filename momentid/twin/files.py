@@ -21,7 +21,8 @@ from momentid.errors import MomentidError, RecordingError
 from momentid.io.outputs import OwnedFolder
 from momentid.twin.parameters import ExtraMode, SensorModel, TwinParameters
 
-__all__ = ["write_twin", "read_twin", "check_against", "file_names", "output_folder", "TWIN_XML", "TWIN_JSON", "TRANSFER_PNG", "TwinFolderError"]
+__all__ = ["write_twin", "read_twin", "check_against", "file_names", "output_folder", "TWIN_XML", "TWIN_JSON",
+           "TRANSFER_PNG", "TwinFolderError"]
 
 TWIN_XML, TWIN_JSON, TRANSFER_PNG = "twin.xml", "twin.json", "transfer.png"
 
@@ -43,7 +44,7 @@ def output_folder(out, *, force: bool = False) -> OwnedFolder:
 
 
 def _write_files(twin, experiment, folder: Path, plots: bool, extra=None) -> list:
-    from momentid.diagnosis.workers import run_forked
+    from momentid.core.processes import run_forked
     from momentid.twin import plots as plotting
 
     (folder / TWIN_XML).write_text(twin.xml)

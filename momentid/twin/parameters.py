@@ -8,10 +8,7 @@ makes: the modal fit of runs without added mass (``ModalIdentification``: K and 
 masses, or mass-normalised without them) or the added-mass identification (``Identification``:
 M, C, K and the mass-proportional damping ``mu`` that an added mass brings).
 
-:func:`tendon_layout` writes K and C exactly as fixed tendons (see ``models/twin/README.md``): every
-pair of levels ``i < j`` (level 0 is the table, level ``j`` floor ``j``) gets a tendon of length
-``q_j - q_i`` with stiffness ``-K_ij`` (``i >= 1``) or the row sum ``sum_l K_jl`` (``i = 0``), and
-damping likewise from C, so that ``sum_t k_t c_t c_t^T = K`` entry by entry.
+:func:`~momentid.lab.tendons.tendon_layout` (re-exported here) writes K and C exactly as fixed tendons.
 """
 
 from __future__ import annotations
@@ -22,9 +19,11 @@ import numpy as np
 
 from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
+from momentid.lab.rig_model import RigModel
+from momentid.lab.tendons import Tendon, pair_coefficient, tendon_layout
 
-__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient", "from_identification",
-           "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
+__all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient",
+           "from_identification", "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
 
 #: Storey height (m) drawn when neither the recording's model nor the lab states one (drawing only).
 DEFAULT_STOREY_HEIGHT = 0.3
@@ -53,11 +52,11 @@ class SensorModel:
     bias: np.ndarray
 
     @classmethod
-    def ideal(cls, d: int) -> "SensorModel":
+    def ideal(cls, d: int) -> SensorModel:
         """Gain 1, no clock offset, no bias on ``d`` floors."""
         return cls(np.ones(d), np.zeros(d), np.zeros(d))
 
-    def with_bias(self, bias) -> "SensorModel":
+    def with_bias(self, bias) -> SensorModel:
         """The same sensors with ``bias`` (m/s^2, shape (d,))."""
         return SensorModel(self.gain, self.clock_offset, np.asarray(bias, float))
 
@@ -140,66 +139,16 @@ class TwinParameters:
     def storeys(self) -> int:
         return self.masses.shape[0]
 
+    def rig(self, added_mass=None) -> RigModel:
+        """The rig MuJoCo builds (sensors and extra modes apart) with ``added_mass`` (kg, (d,); none by
+        default): K and C as tendons, each floor joint damped by ``mu dm`` (:attr:`added_mass_damping`)."""
+        dm = np.zeros(self.storeys) if added_mass is None else np.asarray(added_mass, float)
+        return RigModel.from_matrices(self.masses, self.K, self.C, self.storey_heights,
+                                      joint_damping=self.added_mass_damping * dm, added_mass=dm)
+
     def sensors_of(self, run: str) -> SensorModel:
         """The calibrated sensors of ``run``, else the nominal ones."""
         return self.sensors.get(run, self.nominal)
-
-
-@dataclass(frozen=True)
-class Tendon:
-    """One fixed tendon of the twin: length ``q_upper - q_lower`` (level 0 is the table).
-
-    Attributes
-    ----------
-    name : str
-        ``storey<j>`` when it joins neighbouring levels ``j-1`` and ``j``, else ``link<i>_<j>``.
-    lower, upper : int
-        Levels joined, ``0 <= lower < upper <= d``.
-    stiffness : float
-        N/m (negative on a link that stiffens the floors' difference less than the storeys imply).
-    damping : float
-        N s/m.
-    """
-
-    name: str
-    lower: int
-    upper: int
-    stiffness: float
-    damping: float
-
-
-def pair_coefficient(X: np.ndarray, lower: int, upper: int) -> float:
-    """The tendon coefficient between levels ``lower < upper`` that puts ``X`` together exactly."""
-    if lower == 0:
-        return float(np.sum(X[upper - 1]))
-    return float(-X[lower - 1, upper - 1])
-
-
-def tendon_layout(K: np.ndarray, C: np.ndarray) -> tuple:
-    """Fixed tendons whose stiffnesses sum to ``K`` and damping to ``C`` exactly.
-
-    Storey tendons (neighbouring levels) always; a link tendon only where K or C needs one (a
-    shear building's tridiagonal K and C need none).
-
-    Parameters
-    ----------
-    K, C : ndarray, shape (d, d)
-        Symmetric (N/m, N s/m).
-
-    Returns
-    -------
-    tuple of Tendon
-        Storeys first (1..d), then links by lower level, upper level.
-    """
-    d = K.shape[0]
-    out = [Tendon(f"storey{j}", j - 1, j, pair_coefficient(K, j - 1, j), pair_coefficient(C, j - 1, j))
-           for j in range(1, d + 1)]
-    for i in range(d + 1):
-        for j in range(i + 2, d + 1):
-            k, c = pair_coefficient(K, i, j), pair_coefficient(C, i, j)
-            if k != 0.0 or c != 0.0:
-                out.append(Tendon(f"link{i}_{j}", i, j, k, c))
-    return tuple(out)
 
 
 def matrices_from_modes(frequency, damping_ratio, shapes, masses):

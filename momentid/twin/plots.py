@@ -22,8 +22,8 @@ from momentid.estimation.noise import quiet_lead_in
 from momentid.estimation.frf import MIN_COHERENCE, SEGMENT, measured_transfer
 from momentid.twin.replay import Replay, transfer
 
-__all__ = ["plot_replay", "plot_transfer", "replay_figure", "transfer_figure", "overlay_figure", "replay_file", "replay_files",
-           "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
+__all__ = ["plot_replay", "plot_transfer", "replay_figure", "transfer_figure", "overlay_figure", "replay_file",
+           "replay_files", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
 
 #: Stretches a whole-trial panel is drawn as (minimum and maximum of each): about its width in pixels.
 ENVELOPE_BINS = 1500

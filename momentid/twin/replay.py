@@ -13,7 +13,7 @@ and held by the storeys' springs; the table's own position, which a biased accel
 away, enters no force and no reading.
 
 Score: ``NRMSE = sqrt(sum_j |a_j - a_j,twin|^2 / sum_j |a_j - mean_j|^2)`` over the floor sensors and
-the samples after the quiet lead-in (the definition of :mod:`momentid.diagnosis.modal_check`), with
+the samples after the quiet lead-in (the definition of :mod:`momentid.diagnosis.modal.check`), with
 one constant per sensor fitted (its bias); beside it, the NRMSE the sensors' noise alone leaves
 (levels from :func:`momentid.estimation.noise.estimate_noise`): the floor sensors' own, and the table
 sensor's, which drives the twin and reaches the floors through it.
@@ -234,7 +234,8 @@ def replay_run(params: TwinParameters, run: RunData, *, model: mujoco.MjModel | 
         spec = twin_spec(params, t.timestep, sensors=sensors, added_mass=run.added_mass, name=f"twin_{run.name}")
         model = rig.compile_model(spec)
     names = sensor_names(d, len(params.extra_modes))
-    wanted = ["zdd"] + names["floors"] + names["q"] + names["table_at_floor"] + [c for row in names["extra"] for c in row]
+    wanted = (["zdd"] + names["floors"] + names["q"] + names["table_at_floor"]
+              + [c for row in names["extra"] for c in row])
     raw = roll(model, run["zdd"], t, wanted)
     recorded = run.group("a", d)
     start = quiet_lead_in(run)

@@ -1,18 +1,19 @@
 """The calibrated twin as an MJCF model, built through ``mujoco.MjSpec`` on the rig of ``models/``.
 
-:func:`twin_spec` starts from :func:`momentid.lab.rig.build_spec` (the table on its slide joint
-driven by the table command, every floor a child of the table on its own slide joint, storeys as
-fixed tendons) and makes it the identified rig:
+:func:`twin_spec` builds the identified rig (:meth:`~momentid.twin.parameters.TwinParameters.rig`) with
+the lab's one builder, :func:`momentid.lab.rig.build_spec` (the table on its slide joint driven by the
+table command, every floor a child of the table on its own slide joint, K and C as fixed tendons), then
+adds its extra modes and sensors.  The twin holds:
 
 * **K and C exactly**: the storey tendons and, where the identified matrices are not tridiagonal,
-  link tendons between farther levels (:func:`momentid.twin.parameters.tendon_layout`); the floor
+  link tendons between farther levels (:func:`momentid.lab.tendons.tendon_layout`); the floor
   joints carry no damping of their own (except ``mu dm`` of an added mass, added-mass path);
 * **extra modes**: one oscillator per mode on its own slide joint on the table
   (``extra_mode<e>``, spring ``m w^2`` and damper ``2 zeta w m`` for a body of the mean floor mass),
   so that its coordinate obeys ``eta'' + 2 zeta w eta' + w^2 eta = -z''``;
 * **sensors, natively**: MuJoCo 4.0 sensors keep a history (``nsample``) and read it ``delay``
-  seconds late (interpolated: :data:`LINEAR`, :data:`CUBIC`), which carries each floor sensor's clock offset.  The history
-  cannot read less than one step late, and its cubic interpolation needs two steps behind it, so
+  seconds late (interpolated: :data:`LINEAR`, :data:`CUBIC`), which carries each floor sensor's clock offset.  The
+  history cannot read less than one step late, and its cubic interpolation needs two steps behind it, so
   every sensor reads at least :data:`MIN_LATENCY_STEPS` steps late: the table sensor ``zdd`` reads a
   latency ``L`` late and floor sensor ``j`` ``L + clock_offset_j`` (``L``, whole steps, is as few as keep
   every delay at that floor).  A replay drives the table ``L`` ahead of the recording, so that the twin's
@@ -34,12 +35,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from momentid.core.structure import Structure
 from momentid.errors import ModelError
 from momentid.lab import rig
-from momentid.twin.parameters import SensorModel, TwinParameters, tendon_layout
+from momentid.twin.parameters import SensorModel, TwinParameters
 
-__all__ = ["Timing", "timing", "substeps", "latency", "twin_spec", "sensor_names", "put_tendon", "MIN_LATENCY_STEPS",
+__all__ = ["Timing", "timing", "substeps", "latency", "twin_spec", "sensor_names", "MIN_LATENCY_STEPS",
            "NUMERICAL_DAMPING_FRACTION", "FREQUENCY_ERROR", "MAX_SUBSTEPS", "LINEAR", "CUBIC"]
 
 #: Fewest steps a twin sensor reads late: MuJoCo's history holds past steps only, and its cubic
@@ -135,30 +135,6 @@ def _delayed(sensor, delay: float, step: float, interp: int) -> None:
     sensor.interp = interp
 
 
-def _tendons(spec: mujoco.MjSpec, params: TwinParameters) -> None:
-    for t in tendon_layout(params.K, params.C):
-        put_tendon(spec, t)
-
-
-def put_tendon(spec: mujoco.MjSpec, t) -> None:
-    """Write one tendon of :func:`~momentid.twin.parameters.tendon_layout` into ``spec``.
-
-    A spring-damper on ``q_upper - q_lower`` (``q_upper`` alone when ``lower`` is the table) of
-    stiffness ``t.stiffness`` (N/m) and damping ``t.damping`` (N s/m), rest length 0.  The rig's own
-    storey tendon of that name is reused when ``spec`` has one (``rig.build_spec``); otherwise the
-    tendon is added.
-    """
-    tendon = spec.tendon(t.name)
-    if tendon is None:
-        tendon = spec.add_tendon(name=t.name)
-        tendon.wrap_joint(f"q{t.upper}", 1.0)
-        if t.lower > 0:
-            tendon.wrap_joint(f"q{t.lower}", -1.0)
-    tendon.stiffness = [t.stiffness, 0.0, 0.0]
-    tendon.damping = [t.damping, 0.0, 0.0]
-    tendon.springlength = [0.0, 0.0]
-
-
 def _extra_modes(spec: mujoco.MjSpec, params: TwinParameters) -> None:
     base = spec.body("base")
     mass = float(np.mean(params.masses))
@@ -230,17 +206,8 @@ def twin_spec(params: TwinParameters, step: float, *, sensors: SensorModel | Non
     -------
     mujoco.MjSpec
     """
-    d = params.storeys
     sensors = params.nominal if sensors is None else sensors
-    dm = np.zeros(d) if added_mass is None else np.asarray(added_mass, float)
-    structure = Structure(masses=tuple(float(m) for m in params.masses),
-                          storey_stiffness=tuple(t.stiffness for t in tendon_layout(params.K, params.C)[:d]),
-                          storey_heights=tuple(float(h) for h in params.storey_heights),
-                          rayleigh_mu=0.0, rayleigh_kappa=0.0)
-    spec = rig.build_spec(structure, dm, timestep=step, name=name)
-    _tendons(spec, params)
-    for j in range(d):
-        spec.joint(f"q{j + 1}").damping = [params.added_mass_damping * float(dm[j]), 0.0, 0.0]
+    spec = rig.build_spec(params.rig(added_mass), timestep=step, name=name)
     _extra_modes(spec, params)
     lag = _sensors(spec, params, sensors, step)
     _custom(spec, params, sensors, lag)

@@ -18,7 +18,7 @@ from .scenario import BASE, write
 THREE_RUNS = BASE + '\n[[runs]]\nname = "m2"\nadded_mass = [1.0, 0.0]\n'
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def recording_bytes(sensors: str = "") -> tuple[bytes, tuple[int, ...]]:
     """A simulated recording of the tiny scenario (ideal sensors unless ``sensors`` says otherwise)
     and the file size after each run; simulated once per process."""
@@ -300,7 +300,8 @@ CASES = [
     Case(Group.CLI, "view-result-missing", Outcome.ERROR, _with_rec("view", "REC", "--save", "v.rrd", "--result",
                                                                     "none.json"), ("none.json",)),
     Case(Group.CLI, "view-result-not-json", Outcome.ERROR,
-         lambda f: (_file("r.json", "{oops")(f), _with_rec("view", "REC", "--save", "v.rrd", "--result", "r.json")(f))[1],
+         lambda f: (_file("r.json", "{oops")(f),
+                    _with_rec("view", "REC", "--save", "v.rrd", "--result", "r.json")(f))[1],
          ("r.json",)),
     Case(Group.CLI, "view-unknown-run", Outcome.ERROR, _with_rec("view", "REC", "--save", "v.rrd", "--run", "nope"),
          ("nope",)),
@@ -347,6 +348,7 @@ CASES = [
          _in("sweep", "w.toml", setup=lambda f: (_scenario(f), _file(
              "w.toml", '[sweep]\nbase = "s.toml"\n[grid]\n"scenario.seed" = [0, 1, 0]\n')(f))),
          ("w.toml", "scenario.seed", "twice")),
-    Case(Group.CLI, "sweep-bad-spec", Outcome.ERROR, _in("sweep", "w.toml", setup=_file("w.toml", "[sweep]\nbase = 3\n")),
+    Case(Group.CLI, "sweep-bad-spec", Outcome.ERROR,
+         _in("sweep", "w.toml", setup=_file("w.toml", "[sweep]\nbase = 3\n")),
          ("w.toml", "base")),
 ]

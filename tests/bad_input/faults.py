@@ -50,7 +50,8 @@ import fcntl, os, sys
 kind, path = sys.argv[1], sys.argv[2]
 if kind == "folder":
     os.makedirs(path, exist_ok=True)
-fd = os.open(path + (".partial" if kind == "whole" else ""), os.O_RDONLY if kind == "folder" else os.O_RDWR | os.O_CREAT)
+flags = os.O_RDONLY if kind == "folder" else os.O_RDWR | os.O_CREAT
+fd = os.open(path + (".partial" if kind == "whole" else ""), flags)
 fcntl.flock(fd, fcntl.LOCK_EX)
 print("locked", flush=True)
 sys.stdin.read()            # hold until our stdin closes

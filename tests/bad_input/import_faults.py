@@ -112,7 +112,8 @@ _DOT_CASES = [
      ("dot.csv", "row 15", "repeats the stamp of row 14")),
     ("clock-back", Outcome.ERROR, _edit_rows(_stamp(6, str(699806679 + 2 * STEP_US))),
      ("dot.csv", "row 15", "the clock went back")),
-    ("stamp-missing", Outcome.RECOVERY, _edit_rows(_stamp(6, "")), ("row 15: no SampleTimeFine stamp", "PacketCounter")),
+    ("stamp-missing", Outcome.RECOVERY, _edit_rows(_stamp(6, "")),
+     ("row 15: no SampleTimeFine stamp", "PacketCounter")),
     ("stamp-missing-counter-wrapped", Outcome.RECOVERY, _edit_rows(_counter_wraps),
      ("row 21: no SampleTimeFine stamp", "8333 us per packet")),
     ("units-g", Outcome.RECOVERY, _edit_rows(_scale(1 / 9.80665)), ("accelerations in g", "converted to m/s^2")),
@@ -122,7 +123,7 @@ _DOT_CASES = [
 
 # ----------------------------------------------------------------------------- Xsens folders
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def rig_motion(storeys: int, seed: int) -> np.ndarray:
     """Absolute accelerations along the shaking axis (n, 1 + d) of RIG (its first ``storeys`` floors)
     under an earthquake-like table motion: most of it at 0.3-2 Hz, some up to 0.4 x the sample rate."""
@@ -137,7 +138,7 @@ def dot_export(x: np.ndarray, start_tick: int, seed: int) -> str:
     rng = np.random.default_rng(seed)
     n = x.size
     y, z = rng.normal(0.0, 0.005, n), 9.81 + rng.normal(0.0, 0.005, n)
-    rows = ["0,%d,0,0,0,0,0,0,0,0,0" % start_tick]
+    rows = [f"0,{start_tick},0,0,0,0,0,0,0,0,0"]
     rows += [f"{k + 1},{start_tick + (k + 1) * STEP_US},0,0,0,{x[k]:.6f},{y[k]:.6f},{z[k]:.6f},0,0,0" for k in range(n)]
     return PREAMBLE + HEADER + "\n" + "\n".join(rows) + "\n"
 
@@ -162,7 +163,8 @@ floors = ["run2_f1.csv", "run2_f2.csv", "run2_f3.csv"]
 """
 
 
-def imu_lab(folder: Path, toml: str = IMU_TOML, order=(0, 1, 2, 3), rows: int | None = None, copy: bool = False) -> Path:
+def imu_lab(folder: Path, toml: str = IMU_TOML, order=(0, 1, 2, 3), rows: int | None = None,
+            copy: bool = False) -> Path:
     """A lab folder of two simulated runs of RIG; run 2's sensors written in ``order`` (a swap: their
     files sit in each other's place), all files cut to ``rows`` samples, run 2 a copy of run 1."""
     lab = folder / "lab"
@@ -194,9 +196,12 @@ _IMU_FOLDERS = [
     ("trial-of-30-rows", Outcome.ERROR, _imu(rows=30), ("run1_table.csv", "30 samples", "0.3-2 Hz")),
     ("storeys-1e9", Outcome.REFUSAL, _imu("storeys = 3\nmasses = [0.16, 0.16, 0.142]", "storeys = 1000000000"),
      ("experiment.toml", "storeys = 1000000000")),
-    ("masses-1e308", Outcome.ERROR, _imu("masses = [0.16,", "masses = [1e308,"), ("experiment.toml", "masses[0]", "1e+308")),
-    ("masses-1e-300", Outcome.ERROR, _imu("masses = [0.16,", "masses = [1e-300,"), ("experiment.toml", "masses[0]", "1e-300")),
-    ("added-mass-1e12", Outcome.ERROR, _imu('name = "run2"', 'name = "run2"\nadded_mass = 1e12'), ("added_mass", "1000000000000")),
+    ("masses-1e308", Outcome.ERROR, _imu("masses = [0.16,", "masses = [1e308,"),
+     ("experiment.toml", "masses[0]", "1e+308")),
+    ("masses-1e-300", Outcome.ERROR, _imu("masses = [0.16,", "masses = [1e-300,"),
+     ("experiment.toml", "masses[0]", "1e-300")),
+    ("added-mass-1e12", Outcome.ERROR, _imu('name = "run2"', 'name = "run2"\nadded_mass = 1e12'),
+     ("added_mass", "1000000000000")),
     ("same-trial-twice", Outcome.ERROR, _imu('"run2_table.csv"', '"run1_table.csv"'),
      ("experiment.toml", "run1_table.csv", "listed twice")),
     ("copied-trial", Outcome.ERROR, _imu(copy=True), ("run2", "the same data as run 'run1'")),
@@ -204,7 +209,8 @@ _IMU_FOLDERS = [
      ("run 'run2': the sensors of floor 1 and floor 2 appear swapped", "run2_f2.csv is floor 1's", "relabelled")),
     ("table-and-floor-3-swapped", Outcome.RECOVERY, _imu(order=(3, 1, 2, 0)),
      ("the table's sensor and floor 3's appear swapped",)),
-    ("floor-order-reversed", Outcome.RECOVERY, _imu(order=(0, 3, 2, 1)), ("the floor order appears reversed", "relabelled")),
+    ("floor-order-reversed", Outcome.RECOVERY, _imu(order=(0, 3, 2, 1)),
+     ("the floor order appears reversed", "relabelled")),
     ("floors-swapped-refused", Outcome.ERROR, _imu_refusing, ("experiment.toml", "appear swapped", "refused")),
 ]
 
@@ -287,7 +293,8 @@ _CSV_CASES = [
     ("same-file-twice", Outcome.ERROR, _csv_toml('file = "r2.csv"', 'file = "r1.csv"'),
      ("experiment.toml", "r1.csv", "listed twice")),
     ("gzip-bomb", Outcome.ERROR, _csv_bomb, ("r1.csv", "decompression bomb")),
-    ("floors-swapped", Outcome.RECOVERY, _csv_swapped, ("run 'r2': the sensors of floor 1 and floor 2 appear swapped",)),
+    ("floors-swapped", Outcome.RECOVERY, _csv_swapped,
+     ("run 'r2': the sensors of floor 1 and floor 2 appear swapped",)),
 ]
 
 

@@ -85,7 +85,8 @@ def _clock_fast(ppm: float):
         n = np.arange(len(rows), dtype=float)
         for j in range(ACC_X, ACC_X + 3):
             cells[:, j] = np.interp(n * (1 + ppm * 1e-6), n, cells[:, j])
-        rows[:] = [",".join(row.split(",")[:ACC_X] + [f"{v:.8f}" for v in c[ACC_X:ACC_X + 3]] + row.split(",")[ACC_X + 3:])
+        rows[:] = [",".join(row.split(",")[:ACC_X] + [f"{v:.8f}" for v in c[ACC_X:ACC_X + 3]]
+                            + row.split(",")[ACC_X + 3:])
                    for row, c in zip(rows, cells)]
     return edit
 
@@ -97,7 +98,8 @@ def _drift_read(ppm: float):
     def check(experiment):
         notes = {s["channel"]: " ".join(s["notes"]) for s in experiment.runs[0].meta["sensors"]}
         found = re.search(r"drifts from the table's by ([-+]\d+) ppm", notes["a3"])
-        if found is None or abs(-float(found.group(1)) / ppm - 1) > 0.15 or any("drifts" in notes[c] for c in ("a1", "a2")):
+        if (found is None or abs(-float(found.group(1)) / ppm - 1) > 0.15
+                or any("drifts" in notes[c] for c in ("a1", "a2"))):
             raise AssertionError(f"drift {ppm} ppm on a3 read as: {notes}")
     return check
 
@@ -198,7 +200,8 @@ CASES = [
     Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
          _importing(_table_stops_halfway, check=_no_sensor_reversed), ("kept the 3653 samples every sensor covers",)),
     # Floor 3's clock 300 ppm fast: over the 40 s of shaking its lag to the table grows 1.4 samples.
-    Case(Group.IMU, "shipped-clock-drift-300ppm", Outcome.RECOVERY, _importing(_clock_fast(300), check=_drift_read(300)),
+    Case(Group.IMU, "shipped-clock-drift-300ppm", Outcome.RECOVERY,
+         _importing(_clock_fast(300), check=_drift_read(300)),
          ("its clock drifts from the table's by", "ppm", "resampled onto the table's clock")),
     # One file listed for floors 1 and 2: the message used to read "already run 'this run''s".
     Case(Group.IMU, "shipped-one-file-two-floors", Outcome.ERROR,

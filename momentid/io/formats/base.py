@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import enum
-import gzip
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -249,7 +249,8 @@ def _check_clock_step(path: Path, ticks: np.ndarray, counter: np.ndarray, rows: 
         return
     raise _error(path, int(rows[i]), f"'{CLOCK_COLUMN}'",
                  f"{ticks[i]:.0f} us is {moved[i - 1]:.0f} us after row {int(rows[i - 1])} while {COUNTER_COLUMN} "
-                 f"moves on by {packets[i] - packets[i - 1]:.0f}: the device clock stepped {ahead[-1] * step / 1e3:+.1f} ms "
+                 f"moves on by {packets[i] - packets[i - 1]:.0f}: the device clock stepped "
+                 f"{ahead[-1] * step / 1e3:+.1f} ms "
                  f"and no packet was lost; expected stamps that follow the packet counter (re-export, or cut "
                  f"the record there)")
 

@@ -1,0 +1,499 @@
+"""Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without joint friction.
+
+The twin (:class:`~momentid.lab.FittedRig`: stated floor masses, a full stiffness matrix, modal
+damping, ``joint_friction`` in chosen storeys, one gain and clock offset per floor sensor) is fitted by
+output error: every training trial is re-simulated through MuJoCo under its recorded table
+acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
+that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
+parameter set explains them all).  The optimiser is scipy's trust-region least squares; the Jacobian's
+physical columns are forward differences, all compiled once and re-simulated in one batched rollout per
+trial (:func:`~momentid.lab.resim.simulate`); the sensors' columns are exact (no re-simulation).
+
+Every NRMSE is :func:`~momentid.twin.replay.nrmse` over the floor channels after the trial's
+quiet lead-in.  A trial's low-energy tail (after :data:`FIT_ENERGY` of its floor signal's energy) is not
+re-simulated while fitting; held-out trials are always simulated whole.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.optimize
+
+from momentid.core.series import RunData
+from momentid.core.structure import Mechanism
+from momentid.errors import IdentificationError, MomentidError
+from momentid.estimation.noise import quiet_lead_in
+from momentid.lab import resim
+from momentid.lab.rig_model import RigModel
+from momentid.lab.sensors import gain_and_delay
+from momentid.lab.tendons import pair_coefficient
+from momentid.mechanisms import joint_friction as jf
+from momentid.mechanisms import registry
+from momentid.twin.replay import nrmse as replay_nrmse
+
+__all__ = ["FittedRig", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
+           "sensor_jacobian", "FIT_ENERGY", "friction_start", "twin_modes", "joint_tendon_stiffness", "workers", "each"]
+
+#: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
+FIT_ENERGY = 0.99
+#: Seconds of a trial's quiet lead-in simulated before its shaking starts (the rest is the floors at rest).
+LEAD_IN_MARGIN = 1.0
+#: Forward-difference step, relative to each parameter's typical size.
+DIFF_STEP = 1e-3
+#: Optimiser's evaluation cap per fit (each evaluation re-simulates the training trials once).
+MAX_NFEV = 40
+#: Drift (m) at which the fit states a joint's stiffness loss (storey drifts of a bench rig: 0.1-10 mm).
+REFERENCE_DRIFT = 1e-3
+#: Bounds of the friction parameters in the fit: stiffness lost at REFERENCE_DRIFT (N/m), slip drift (m),
+#: exponent.
+FRICTION_BOUNDS = ((1e-3, 300.0), (2e-4, 0.05), (-0.9, 1.0))
+#: Bounds of the modal damping ratios and the sensors' log-gains and clock offsets (s).
+DAMPING_BOUNDS = (-0.01, 0.1)
+GAIN_BOUNDS = (-0.2, 0.2)
+OFFSET_BOUNDS = (-0.02, 0.02)
+#: Share of the linear twin's viscous damping an augmented fit starts from.
+START_DAMPING_SHARE = 0.3
+_INVALID = 10.0     # residual of a parameter set whose stiffness is not positive definite
+
+
+@dataclass(frozen=True)
+class FittedRig:
+    """A real rig as the twin's fit sizes it: the parameters it searches, and the rig they make
+    (:meth:`rig`, built and re-simulated by the lab: :mod:`momentid.lab.resim`).
+
+    Attributes
+    ----------
+    masses : ndarray, shape (d,)
+        Floor masses (kg).
+    stiffness : ndarray, shape (d, d)
+        K (N/m) of the stuck joints (small drifts), symmetric positive definite.
+    damping_ratio : ndarray, shape (d,)
+        Modal viscous damping ratios (1) on the modes of (M, K), ascending frequency.
+    friction : tuple of Mechanism
+        ``joint_friction`` records (at most one per storey); empty: the linear twin.
+    gain, offset : ndarray, shape (d,)
+        Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
+    """
+
+    masses: np.ndarray
+    stiffness: np.ndarray
+    damping_ratio: np.ndarray
+    friction: tuple = ()
+    gain: np.ndarray = field(default=None)
+    offset: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        d = len(self.masses)
+        if self.gain is None:
+            object.__setattr__(self, "gain", np.ones(d))
+        if self.offset is None:
+            object.__setattr__(self, "offset", np.zeros(d))
+
+    @property
+    def storeys(self) -> int:
+        return len(self.masses)
+
+    @property
+    def damping(self) -> np.ndarray:
+        """C (N s/m), shape (d, d)."""
+        return resim.modal_damping(self.masses, self.stiffness, self.damping_ratio)
+
+    def linear(self) -> FittedRig:
+        """The same rig without its friction."""
+        return replace(self, friction=())
+
+    def rig(self) -> RigModel:
+        """The rig MuJoCo simulates (sensors apart): K and C as tendons, the friction on its storeys."""
+        return RigModel.from_matrices(self.masses, self.stiffness, self.damping,
+                                      np.full(self.storeys, resim.STOREY_HEIGHT), base_mass=resim.BASE_MASS,
+                                      mechanisms=self.friction)
+
+    def to_dict(self) -> dict:
+        return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
+                "damping_ratio": np.asarray(self.damping_ratio).tolist(),
+                "friction": [{**registry.get(m.type).place(m.location).location, **dict(m.parameters)}
+                             for m in self.friction],
+                "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
+
+
+def friction_records(storeys, params) -> tuple:
+    """``joint_friction`` records from per-storey ``params`` dicts."""
+    return tuple(Mechanism("joint_friction", int(s), tuple(p.items())) for s, p in zip(storeys, params))
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One recorded trial: table acceleration, floor accelerations, where its shaking starts.
+
+    Attributes
+    ----------
+    name : str
+    zdd : ndarray, shape (n,)
+    a : ndarray, shape (n, d)
+    dt : float
+    start : int
+        First sample after the quiet lead-in.
+    fit_stop : int
+        Samples re-simulated while fitting (:data:`FIT_ENERGY`).
+    norm : float
+        ``sqrt(sum |a - mean|^2)`` after ``start`` (the NRMSE's denominator).
+    """
+
+    name: str
+    zdd: np.ndarray
+    a: np.ndarray
+    dt: float
+    start: int
+    fit_stop: int
+    norm: float
+
+
+def trial(run: RunData, d: int) -> Trial:
+    """A :class:`Trial` from a run with ``zdd`` and ``a1..ad`` (m/s^2)."""
+    a = run.group("a", d)
+    start = quiet_lead_in(run)
+    active = a[start:]
+    energy = np.cumsum(np.sum(a ** 2, axis=1))
+    stop = int(min(len(a), np.searchsorted(energy, FIT_ENERGY * energy[-1]) + 1))
+    return Trial(run.name, np.asarray(run["zdd"], float), a, 1.0 / run.sample_rate, start, max(stop, start + 2),
+                 float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2))))
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A twin fitted by re-simulation.
+
+    Attributes
+    ----------
+    model : RigModel
+    trials : tuple of str
+        The trials it was fitted to.
+    nrmse : dict
+        Each training trial's NRMSE (whole trial).
+    cost : float
+        Sum of the training trials' squared NRMSE over the fitted spans.
+    nfev : int
+    """
+
+    model: FittedRig
+    trials: tuple
+    nrmse: dict
+    cost: float
+    nfev: int
+
+
+class _Layout:
+    """The parameter vector: K's upper triangle (N/m), damping ratios, per friction storey (log of the
+    stiffness its secant has lost at :data:`REFERENCE_DRIFT`, log slip drift, exponent), then log-gains and
+    clock offsets of the sensors.  Below the slip drift a joint's loss grows as a power of the drift, so
+    its stiffness and slip drift are nearly interchangeable; the loss at a drift the rig reaches is what
+    the trials determine."""
+
+    def __init__(self, template: FittedRig, storeys: tuple):
+        self.template = template
+        self.d = template.storeys
+        self.storeys = tuple(storeys)
+        self.iu = np.triu_indices(self.d)
+        self.n_phys = len(self.iu[0]) + self.d + 3 * len(self.storeys)
+        # each parameter's typical size, for the difference steps: K's entries (N/m), damping ratios,
+        # the friction's logs and exponents, the sensors' log-gains and clock offsets (s)
+        k = len(self.iu[0])
+        K = np.abs(np.asarray(template.stiffness))
+        self.scale = np.concatenate([np.maximum(K[self.iu], 0.01 * K.max()), np.full(self.d, 0.01),
+                                     np.ones(3 * len(self.storeys)), np.full(self.d, 0.01), np.full(self.d, 1e-3)])
+        assert self.scale.size == k + self.d + 3 * len(self.storeys) + 2 * self.d
+
+    def pack(self, model: FittedRig) -> np.ndarray:
+        friction = {m.location: dict(m.parameters) for m in model.friction}
+        parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
+        for s in self.storeys:
+            p = friction[s]
+            lost = p["stiffness"] * jf.lost_fraction(REFERENCE_DRIFT, p["slip_drift"], p["exponent"])
+            parts.append([np.log(lost), np.log(p["slip_drift"]), p["exponent"]])
+        parts += [np.log(model.gain), model.offset]
+        return np.concatenate([np.ravel(p) for p in parts])
+
+    def unpack(self, theta) -> FittedRig:
+        d, k = self.d, len(self.iu[0])
+        K = np.zeros((d, d))
+        K[self.iu] = theta[:k]
+        K = K + K.T - np.diag(np.diag(K))
+        zeta = np.asarray(theta[k:k + d])
+        i = k + d
+        params = []
+        for _ in self.storeys:
+            slip, chi = float(np.exp(theta[i + 1])), float(theta[i + 2])
+            stiffness = float(np.exp(theta[i])) / jf.lost_fraction(REFERENCE_DRIFT, slip, chi)
+            params.append({"stiffness": stiffness, "slip_drift": slip, "exponent": chi})
+            i += 3
+        return replace(self.template, stiffness=K, damping_ratio=zeta,
+                       friction=friction_records(self.storeys, params),
+                       gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]))
+
+    def bounds(self):
+        k = len(self.iu[0])
+        lo = [-np.inf] * k + [DAMPING_BOUNDS[0]] * self.d
+        hi = [np.inf] * k + [DAMPING_BOUNDS[1]] * self.d
+        for _ in self.storeys:
+            lo += [np.log(FRICTION_BOUNDS[0][0]), np.log(FRICTION_BOUNDS[1][0]), FRICTION_BOUNDS[2][0]]
+            hi += [np.log(FRICTION_BOUNDS[0][1]), np.log(FRICTION_BOUNDS[1][1]), FRICTION_BOUNDS[2][1]]
+        # (the first friction bound is on the stiffness lost at REFERENCE_DRIFT, N/m)
+        lo += [GAIN_BOUNDS[0]] * self.d + [OFFSET_BOUNDS[0]] * self.d
+        hi += [GAIN_BOUNDS[1]] * self.d + [OFFSET_BOUNDS[1]] * self.d
+        return np.array(lo), np.array(hi)
+
+
+def _valid(model: FittedRig) -> bool:
+    K = np.asarray(model.stiffness)
+    if np.any(np.linalg.eigvalsh(K) <= 0):
+        return False
+    return all(dict(m.parameters)["stiffness"] < joint_tendon_stiffness(K, m) for m in model.friction)
+
+
+def joint_tendon_stiffness(K: np.ndarray, mech) -> float:
+    """The stiffness (N/m) of the tendon in K between the two levels a joint mechanism ``mech`` acts across
+    (its kind's :class:`~momentid.mechanisms.place.Place` ``nodes``; the tendons of
+    :func:`momentid.lab.tendons.tendon_layout`)."""
+    nodes = registry.get(mech.type).place(mech.location).nodes
+    return pair_coefficient(K, *nodes)
+
+
+def workers() -> int:
+    """Threads the fits run side by side (:data:`~momentid.lab.resim.ROLLOUT_THREADS`, else one per core):
+    MuJoCo's rollout releases the GIL, so trials and fits simulated on threads share the cores."""
+    return max(1, resim.ROLLOUT_THREADS or os.cpu_count() or 1)
+
+
+def each(fn, items) -> list:
+    """``[fn(x) for x in items]``, on up to :func:`workers` threads (results in ``items``' order)."""
+    items = list(items)
+    if len(items) < 2 or workers() < 2:
+        return [fn(x) for x in items]
+    with ThreadPoolExecutor(min(workers(), len(items))) as pool:
+        return list(pool.map(fn, items))
+
+
+def _steps(substeps: int | None, dt: float) -> int:
+    """Integrator steps per sample: ``substeps``, else :func:`~momentid.lab.resim.substeps_for` of ``dt``."""
+    return resim.substeps_for(dt) if substeps is None else int(substeps)
+
+
+def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=None,
+              threads: int | None = None) -> np.ndarray:
+    """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
+    floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
+    its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step."""
+    substeps = _steps(substeps, tr.dt)
+    stop = len(tr.zdd) if whole else tr.fit_stop
+    first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
+    compiled = resim.compile_models([m.rig() for m in models], tr.dt / substeps) if compiled is None else compiled
+    out = np.empty((len(compiled), stop, tr.a.shape[1]))
+    out[:, :first] = tr.zdd[None, :first, None]
+    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps, threads=threads)
+    return out
+
+
+def _compiled_by_step(models, trials, substeps: int | None) -> dict:
+    """``models`` compiled once per distinct sample interval of ``trials`` (the trials of one recording
+    share it): ``{dt: [MjModel]}``."""
+    rigs = [m.rig() for m in models]
+    return {dt: resim.compile_models(rigs, dt / _steps(substeps, dt)) for dt in {t.dt for t in trials}}
+
+
+def _residual(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
+    read = gain_and_delay(a, model.gain, model.offset, tr.dt)
+    stop = a.shape[0]
+    return ((tr.a[tr.start:stop] - read[tr.start:stop]) / tr.norm).ravel()
+
+
+def sensor_jacobian(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
+    """Exact derivatives of the fit's residual on ``tr`` with respect to the sensors' log-gains and clock
+    offsets: a reading ``g_j a_j(t - tau_j)`` changes by itself per unit of ``log g_j`` and by minus its
+    time derivative (taken in the frequency domain, as the delay is) per second of ``tau_j``.
+
+    Parameters
+    ----------
+    model : RigModel
+        Its ``gain`` and ``offset`` (s) are the sensors'.
+    a : ndarray, shape (stop, d)
+        The model's floor accelerations (m/s^2) on ``tr`` as ideal sensors read them.
+    tr : Trial
+
+    Returns
+    -------
+    ndarray, shape ((stop - tr.start) * d, 2 d)
+        Rows as the residual's (time-major, then channel); columns: the d log-gains, then the d offsets
+        (residual per second).
+    """
+    d, stop = a.shape[1], a.shape[0]
+    n = a.shape[0]
+    w = 2 * np.pi * np.fft.rfftfreq(2 * n, tr.dt)[:, None]
+    spectrum = np.fft.rfft(a, 2 * n, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
+    read = np.fft.irfft(spectrum, 2 * n, axis=0)[:n]                 # gain_and_delay(a, gain, offset, dt)
+    rate = np.fft.irfft(1j * w * spectrum, 2 * n, axis=0)[:n]        # its time derivative
+    rows = stop - tr.start
+    J = np.zeros((rows, d, 2 * d))
+    for j in range(d):
+        J[:, j, j] = -read[tr.start:stop, j] / tr.norm
+        J[:, j, d + j] = rate[tr.start:stop, j] / tr.norm
+    return J.reshape(rows * d, 2 * d)
+
+
+class _Problem:
+    """Residual and Jacobian of the output-error fit, sharing the simulations of the current point."""
+
+    def __init__(self, layout: _Layout, trials, substeps: int | None, max_nfev: int):
+        self.layout, self.trials, self.substeps = layout, tuple(trials), substeps
+        self.sizes = [(t.fit_stop - t.start) * layout.d for t in self.trials]
+        self.cache_key, self.cache = None, None
+        self.nsim = 0
+        self.max_nfev, self.nfev, self.last_jacobian = max_nfev, 0, None
+
+    def evaluate(self, theta):
+        """The residual as the optimiser asks for it (counted against ``max_nfev``)."""
+        self.nfev += 1
+        return self.residual(theta)
+
+    def sims(self, theta):
+        key = theta.tobytes()
+        if key != self.cache_key:
+            model = self.layout.unpack(theta)
+            if _valid(model):
+                compiled = _compiled_by_step([model], self.trials, self.substeps)
+                self.cache = each(lambda t: _simulate([model], t, False, self.substeps, compiled[t.dt], threads=1)[0],
+                                  self.trials)
+            else:
+                self.cache = None
+            self.cache_key = key
+            self.nsim += 1
+        return self.cache
+
+    def residual(self, theta):
+        sims = self.sims(theta)
+        if sims is None:
+            return np.full(sum(self.sizes), _INVALID)
+        model = self.layout.unpack(theta)
+        return np.concatenate([_residual(model, a, t) for a, t in zip(sims, self.trials)])
+
+    def jacobian(self, theta):
+        if self.nfev >= self.max_nfev and self.last_jacobian is not None:
+            # scipy's trust-region loop takes the Jacobian of its last accepted point even when its
+            # evaluations are spent and it stops without using it: re-simulating it would be wasted
+            return self.last_jacobian
+        self.last_jacobian = self._jacobian(theta)
+        return self.last_jacobian
+
+    def _jacobian(self, theta):
+        base = self.residual(theta)
+        sims = self.sims(theta)
+        n = theta.size
+        J = np.zeros((base.size, n))
+        if sims is None:
+            return J
+        lo, hi = self.layout.bounds()
+        steps = np.empty(n)
+        perturbed = []
+        for i in range(self.layout.n_phys):
+            h = DIFF_STEP * self.layout.scale[i]
+            if theta[i] + h > hi[i]:
+                h = -h
+            steps[i] = h
+            t = theta.copy()
+            t[i] += h
+            perturbed.append(t)
+        phys = [self.layout.unpack(perturbed[i]) for i in range(self.layout.n_phys)]
+        ok = [_valid(m) for m in phys]
+        valid = [m for m, v in zip(phys, ok) if v]
+        compiled = _compiled_by_step(valid, self.trials, self.substeps) if valid else {}
+        runs = [_simulate(valid, t, False, self.substeps, compiled[t.dt]) if valid else None for t in self.trials]
+        model = self.layout.unpack(theta)
+        row = 0
+        for k, t in enumerate(self.trials):
+            size = self.sizes[k]
+            column = 0
+            for i in range(self.layout.n_phys):
+                if not ok[i]:
+                    continue
+                J[row:row + size, i] = (_residual(phys[i], runs[k][column], t) - base[row:row + size]) / steps[i]
+                column += 1
+            J[row:row + size, self.layout.n_phys:] = sensor_jacobian(model, sims[k], t)
+            row += size
+        self.nsim += 1
+        return J
+
+
+def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
+             max_nfev: int = MAX_NFEV) -> FitResult:
+    """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
+
+    Parameters
+    ----------
+    trials : sequence of Trial
+    start : RigModel
+        Starting point; its ``friction`` records say which storeys carry joint friction.
+
+    Raises
+    ------
+    IdentificationError
+        The start is not a valid model (stiffness not positive definite, friction stiffer than its storey).
+    """
+    trials = tuple(trials)
+    if not _valid(start):
+        raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
+                                  f"or a joint stiffer than its storey: {start.to_dict()}")
+    layout = _Layout(start, tuple(m.location for m in start.friction))
+    problem = _Problem(layout, trials, substeps, max_nfev)
+    lo, hi = layout.bounds()
+    theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
+    result = scipy.optimize.least_squares(problem.evaluate, theta0, jac=problem.jacobian, bounds=(lo, hi),
+                                          method="trf", x_scale="jac", max_nfev=max_nfev, ftol=1e-6, xtol=1e-8)
+    model = layout.unpack(result.x)
+    return FitResult(model=model, trials=tuple(t.name for t in trials),
+                     nrmse=dict(zip([t.name for t in trials], each(lambda t: nrmse(model, t, substeps), trials))),
+                     cost=float(2 * result.cost), nfev=int(problem.nsim))
+
+
+def predict(model: FittedRig, tr: Trial, substeps: int | None = None) -> np.ndarray:
+    """``model``'s floor accelerations (n, d) on the whole of ``tr``, as its sensors read them."""
+    a = _simulate([model], tr, True, substeps)[0]
+    return gain_and_delay(a, model.gain, model.offset, tr.dt)
+
+
+def nrmse(model: FittedRig, tr: Trial, substeps: int | None = None) -> float:
+    """Held-out NRMSE of ``model`` on the whole of ``tr`` (floor channels, after the lead-in)."""
+    return float(replay_nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:]))
+
+
+def twin_modes(model: FittedRig):
+    """``(omega (rad/s), zeta, residues (d modes, d floors))`` of the twin's stuck (small-drift) linear part,
+    in :func:`~momentid.diagnosis.modal.check.replay`'s form."""
+    m = np.asarray(model.masses, float)
+    m_half = np.sqrt(m)
+    w2, psi = np.linalg.eigh(np.asarray(model.stiffness) / m_half[:, None] / m_half[None, :])
+    phi = psi / m_half[:, None]                       # mass-normalised shapes, columns
+    gamma = phi.T @ m
+    return np.sqrt(w2), np.asarray(model.damping_ratio, float), gamma[:, None] * phi.T
+
+
+def friction_start(linear: FittedRig, storeys, loss: float, slip_drift: float,
+                   exponent: float) -> FittedRig:
+    """A start for the augmented fit: ``linear`` with joint friction in ``storeys`` that has lost ``loss``
+    of the storey's stiffness at :data:`REFERENCE_DRIFT`, fully slipping at ``slip_drift`` (m), exponent
+    ``exponent``; K stiffened by that loss (K is the stuck joints' stiffness) and the viscous damping
+    lowered by :data:`START_DAMPING_SHARE` (the friction dissipates the rest)."""
+    K = np.asarray(linear.stiffness)
+    share = jf.lost_fraction(REFERENCE_DRIFT, slip_drift, exponent)
+    unit = friction_records(storeys, [{"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}]
+                                  * len(storeys))
+    params = [{"stiffness": loss * joint_tendon_stiffness(K, m) / share, "slip_drift": slip_drift, "exponent": exponent}
+              for m in unit]
+    if any(p["stiffness"] <= 0 for p in params):
+        raise MomentidError(f"storeys {list(storeys)} of stiffness {K.tolist()}: a storey with no positive stiffness "
+                            f"cannot carry joint friction")
+    return replace(linear, stiffness=K * (1.0 + loss),
+                   damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
+                   friction=friction_records(storeys, params))

@@ -1,7 +1,9 @@
-"""Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without joint friction.
+"""Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without physics beyond it.
 
 The twin (:class:`~momentid.lab.FittedRig`: stated floor masses, a full stiffness matrix, modal
-damping, ``joint_friction`` in chosen storeys, one gain and clock offset per floor sensor) is fitted by
+damping, records of the registry's real-rig kinds in chosen storeys (``joint_friction``,
+``cubic_spring``, ``quadratic_damping``: each MJCF-only, no Python in the loop), one gain and clock
+offset per floor sensor) is fitted by
 output error: every training trial is re-simulated through MuJoCo under its recorded table
 acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
 that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
@@ -75,7 +77,8 @@ class FittedRig:
     damping_ratio : ndarray, shape (d,)
         Modal viscous damping ratios (1) on the modes of (M, K), ascending frequency.
     friction : tuple of Mechanism
-        ``joint_friction`` records (at most one per storey); empty: the linear twin.
+        Records of real-rig kinds (``joint_friction``, ``cubic_spring``, ``quadratic_damping``; at most one
+        of a kind per storey; the field keeps its first kind's name); empty: the linear twin.
     gain, offset : ndarray, shape (d,)
         Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
     """

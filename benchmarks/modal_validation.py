@@ -190,7 +190,7 @@ def scenario(case: Case):
     return parse_scenario(data, source=f"modal_case_{case.index}.toml")
 
 
-class _Delayed:
+class Delayed:
     """A table motion started ``delay`` s late (at rest before)."""
 
     def __init__(self, motion, delay: float):
@@ -253,7 +253,7 @@ def _motion(case: Case):
 
     band = (0.2, 0.45 * case.sample_rate)
     if case.excitation == "noise":
-        return _Delayed(ground_motion(BandLimitedNoise(case.table_rms, band, case.seed, taper=1.0), case.duration),
+        return Delayed(ground_motion(BandLimitedNoise(case.table_rms, band, case.seed, taper=1.0), case.duration),
                         case.lead_in)
     servo = ground_motion(BandLimitedNoise(SERVO_NOISE * case.table_rms, band, case.seed, taper=1.0), case.duration)
     if case.excitation == "record":
@@ -261,7 +261,7 @@ def _motion(case: Case):
                                case.duration)
     else:
         motion = _SineTest(case.table_rms, case.drive, case.duration)
-    return _Delayed(_WithServoNoise(motion, servo), case.lead_in)
+    return Delayed(_WithServoNoise(motion, servo), case.lead_in)
 
 
 @dataclass(frozen=True)
@@ -274,17 +274,18 @@ class Truth:
     extra_damping_ratio: np.ndarray
 
 
-def truth(case: Case) -> Truth:
-    """Complex eigenvalues of the simulated rig (appendage included), split into storey and extra modes."""
+def rig_modes(masses, stiffness, mu: float, kappa: float, appendage):
+    """Complex eigenvalues of a Rayleigh-damped shear rig with an optional appendage ``(floor, mass kg,
+    frequency Hz, damping ratio)``: frequencies (Hz) and damping ratios of the storey modes, ascending, and
+    of the appendage's mode (empty without one): the one whose kinetic energy sits mostly in it."""
     from momentid.core.analytic import shear_stiffness
 
-    mu, kappa = _rayleigh(case)
-    d = case.storeys
-    M = np.diag(case.masses)
-    K = shear_stiffness(case.stiffness)
+    d = len(masses)
+    M = np.diag(masses)
+    K = shear_stiffness(stiffness)
     C = mu * M + kappa * K
-    if case.appendage is not None:
-        floor, mass, f_app, z_app = case.appendage
+    if appendage is not None:
+        floor, mass, f_app, z_app = appendage
         n = d + 1
         Mf, Cf, Kf = (np.zeros((n, n)) for _ in range(3))
         Mf[:d, :d], Cf[:d, :d], Kf[:d, :d] = M, C, K
@@ -309,13 +310,17 @@ def truth(case: Case) -> Truth:
     lam, V = lam[order], V[:, order]
     f = np.abs(lam) / (2 * np.pi)
     z = -lam.real / np.abs(lam)
-    if case.appendage is None:
-        return Truth(f, z, np.zeros(0), np.zeros(0))
+    if appendage is None:
+        return f, z, np.zeros(0), np.zeros(0)
     energy = np.abs(V) ** 2 * np.diag(M)[:, None]
-    share = energy[d] / energy.sum(axis=0)
-    extra = int(np.argmax(share))
+    extra = int(np.argmax(energy[d] / energy.sum(axis=0)))
     storey = np.array([i for i in range(n) if i != extra])
-    return Truth(f[storey], z[storey], f[[extra]], z[[extra]])
+    return f[storey], z[storey], f[[extra]], z[[extra]]
+
+
+def truth(case: Case) -> Truth:
+    """Complex eigenvalues of the simulated rig (appendage included), split into storey and extra modes."""
+    return Truth(*rig_modes(case.masses, case.stiffness, *_rayleigh(case), case.appendage))
 
 
 def simulate_case(case: Case):
@@ -389,27 +394,34 @@ def _table(rows) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", type=int, default=48)
-    parser.add_argument("--seed", type=int, default=2025)
+def run_cases(argv, description: str, cases: int, seed: int, draw, evaluate_one):
+    """Parse a validation benchmark's command line (``--cases --seed --workers --only --no-write``), draw
+    its cases with ``draw(n, seed)`` and evaluate them on the workers; ``(args, rows, start time)``."""
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("--cases", type=int, default=cases)
+    parser.add_argument("--seed", type=int, default=seed)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--only", default="", help="comma-separated case indices")
     parser.add_argument("--no-write", action="store_true")
     args = parser.parse_args(argv)
-    cases = draw_cases(args.cases, args.seed)
+    drawn = draw(args.cases, args.seed)
     if args.only:
         keep = {int(i) for i in args.only.split(",")}
-        cases = [c for c in cases if c.index in keep]
+        drawn = [c for c in drawn if c.index in keep]
     from threadpoolctl import threadpool_limits
 
     start = time.perf_counter()
     with threadpool_limits(limits=1, user_api="blas"):
         if args.workers > 1:
             with ProcessPoolExecutor(max_workers=args.workers) as pool:
-                rows = list(pool.map(evaluate, cases))
+                rows = list(pool.map(evaluate_one, drawn))
         else:
-            rows = [evaluate(c) for c in cases]
+            rows = [evaluate_one(c) for c in drawn]
+    return args, rows, start
+
+
+def main(argv=None) -> int:
+    args, rows, start = run_cases(argv, __doc__.splitlines()[0], 48, 2025, draw_cases, evaluate)
     table = _table(rows)
     passed = sum(r["ok"] for r in rows)
     summary = (f"{passed} of {len(rows)} cases pass (every storey mode's frequency within {FREQUENCY_TOLERANCE:.1%} "

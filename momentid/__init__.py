@@ -18,7 +18,7 @@ Subpackages, each importable on its own:
 - :mod:`momentid.lab`: scenarios, excitation, the MuJoCo rig, simulation, sensor models;
 - :mod:`momentid.estimation`: identification, reconstruction, errors-in-variables, design, comparison;
 - :mod:`momentid.diagnosis`: missing physics, where the mismatch is, sensor consistency;
-- :mod:`momentid.report`: the rerun viewer;
+- :mod:`momentid.report`: the rerun viewer, ``report.html`` and the UFF files;
 
 plus :mod:`momentid.sweep` (campaigns), :mod:`momentid.cli` and :mod:`momentid.errors`.
 The names below are the ones most scripts need.
@@ -27,6 +27,7 @@ The names below are the ones most scripts need.
 from momentid.core.analytic import Modes, modal_properties, rayleigh_coefficients, shear_stiffness
 from momentid.core.series import Experiment, RunData
 from momentid.core.structure import LabStatement, Mechanism, Structure
+from momentid.core.version import __version__ as __version__
 from momentid.diagnosis.dispatch import Diagnosis, diagnose
 from momentid.errors import (
     IdentificationError,
@@ -49,8 +50,6 @@ from momentid.lab.rig import build_spec, compile_model
 from momentid.lab.scenario import Scenario, default_scenario_path, load_scenario
 from momentid.lab.simulation import run_experiment, simulate, simulate_run
 from momentid.report.viewer import view
-
-__version__ = "0.1.0"
 
 __all__ = [
     # types

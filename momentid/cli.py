@@ -7,6 +7,7 @@ an interrupted run exits 130.  Run ``momentid COMMAND --help`` for details.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import signal
 import sys
@@ -17,7 +18,8 @@ from momentid.core.processes import Terminated, quiet_broken_pipe, sigterm_as_in
 from momentid.core.series import json_safe
 from momentid.estimation.design import PLAN_TIME_LIMIT_S
 from momentid.errors import IdentificationError, MomentidError, RecoveryWarning
-from momentid.cli_output import only_json_on_stdout, output_folder, output_path, replaced
+from momentid.cli_output import (identification_output, only_json_on_stdout, output_folder, output_path,
+                                 refuse_empty_paths, replaced, report_page, write_identification_folder)
 from momentid.cli_values import finite_time, positive_float, positive_int, run_names
 from momentid.io.outputs import check_file, drop_link
 
@@ -39,8 +41,6 @@ _EPILOG = """examples:
 def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
     """A warning as one line on stderr: ``note:`` for data recovered from a damaged input, else
     ``warning:``; never the source line of the code that warned."""
-    from momentid.errors import RecoveryWarning
-
     kind = "note" if issubclass(category, RecoveryWarning) else "warning"
     print(f"{kind}: {message}", file=sys.stderr)
 
@@ -61,7 +61,9 @@ def _refuse_implausible(experiment, result) -> None:
                                   + "; ".join(reasons) + "; `momentid diagnose` locates a mismatch")
 
 
-def _report(experiment, args) -> int:
+def _report(experiment, args, out: Path | None = None) -> int:
+    """Identify ``experiment``, print the result (``--json``: one JSON object) and, with ``out`` (``identify
+    -o``), write its folder (:func:`momentid.report.files.write_identification`)."""
     from momentid.estimation.comparison import compare
     from momentid.estimation.identification import identify
     from momentid.estimation.scaled import ModalIdentification
@@ -77,6 +79,7 @@ def _report(experiment, args) -> int:
         raise
     _refuse_implausible(experiment, result)
 
+    comparison = None
     if isinstance(result, ModalIdentification):       # no added mass: modes, not the analytic comparison
         payload, text = result.to_dict(), result.table(warnings=False)   # warnings: on stderr, once
     elif experiment.structure is not None:
@@ -93,6 +96,8 @@ def _report(experiment, args) -> int:
         print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
     else:
         print(text)
+    if out is not None:
+        write_identification_folder(out, result, experiment, payload, args, comparison=comparison)
     _warn(result.warnings)
     return 0
 
@@ -125,28 +130,32 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_identify(args) -> int:
+    from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
     if args.stream:
         return _identify_stream(args)
+    out = identification_output(args)   # checked before the work
     experiment = read_recording(args.recording)
-    runs = run_names(args.runs)
-    if args.per_run:
+    with exclusive(out) if out is not None else contextlib.nullcontext():   # one writer per folder
+        if not args.per_run:
+            return _report(experiment, args, out)
         from momentid.estimation.scaled import amplitude_trend, identify_per_run
 
-        results = identify_per_run(experiment, runs)
+        results = identify_per_run(experiment, run_names(args.runs))
         trend = amplitude_trend(results) if len(results) > 1 else None
+        payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
         if args.json:
-            payload = trend.to_dict() if trend else {"runs": [r.to_dict() for r in results]}
             print(json.dumps(json_safe(payload), indent=2, allow_nan=False))
         else:
             print("\n\n".join(r.table(warnings=False) for r in results))   # warnings: on stderr, once
             if trend is not None:
                 print("\n" + trend.table())
+        if out is not None:
+            write_identification_folder(out, tuple(results), experiment, payload, args, trend=trend)
         for r in results:
             _warn(r.warnings, r.runs[0])
         return 0
-    return _report(experiment, args)
 
 
 def _identify_stream(args) -> int:
@@ -159,7 +168,7 @@ def _identify_stream(args) -> int:
     # rather than silently compute something else.
     ignored = [f"--estimator {args.estimator}" if args.estimator not in ("auto", "equation") else "",
                "--runs" if args.runs else "", "--time" if args.time else "",
-               "--per-run" if args.per_run else ""]
+               "--per-run" if args.per_run else "", "-o (its transfer functions)" if args.output else ""]
     ignored = [o for o in ignored if o]
     if ignored:
         raise IdentificationError(f"{args.recording}: --stream computes the equation form over every sample of every "
@@ -250,6 +259,7 @@ def _cmd_sweep(args) -> int:
 def _cmd_diagnose(args) -> int:
     from momentid.diagnosis.dispatch import diagnose, write_report
     from momentid.diagnosis.report import REPORT_FILES, report_folder
+    from momentid.report.files import diagnosis_html_page
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
 
@@ -258,7 +268,8 @@ def _cmd_diagnose(args) -> int:
     experiment = read_recording(args.recording)
     with exclusive(out):   # one writer per report folder, refused before minutes of work
         diag = diagnose(experiment, hold_out=args.hold_out)
-        written = write_report(diag, out, force=args.force)  # experiment.notes: stderr, by read_recording
+        written = write_report(diag, out, force=args.force, extra=lambda folder: [
+            report_page(folder, lambda made: diagnosis_html_page(diag, made, args.recording), args)])
     if args.json:
         print(json.dumps(json_safe(diag.to_dict()), indent=2))
     else:
@@ -270,6 +281,7 @@ def _cmd_diagnose(args) -> int:
 def _cmd_twin(args) -> int:
     from momentid.io.exclusive import exclusive
     from momentid.io.recording import read_recording
+    from momentid.report.files import twin_html_page
     from momentid.twin import build_twin, write_twin
     from momentid.twin.files import file_names, output_folder as twin_folder
 
@@ -280,7 +292,9 @@ def _cmd_twin(args) -> int:
     twin_folder(out, force=args.force).check(file_names([r.name for r in experiment.runs], not args.no_plots))
     with exclusive(out):   # one writer per twin folder, refused before the twin is built
         twin = build_twin(experiment, runs)
-        names = write_twin(twin, experiment, out, plots=not args.no_plots, force=args.force)
+        page = None if args.no_plots else (
+            lambda folder: [report_page(folder, lambda made: twin_html_page(twin, experiment, made), args)])
+        names = write_twin(twin, experiment, out, plots=not args.no_plots, force=args.force, extra=page)
     if args.json:
         print(json.dumps(json_safe(twin.to_dict()), indent=2, allow_nan=False))
     else:
@@ -401,6 +415,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--per-run", action="store_true",
                    help="runs without added mass: one modal fit per run, and how mode 1's frequency and "
                         "damping change with the response amplitude across runs (a linear rig shows no trend)")
+    p.add_argument("-o", "--output", metavar="DIR",
+                   help="also write DIR/report.html (one self-contained page: the answer, tables, figures, "
+                        "provenance), DIR/modes.uff and DIR/frf.uff (UFF datasets 55 and 58: the modes and the "
+                        "measured table-to-floor transfer functions) and DIR/identification.json (what --json "
+                        "prints), beside any other files in DIR; see docs/reports.md")
+    _add_force(p)
     p.set_defaults(func=_cmd_identify)
 
     p = sub.add_parser("import", help="turn a lab's raw exports (CSV per run, Xsens DOT IMU files) into a recording",
@@ -537,6 +557,7 @@ def main(argv=None) -> int:
     try:
         parser = build_parser()
         args = parser.parse_args(argv)   # --help and usage errors print too
+        args.argv = list(sys.argv[1:] if argv is None else argv)    # the exact command (report provenance)
         if args.command is None:
             parser.print_help()
             return 2
@@ -555,6 +576,7 @@ def _run_command(args) -> int:
               mujoco_warnings_counted_not_printed()):
             warnings.showwarning = _one_line_warning
             warnings.simplefilter("always", RecoveryWarning)  # every recovered file says so, every time
+            refuse_empty_paths(args)
             return args.func(args)
     except BrokenPipeError:
         raise   # an OSError, but no error of the command: main() keeps it quiet

@@ -14,7 +14,22 @@ from pathlib import Path
 
 from momentid.errors import MomentidError
 
-__all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout"]
+__all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout", "report_page",
+           "identification_output", "write_identification_folder", "refuse_empty_paths"]
+
+
+#: Options that name a path to write; an empty value is refused (:func:`refuse_empty_paths`).
+PATH_OPTIONS = (("output", "-o"), ("save", "--save"))
+
+
+def refuse_empty_paths(args) -> None:
+    """Refuse an empty output path (``-o ""``, ``--save ""``: an unset shell variable, say), which would
+    mean the current folder, the default one, or no output at all depending on the command."""
+    for key, option in PATH_OPTIONS:
+        value = getattr(args, key, None)
+        if value is not None and not value.strip():
+            raise OutputError(repr(value), f"an empty path (an unset shell variable?); expected a file or folder "
+                                           f"path, or no {option} for the command's default", option=option)
 
 
 def output_path(out: str | None, name: str, *, force: bool = False) -> Path:
@@ -39,9 +54,9 @@ def replaced(out: Path, existed: bool) -> None:
 
 
 class OutputError(MomentidError):
-    def __init__(self, out: str, expected: str):
+    def __init__(self, out: str, expected: str, option: str = "-o"):
         self.out = out
-        super().__init__(f"-o {out}: {expected}")
+        super().__init__(f"{option} {out}: {expected}")
 
 
 def output_folder(out) -> Path:
@@ -78,3 +93,34 @@ def only_json_on_stdout(active: bool):
         sys.stdout = old
         os.dup2(saved, 1)
         os.close(saved)
+
+
+def identification_output(args) -> Path | None:
+    """``identify -o DIR``: the folder, checked under the one output rule before the work
+    (:func:`momentid.report.files.identification_folder`); None without ``-o``."""
+    from momentid.report.files import IDENTIFICATION_FILES, identification_folder
+
+    if not args.output:
+        return None
+    out = output_folder(args.output)
+    identification_folder(out, force=args.force).check(IDENTIFICATION_FILES)
+    return out
+
+
+def write_identification_folder(out: Path, result, experiment, payload: dict, args, **extra) -> None:
+    """``identify -o DIR``: the folder, and one line naming what it holds (stderr with ``--json``)."""
+    from momentid.report.files import write_identification
+    from momentid.report.page import provenance
+
+    made = provenance(getattr(args, "argv", None), [args.recording])
+    names = write_identification(out, result, experiment, payload, made, force=args.force, **extra)
+    print(f"\nreport written to {out}/ ({', '.join(names)})", file=sys.stderr if args.json else sys.stdout)
+
+
+def report_page(out: Path, page, args) -> str:
+    """Write ``out/report.html``, ``page(provenance)``'s HTML; returns its name."""
+    from momentid.report.files import REPORT_HTML
+    from momentid.report.page import provenance, write_text_atomic
+
+    write_text_atomic(out / REPORT_HTML, page(provenance(getattr(args, "argv", None), [args.recording])))
+    return REPORT_HTML

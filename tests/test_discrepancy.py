@@ -167,6 +167,8 @@ def test_a_sensor_saturation_is_named_at_its_channel_with_its_level(diagnoses):
     level = truth("saturation_a2")["saturation"]
     assert abs(diag.parameters["level"] - level) < 0.05 * level
     assert "sensor saturation at channel a2" in diag.summary and diag.to_dict()["path"] == "data check"
+    # the report page's answer (main's report.html) on the data check, which estimates no noise: no "nan %"
+    assert "sensor saturation" in diag._repr_html_() and "nan" not in diag._repr_html_()
 
 
 def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):

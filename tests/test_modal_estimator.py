@@ -142,7 +142,7 @@ def test_no_extra_mode_on_a_shear_building():
     assert selection.model.n == 3 and selection.extra == ()
 
 
-def test_damping_far_from_the_subspace_estimate_is_not_an_answer():
+def test_an_equivalent_linear_damping_far_from_the_subspace_estimate_is_warned_about():
     run = shear_run(4)
     r = identify_modal(lab(run))
     assert r.damping_is_answer.all() and not any("NOT AN ANSWER" in w for w in r.warnings)
@@ -154,8 +154,10 @@ def test_damping_far_from_the_subspace_estimate_is_not_an_answer():
     std = {"frequency": np.zeros(3), "damping_ratio": np.zeros(3)}
     gain, offset = selection.model.sensors(selection.fit.theta, 0)
     warnings, _, answer = check(doubted, values, std, [run], gain[None], offset[None], MASSES)
-    assert list(answer) == [True, False, True]
-    assert any("mode 2" in w and "NOT AN ANSWER" in w and "subspace" in w for w in warnings), warnings
+    # the linear fit's damping is the equivalent linear one: warned about, while the damping answer
+    # (at small amplitude, momentid.estimation.damping) is judged on its own evidence
+    assert list(answer) == [True, True, True]
+    assert any("mode 2" in w and "equivalent linear" in w and "subspace" in w for w in warnings), warnings
 
 
 def test_a_sensor_reading_a_third_of_the_table_is_refused():

@@ -275,8 +275,15 @@ def test_noise_stated_and_high_band_and_refusal():
     est = estimate_noise(fast, f_max=25.0)
     assert est.source is NoiseSource.HIGH_BAND and est.detail == "high band 75-400 Hz"
     assert est.sigma["zdd"] == pytest.approx(0.01, rel=0.15)   # as above (thousands of bins: tighter)
+    # shakes at once at 120 Hz: neither a lead-in nor a band above 3 x 25 Hz; the floor's scatter between
+    # neighbouring bins gives the level (the floor is 1.5 x the table: a smooth response), within 20 %
+    # (the median of ~2000 bins' 10-dof scatter, the table's noise through the response removed)
+    est = estimate_noise(shaken(rest=0.0), f_max=25.0)
+    assert est.source is NoiseSource.LOCAL_POLYNOMIAL and "local polynomial" in est.detail
+    assert est.sigma["a1"] == pytest.approx(0.01, rel=0.2) and est.sigma["zdd"] == est.sigma["a1"]
+    # a record too short for the local fits (fewer than 20 bins in their band) still has no source
     with pytest.raises(mi.IdentificationError, match=r"run 'trial': no source for the sensor noise level"):
-        estimate_noise(shaken(rest=0.0), f_max=25.0)
+        estimate_noise(shaken(rest=0.0, duration=0.3), f_max=25.0)
 
 
 def test_eiv_spectra_say_where_the_noise_came_from(truth):

@@ -92,6 +92,25 @@ def test_reusing_a_twin_folder_keeps_the_users_files(tmp_path, rig, built):
     assert (out / "twin.xml").read_text() == built.xml
 
 
+def test_a_folder_from_before_the_manifest_says_how_to_proceed(tmp_path, rig, built, capsys):
+    """A twin folder written before momentid kept .momentid.json (or files of the user's under the
+    command's names) is refused in one line saying exactly that, and that --force proceeds; forced
+    once, the folder keeps the list and the next run needs no --force."""
+    experiment, rec = rig
+    out = tmp_path / "twin"
+    mi.twin.write_twin(built, experiment, out, plots=False)
+    (out / MANIFEST).unlink()                                  # as an older momentid left it
+    before = _files(out)
+    error = _refused(capsys, ["twin", str(rec), "-o", str(out), "--no-plots"])
+    assert error.startswith(f"error: -o {out}: the folder holds ") and "(and " in error, error
+    assert f"and no {MANIFEST}, the list of the files momentid wrote there" in error, error
+    assert "expected a new folder, or --force to overwrite these files once you know they are not yours" in error
+    assert _files(out) == before
+    assert main(["twin", str(rec), "-o", str(out), "--no-plots", "--force"]) == 0
+    assert (out / MANIFEST).is_file()
+    assert main(["twin", str(rec), "-o", str(out), "--no-plots"]) == 0
+
+
 def test_plot_names_never_collide(tmp_path, rig, built):
     """Data loss 3: trials "trial 1", "trial_1" and "trial.1" all wrote replay_trial_1.png."""
     experiment, _ = rig
@@ -141,6 +160,86 @@ def test_import_follows_no_symlink_onto_another_file(tmp_path, capsys):
     assert main(["import", str(lab), "-o", str(link), "--force"]) == 0
     assert not link.is_symlink() and precious.read_text() == "years of work"
     assert len(mi.read_recording(link).runs) == 2
+
+
+def test_a_failed_reimport_keeps_the_previous_recording(tmp_path, capsys, monkeypatch):
+    """`import -o rec.mcap` over an earlier recording wrote the new one in its place from the first byte:
+    a failure half-way (a full disk, Ctrl-C) lost the earlier recording.  Now the new one is written
+    beside it and renamed into place once complete; the completed runs of a failed one stay readable
+    beside the kept file."""
+    import momentid.io.recording as recording
+    from bad_input.csv_import import lab_folder
+    from bad_input.faults import fill_disk_at
+
+    lab = lab_folder(tmp_path)
+    out, partial = tmp_path / "rec.mcap", tmp_path / "rec.mcap.partial"
+    assert main(["import", str(lab), "-o", str(out)]) == 0
+    before = out.read_bytes()
+    with monkeypatch.context() as m:     # a disk that takes the header and run r1 of the new file, not r2
+        fill_disk_at(m, recording, len(before) // 2 + 200)
+        error = _refused(capsys, ["import", str(lab), "-o", str(out)])
+    assert f"{out}: cannot write run 'r2'" in error and "the file there is kept" in error, error
+    assert f"the 1 completed run(s) (r1) are in {partial}" in error, error
+    assert out.read_bytes() == before
+    with pytest.warns(mi.errors.RecoveryWarning):
+        assert [r.name for r in mi.read_recording(partial).runs] == ["r1"]
+    with monkeypatch.context() as m:     # Ctrl-C after run r1
+        write_run = recording.RecordingWriter.write_run
+        m.setattr(recording.RecordingWriter, "write_run", lambda self, run, **k: (
+            write_run(self, run, **k) if run.name == "r1" else (_ for _ in ()).throw(KeyboardInterrupt())))
+        assert main(["import", str(lab), "-o", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert f"note: {out}: not replaced, the file there is kept; the 1 completed run(s) of the new recording (r1) " \
+           f"are in {partial}" in err and "error: interrupted" in err, err
+    assert out.read_bytes() == before
+    assert main(["import", str(lab), "-o", str(out)]) == 0          # complete: renamed into place
+    assert "an existing file, replaced by this recording" in capsys.readouterr().err
+    assert not partial.exists() and len(mi.read_recording(out).runs) == 2
+
+
+def test_a_users_file_at_the_temporary_name_is_refused_unless_forced(tmp_path, capsys):
+    """An output is written to `<name>.partial` first: a user's file of that name is refused (view --save
+    used to truncate it and rename it over the output); --force removes it; what a killed writer of the
+    same kind left there is written over."""
+    from bad_input.csv_import import lab_folder
+
+    lab = lab_folder(tmp_path)
+    out, partial = tmp_path / "rec.mcap", tmp_path / "rec.mcap.partial"
+    partial.write_text("years of work")
+    error = _refused(capsys, ["import", str(lab), "-o", str(out)])
+    assert f"-o {out}: {partial} beside it is not an MCAP recording" in error and "--force removes it" in error
+    assert partial.read_text() == "years of work" and not out.exists()
+    assert main(["import", str(lab), "-o", str(out), "--force"]) == 0
+    assert not partial.exists() and len(mi.read_recording(out).runs) == 2
+    partial.write_bytes(out.read_bytes()[:100])                      # a writer killed in the header
+    assert main(["import", str(lab), "-o", str(out)]) == 0
+    assert not partial.exists() and len(mi.read_recording(out).runs) == 2
+
+
+def test_a_writer_killed_beside_a_recording_keeps_both(tmp_path):
+    """SIGKILL while a new recording is written over an earlier one: the earlier one is whole, and the
+    new one's completed runs read back from the partial file beside it, with a note."""
+    import subprocess
+    import sys
+
+    from bad_input.recording import tiny_experiment
+
+    out = tmp_path / "rec.mcap"
+    write_experiment(out, tiny_experiment(1))
+    before = out.read_bytes()
+    script = ("import os, signal, sys; sys.path.insert(0, 'tests')\n"
+              "from bad_input.recording import tiny_experiment\n"
+              "from momentid.io.recording import RecordingWriter\n"
+              "e = tiny_experiment(3)\n"
+              f"w = RecordingWriter({str(out)!r}, structure=e.structure, scenario=e.scenario)\n"
+              "w.write_run(e.runs[0]); w.write_run(e.runs[1])\n"
+              "os.kill(os.getpid(), signal.SIGKILL)\n")
+    proc = subprocess.run([sys.executable, "-c", script], cwd=Path(__file__).resolve().parents[1])
+    assert proc.returncode == -9
+    assert out.read_bytes() == before
+    with pytest.warns(mi.errors.RecoveryWarning):
+        kept = mi.read_recording(tmp_path / "rec.mcap.partial")
+    assert [r.name for r in kept.runs] == ["r1", "r2"] and not kept.complete
 
 
 def test_run_and_import_refuse_a_file_that_is_not_a_recording(tmp_path, capsys):
@@ -231,6 +330,60 @@ def test_reused_report_folder_loses_its_stale_plots(tmp_path, diagnosis):
     assert (out / "my_plot.png").read_bytes() == b"mine"
     listed = set(json.loads((out / MANIFEST).read_text())["files"])
     assert listed == set(second)
+
+
+# ------------------------------------------------------------------------------------- identify -o
+
+IDENTIFY_FILES = ["frf.uff", "identification.json", "modes.uff", "report.html"]
+
+
+def test_identify_never_overwrites_a_users_report(tmp_path, rig, capsys, monkeypatch):
+    """`identify -o DIR` wrote report.html, modes.uff, frf.uff and identification.json over a user's files
+    of those names: now refused before the work (without --force), beside the user's other files."""
+    import momentid.estimation.identification as identification
+
+    _, rec = rig
+    out = tmp_path / "thesis"
+    out.mkdir()
+    (out / "report.html").write_text("<p>my report</p>")
+    (out / "thesis.tex").write_text("\\chapter{Results}")
+    before = _files(out)
+    with monkeypatch.context() as m:    # refused before the identification starts
+        m.setattr(identification, "identify", lambda *a, **k: pytest.fail("identified before the refusal"))
+        error = _refused(capsys, ["identify", str(rec), "-o", str(out)])
+    assert f"-o {out}: the folder holds report.html, which `momentid identify` would overwrite" in error, error
+    assert "--force" in error and _files(out) == before
+    assert main(["identify", str(rec), "-o", str(out), "--force"]) == 0
+    assert sorted(set(os.listdir(out)) - {"thesis.tex", MANIFEST}) == IDENTIFY_FILES
+    assert (out / "thesis.tex").read_text() == "\\chapter{Results}"
+    listed = set(json.loads((out / MANIFEST).read_text())["files"])
+    assert listed == set(IDENTIFY_FILES)
+
+
+def test_identify_reuses_its_folder_and_drops_its_stale_files(tmp_path, rig, capsys, monkeypatch):
+    """A second `identify -o` into its own folder needs no --force; a file it no longer writes (a
+    modes.uff that cannot be written now) goes, a user's file stays; a diagnosis's report.html is not
+    the identification's to replace."""
+    import momentid.report.exports as exports
+    from momentid.errors import MomentidError
+
+    _, rec = rig
+    out = tmp_path / "id"
+    assert main(["identify", str(rec), "-o", str(out)]) == 0
+    (out / "notes.md").write_text("mode 2 looks odd")
+
+    def fails(*args, **kwargs):
+        raise MomentidError("a mode shape that is not finite")
+    monkeypatch.setattr(exports, "modes_uff", fails)
+    capsys.readouterr()
+    assert main(["identify", str(rec), "-o", str(out)]) == 0
+    assert f"warning: {out / 'modes.uff'} not written" in capsys.readouterr().err
+    assert not (out / "modes.uff").exists() and (out / "notes.md").read_text() == "mode 2 looks odd"
+    assert set(json.loads((out / MANIFEST).read_text())["files"]) == set(IDENTIFY_FILES) - {"modes.uff"}
+    report = tmp_path / "report"
+    OwnedFolder(report, "diagnose").write(lambda staging: [(staging / "report.html").write_text("x") and "report.html"])
+    error = _refused(capsys, ["identify", str(rec), "-o", str(report)])
+    assert "report.html" in error and "`momentid diagnose` wrote it" in error, error
 
 
 # ----------------------------------------------------------------------------- run names, properties

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import gzip
 import shutil
+import tomllib
 from collections import defaultdict
 from pathlib import Path
 
@@ -485,3 +486,43 @@ def test_names_of_the_uncompressed_exports_find_the_shipped_gzip_files(tmp_path,
     toml.write_text(toml.read_text().replace(".csv.gz", ".csv"))
     again = import_folder(folder)
     assert all(np.array_equal(a.values, b.values) for a, b in zip(again.runs, shipped.runs))
+
+
+
+def _one_trial(folder: Path, name: str, late: int | None = None) -> Path:
+    """Run ``name`` of the shipped rig alone as plain files in ``folder``; sensor ``late`` (0: the table)
+    switched on 30 s late: its first 3600 rows (at 120 Hz) are gone."""
+    text = (FOLDER / "experiment.toml").read_text()
+    spec = tomllib.loads(text)
+    run = next(r for r in spec["runs"] if r["name"] == name)
+    names = ["table.csv", "f1.csv", "f2.csv", "f3.csv"]
+    folder.mkdir()
+    for k, (source, target) in enumerate(zip([run["table"], *run["floors"]], names)):
+        lines = gzip.decompress((FOLDER / source).read_bytes()).decode("utf-8").splitlines()
+        if k == late:
+            first = next(i for i, line in enumerate(lines) if line.startswith("PacketCounter")) + 1
+            del lines[first:first + 3600]
+        (folder / target).write_text("\n".join(lines) + "\n")
+    (folder / "experiment.toml").write_text(text.split("[[runs]]")[0] + f'[[runs]]\nname = "{name}"\ntable = '
+                                            f'"table.csv"\nfloors = ["f1.csv", "f2.csv", "f3.csv"]\n')
+    return folder
+
+
+@pytest.mark.parametrize("trial, floor", [("northridge", 1), ("northridge", 2), ("sine_1p5", 3)])
+def test_a_floor_file_that_starts_30_s_late_gets_no_drift(tmp_path, trial, floor):
+    """Issue 32, silent wrong 3: a floor file that starts 30 s late got an invented drift ("drifts by -284
+    ppm ... resampled", ending 1.8 samples off; before the fix, northridge's floor 1 read -236 ppm and
+    floor 2 -445 ppm: the trial whose clocks are aligned from the data).  The run keeps the span every
+    sensor covers, and there every sample is the clean import's, on the same clock."""
+    clean = import_folder(_one_trial(tmp_path / "clean", trial)).runs[0]
+    late = import_folder(_one_trial(tmp_path / "late", trial, floor)).runs[0]
+    notes = " ".join([*late.meta["notes"], *(n for s in late.meta["sensors"] for n in s["notes"])])
+    assert "drift" not in notes and "resampled" not in notes, notes
+    k = clean.n_samples - late.n_samples          # the late file ends with the others
+    assert f"kept the {late.n_samples} samples every sensor covers" in notes and k > 3500
+    for ch in late.channels:
+        diff = clean[ch][k:] - late[ch]
+        # The same samples: they differ by the offset each sensor removes (its mean over the span it keeps),
+        # a constant, to float rounding (1e-12 m/s^2).  A lag of 0.1 sample would leave ~1e-2 m/s^2 here
+        # (floor accelerations of ~1 m/s^2 at 1.5 Hz and more), a drift more.
+        assert np.ptp(diff) < 1e-12, (ch, np.ptp(diff))

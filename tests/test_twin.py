@@ -262,7 +262,8 @@ def test_cli_writes_the_folder(tmp_path, experiment, twin, capsys, monkeypatch):
     text = capsys.readouterr().out
     assert "small" in text and "large" in text and "NRMSE" in text and "twin written to" in text
     names = sorted(p.name for p in out.iterdir())
-    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "transfer.png", "twin.json", "twin.xml"]
+    assert names == [MANIFEST, "replay_large.png", "replay_small.png", "report.html", "transfer.png", "twin.json",
+                     "twin.xml"]
     model = mujoco.MjModel.from_xml_path(str(out / "twin.xml"))
     assert model.nsensor > 0
     data = json.loads((out / "twin.json").read_text())
@@ -441,7 +442,7 @@ def test_which_warnings_refuse_a_twin(twin):
     assert refusals(replace(result, warnings=(gain,))) == ([], [gain])
     poor = "mode 2 at 10.31 Hz is poorly determined (frequency +- 0.2 Hz, damping ratio 0.008 +- 0.006)"
     assert refusals(replace(result, warnings=(gain, poor))) == ([poor], [gain])
-    unstable = replace(result, damping_ratio=np.array([0.01, -0.001]))
+    unstable = replace(result, damping_ratio_equivalent=np.array([0.01, -0.001]))   # the linear fit the twin replays
     assert "unstable" in refusals(unstable)[0][0]
     loose = replace(result, sensor_gain=np.array([[1.0, 1.0], [1.0, 0.3]]))
     assert "expected 0.5-2" in refusals(loose)[0][0]
@@ -548,6 +549,6 @@ def test_two_twins_writing_the_same_folder(tmp_path, experiment, capsys):
     assert first.returncode == 0, first_err
     # (a second that succeeds started after the first had finished building and writing)
     assert second == 2 and err.count("\n") == 1 and err.startswith("error: ") and str(out) in err, err
-    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "replay_large.png", "replay_small.png",
+    assert sorted(p.name for p in out.iterdir()) == [MANIFEST, "replay_large.png", "replay_small.png", "report.html",
                                                      "transfer.png", "twin.json", "twin.xml"]
     assert read_twin(out).runs == ("small", "large")

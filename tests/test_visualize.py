@@ -15,11 +15,13 @@ import pytest
 import momentid as mi
 from momentid.report import panels, viewer
 from momentid.cli import main
+from momentid.core.series import json_safe
 from momentid.errors import ViewerError
 from momentid.estimation.equation_form import equation_residual
 from momentid.io.recording import write_experiment
 from momentid.lab.scenario import default_scenario_path
 from benchmarks.bench import scenario_variant_file
+from conftest import DATA
 
 rerun_chunk = pytest.importorskip("rerun.chunk")
 
@@ -158,6 +160,29 @@ def test_result_json_round_trip(rec, tmp_path, capsys):
     assert scene.result is result and "runs reference, uniform" in panels.parameters_markdown(scene)
 
 
+def test_modal_result_of_the_shipped_rig(tmp_path, capsys):
+    """Issue 32: `view --result FILE` reads what `identify --json` prints for runs without added mass
+    (the shipped rig): every key of it, and shows its modes."""
+    rec, path, rrd = tmp_path / "flex3.mcap", tmp_path / "result.json", tmp_path / "view.rrd"
+    assert main(["import", str(DATA / "mini_shake_table" / "flexible_3storey"), "-o", str(rec)]) == 0
+    capsys.readouterr()
+    assert main(["identify", str(rec), "--runs", "sine_2p0", "--json"]) == 0
+    printed = json.loads(capsys.readouterr().out)
+    path.write_text(json.dumps(printed))
+    assert main(["view", str(rec), "--result", str(path), "--save", str(rrd)]) == 0
+    result = viewer.load_result(path, mi.read_recording(rec))
+    assert json.loads(json.dumps(json_safe(result.to_dict()))) == printed      # nothing lost or changed
+    assert [m.source for m in result.damping] == [m["source"] for m in printed["damping"]]
+    chunks = defaultdict(list)
+    for chunk in rerun_chunk.RrdReader(rrd).store().stream().to_chunks():
+        chunks[chunk.entity_path].append(chunk.to_record_batch())
+    panel = static(chunks, "/identification/parameters", "TextDocument:text")
+    assert result.table() in panel and "masses (stated, kg): [0.1" in panel
+    modes = static(chunks, "/identification/modes", "TextDocument:text")
+    for k, (f, z) in enumerate(zip(printed["frequency_hz"], printed["damping_ratio_equivalent"])):
+        assert f"| {k + 1} | {f:.5f} | n/a | {z:.5f} | n/a |" in modes     # the linear model C replays
+
+
 def test_auto_exaggeration_is_a_nice_factor(rec):
     e = rec["experiment"]
     x = viewer.auto_exaggeration(e, e.structure.storey_heights)
@@ -204,6 +229,9 @@ def test_no_viewer_suggests_save(rec, monkeypatch):
         (["view", "{rec}", "--result", "{renamed}"], "step9 are not in"),
         (["view", "{rec}", "--result", "{bad}"], "bad.mcap: not a JSON result"),
         (["view", "{rec}", "--result", "nowhere.json"], "nowhere.json: result file not found"),
+        (["view", "{rec}", "--result", "{modal}"], "modal.json: key 'mode_shapes': [[1.0, 0.0], [0.0, 1.0]]; "
+                                                    "expected numbers of shape (3, 3)"),
+        (["view", "{rec}", "--result", "{per_run}"], "identify --per-run --json` (one fit per run)"),
         (["view", "{rec}", "--run", "nope"], "no run named 'nope'"),
         (["view", "{rec}", "--exaggeration", "-1"], "positive"),
         (["view", "{rec}", "--save", "{bad}/x.rrd"], "cannot write"),
@@ -218,7 +246,13 @@ def test_mistakes_are_one_line_errors(rec, tmp_path, capsys, argv, fragment):
     renamed.write_text(json.dumps(payload))
     other = tmp_path / "other.json"
     other.write_text(json.dumps(dict(payload, M=np.eye(4).tolist(), C=np.eye(4).tolist(), K=np.eye(4).tolist())))
-    subs = {"{rec}": str(rec["mcap"]), "{bad}": str(bad), "{renamed}": str(renamed), "{other}": str(other)}
+    modal = tmp_path / "modal.json"      # runs without added mass: a mode shape matrix of 2 modes for 3
+    modal.write_text(json.dumps({"frequency_hz": [1.0, 2.0, 3.0], "damping_ratio": [0.01] * 3,
+                                 "mode_shapes": np.eye(2).tolist(), "runs": ["reference"]}))
+    per_run = tmp_path / "per_run.json"
+    per_run.write_text(json.dumps({"runs": [payload, payload]}))
+    subs = {"{rec}": str(rec["mcap"]), "{bad}": str(bad), "{renamed}": str(renamed), "{other}": str(other),
+            "{modal}": str(modal), "{per_run}": str(per_run)}
     for key, value in subs.items():
         argv = [a.replace(key, value) for a in argv]
     assert main(argv) == 2

@@ -40,8 +40,8 @@ def run_name_problem(name) -> str | None:
 
     A run name is printed in one-line reports and becomes part of file names: it must be a non-empty
     string of at most 200 printable characters, without line breaks, tabs or other control characters,
-    without ``/`` or ``\\``, without ``..``, and without leading or trailing spaces.  Spaces inside
-    ("El Centro Trial 1") are fine.
+    without ``/`` or ``\\``, without ``..``, without ``,`` (``--runs`` separates names by commas), and
+    without leading or trailing spaces.  Spaces inside ("El Centro Trial 1") are fine.
     """
     import unicodedata
 
@@ -55,6 +55,8 @@ def run_name_problem(name) -> str | None:
     for part in ("/", "\\", ".."):
         if part in name:
             return f"{part!r} (a run name becomes part of file names)"
+    if "," in name:
+        return "',' (--runs lists run names separated by commas: this run could never be chosen)"
     if name != name.strip():
         return "leading or trailing spaces"
     return None

@@ -22,7 +22,6 @@ force is larger than that force at the peak (:data:`LOUD`).
 
 from __future__ import annotations
 
-import json
 
 import numpy as np
 
@@ -205,7 +204,7 @@ def describe(place: Place, terms: list[dict], structure: Structure, peak: float,
     k_lin = linear_stiffness(place, structure) + coef["x"]["coefficient"]
     if k_lin <= 0:   # the fitted spring undoes the model's: compare with the model's alone
         k_lin = linear_stiffness(place, structure)
-    head = f"Discovered at {json.dumps(place.location)}, {_where(place)}: "
+    head = f"Discovered at {_where(place)}: "
     ph = physics(place, terms)
     nonlinear = [t for t in terms if t["term"] not in LINEAR_TERMS]
     if not nonlinear:

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from momentid.diagnosis.result import Diagnosis
+from momentid.mechanisms.place import location_words
 
 __all__ = ["plot_replay"]
 
@@ -37,7 +37,7 @@ def plot_replay(diag: Diagnosis, path: Path) -> None:
     axes[0, 1].legend(fontsize=7)
     axes[-1, 0].set_xlabel("time (s)")
     axes[-1, 1].set_xlabel("time (s)")
-    fig.suptitle(f"{diag.mechanism} {json.dumps(diag.location)}: held-out NRMSE "
+    fig.suptitle(f"{diag.mechanism.replace('_', ' ')} at {location_words(diag.location)}: held-out NRMSE "
                  f"{100 * diag.nrmse_before:.2f} % -> {100 * diag.nrmse_after:.2f} %")
     fig.tight_layout()
     fig.savefig(path, dpi=90)

@@ -18,7 +18,7 @@ __all__ = ["write_report", "report_folder", "REPORT_FILES"]
 
 #: Every file a report folder may hold (checked against the folder before the diagnosis runs).
 REPORT_FILES = ("report.json", "summary.txt", "twin.xml", "model_augmented.xml", "replay.png", "diagnosis.rrd",
-                "locate.png", "discovered.png")
+                "locate.png", "discovered.png", "report.html")
 
 
 def report_folder(folder, *, force: bool = False) -> OwnedFolder:
@@ -26,7 +26,7 @@ def report_folder(folder, *, force: bool = False) -> OwnedFolder:
     return OwnedFolder(folder, "diagnose", force=force)
 
 
-def write_report(diag: Diagnosis, folder, *, force: bool = False) -> tuple[str, ...]:
+def write_report(diag: Diagnosis, folder, *, force: bool = False, extra=None) -> tuple[str, ...]:
     """Write the report folder; returns the names of the files written, in this order:
     ``report.json``, ``summary.txt``, ``twin.xml`` (the linear twin, on the twin path),
     ``model_augmented.xml`` (when there is an augmented model), ``replay.png`` (recorded vs. linear vs.
@@ -37,8 +37,12 @@ def write_report(diag: Diagnosis, folder, *, force: bool = False) -> tuple[str, 
     built before any is put in place; files of these names that ``momentid diagnose`` did not write
     (the user's, a twin's) are refused unless ``force``; this command's files of an earlier report
     that the new one does not write (a stale ``discovered.png``) are removed; other files are left
-    alone."""
-    return tuple(report_folder(folder, force=force).write(lambda staging: _write_files(diag, staging)))
+    alone.  ``extra(staging)`` writes more files beside them (the report page of :mod:`momentid.report`,
+    which this layer does not import) and returns their names."""
+    def files(staging):
+        return _write_files(diag, staging) + (list(extra(staging)) if extra is not None else [])
+
+    return tuple(report_folder(folder, force=force).write(files))
 
 
 def _write_files(diag: Diagnosis, folder: Path) -> list[str]:

@@ -117,6 +117,12 @@ class Diagnosis:
         """The report's text, in its path's words (:meth:`Evidence.words`)."""
         return self.evidence.words(self)
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.diagnosis.summary_html.diagnosis_html`)."""
+        from momentid.diagnosis.summary_html import diagnosis_html
+        return diagnosis_html(self)
+
     def to_dict(self) -> dict:
         return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
                 "std": self.std, "summary": self.summary, "held_out": self.held_out, "holdout": self.held_out,

@@ -105,6 +105,12 @@ class Identification:
         return {"M": M, "C": s[lay.c], "K": s[lay.k], "mu": float(s[lay.mu]),
                 "kappa": float(np.sqrt(max(g @ self.covariance @ g, 0.0)))}
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.estimation.summary_html.identification_html`)."""
+        from momentid.estimation.summary_html import identification_html
+        return identification_html(self)
+
     def to_dict(self) -> dict:
         """JSON-friendly dict: matrices as nested lists in SI units; ``std`` likewise."""
         modes = self.modes()

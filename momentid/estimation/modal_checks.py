@@ -7,8 +7,9 @@ notes of :class:`~momentid.estimation.scaled.ModalIdentification`:
   (a turned sensor, a wrong unit or channel): the run is **refused** with the sensor named and its
   low-frequency ratio to the table (:func:`low_frequency_ratio`); so is one whose clock offset reached
   the 1.5-sample bound (clocks not aligned);
-* a mode whose damping ratio differs from the subspace estimate of the same data by more than
-  :data:`DAMPING_DISAGREEMENT` is printed with that cause named, flagged as not an answer;
+* a mode whose linear-fit (equivalent linear) damping ratio differs from the subspace estimate of the
+  same data by more than :data:`DAMPING_DISAGREEMENT` is warned about with that cause named (the damping
+  answer itself comes from :mod:`momentid.estimation.damping`);
 * a capped fit (after its restarts), an unstable or a poorly determined mode, a suspect gain, shapes
   far from orthogonal with the stated masses: warnings, as before.
 """
@@ -181,9 +182,8 @@ def check(selection, values: dict, std: dict, runs, gain, offset, masses) -> tup
                        f"the runs excite it too little")
         disagreement = _disagreement(z[i], independent[i])
         if disagreement:
-            answer[i] = False
-            out.append(f"mode {i + 1} at {f[i]:.4g} Hz: damping ratio {100 * z[i]:.3g} % is NOT AN ANSWER: "
-                       f"{disagreement}")
+            out.append(f"mode {i + 1} at {f[i]:.4g} Hz: the linear fit's (equivalent linear) damping ratio "
+                       f"{100 * z[i]:.3g} % is not a figure to use: {disagreement}")
         elif np.isnan(independent[i]):
             notes.append(f"mode {i + 1} at {f[i]:.4g} Hz: no subspace pole is stable over model orders there, so "
                          f"its damping ratio has no second opinion from these data")

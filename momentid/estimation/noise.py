@@ -15,8 +15,22 @@ sources, tried in this order:
     A sample rate far above the structure's band (simulated 1 kHz data) leaves
     a band between ``3 f_max`` and 0.8 x Nyquist that holds noise only.
 
-A 60-200 Hz accelerometer has no such band and rarely a stated level; its
-records have a lead-in.  Every estimate says which source it used.
+``the data's own scatter``
+    A record that shakes from its first sample at 60-200 Hz has neither.  The
+    floors' response is then a smooth function of the table's between
+    neighbouring DFT bins (the local polynomial method of Pintelon et al.,
+    *IEEE Trans. Instrum. Meas.* 59(5), 2010): per bin, each floor's bins
+    within +-:data:`LPM_HALF_WIDTH` are fitted by a frequency response and a
+    transient, both linear in frequency, and what they scatter beyond that is the
+    floor sensor's noise (median over the band: the few bins at a lightly
+    damped resonance, where the response is not smooth, do not move it).  The
+    table's own noise is not seen this way; it is taken as the floors' median
+    (sensors of one kind), and the estimate says so.  On a rig that is not
+    linear the scatter also holds its distortion (10-50x the sensor noise on
+    the shipped rigs): an upper bound, which weights the fit correctly but
+    hides the quietest part of a free decay.
+
+Every estimate says which source it used.
 
 Levels are the standard deviation of white noise in the channel's SI unit,
 which is also the RMS of one DFT bin normalised by ``sqrt(N)``.
@@ -28,11 +42,13 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
+import scipy.stats
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 
 __all__ = ["NoiseSource", "NoiseEstimate", "estimate_noise", "band_level", "windowed_dft", "quiet_lead_in",
+           "local_polynomial_noise",
            "high_band_noise", "HIGH_BAND_FACTOR"]
 
 
@@ -42,6 +58,7 @@ class NoiseSource(Enum):
     STATED = "stated"
     QUIET_LEAD_IN = "quiet lead-in"
     HIGH_BAND = "high band"
+    LOCAL_POLYNOMIAL = "the data's own scatter"
 
 
 #: The noise-only band starts at this multiple of the top frequency fitted (the
@@ -65,6 +82,12 @@ LEAD_IN_START_FACTOR = 3.0
 LEAD_IN_MARGIN = 0.25
 #: A lead-in shorter than this is not used (too few bins, or no rest at all).
 MIN_LEAD_IN = 1.0
+#: Half-width (bins) of the local polynomial fits: 9 bins against 4 complex unknowns (frequency
+#: response and transient, each with its slope) leave 5 degrees of freedom per bin.
+LPM_HALF_WIDTH = 4
+#: The local polynomial band, as fractions of the sample rate: above the table's slow drift, below the
+#: anti-alias roll-off.
+LPM_BAND = (0.02, 0.45)
 
 
 @dataclass(frozen=True)
@@ -150,6 +173,45 @@ def quiet_lead_in(run: RunData, channel: str = "zdd") -> int:
     return end if end >= MIN_LEAD_IN * run.sample_rate else 0
 
 
+def local_polynomial_noise(run: RunData) -> dict | None:
+    """Noise level of every floor channel from the scatter between neighbouring DFT bins (see the module
+    docstring), and of the table taken as theirs; None when the record is too short or has no floors.
+
+    Returns
+    -------
+    dict of str to float
+        Channel name to noise standard deviation (the channel's SI unit).
+    """
+    floors = [c for c in run.channels if c != "zdd" and c[:1] == "a"]
+    if not run.has("zdd") or not floors:
+        return None
+    n, fs = run.n_samples, run.sample_rate
+    U = np.fft.rfft(run["zdd"]) / np.sqrt(n)
+    freq = np.fft.rfftfreq(n, 1.0 / fs)
+    centres = np.flatnonzero((freq > LPM_BAND[0] * fs) & (freq < LPM_BAND[1] * fs))
+    w = LPM_HALF_WIDTH
+    centres = centres[(centres >= w) & (centres < freq.size - w)]
+    if centres.size < MIN_BINS:
+        return None
+    r = np.arange(-w, w + 1)
+    out = {}
+    for c in floors:
+        Y = np.fft.rfft(run[c]) / np.sqrt(n)
+        level = np.empty(centres.size)
+        for k, centre in enumerate(centres):
+            A = np.column_stack([U[centre + r], r * U[centre + r], np.ones(r.size), r])
+            b = Y[centre + r]
+            coef = np.linalg.lstsq(A, b, rcond=None)[0]
+            res = b - A @ coef
+            # the scatter holds the floor's noise and the table's through the response G: with sensors
+            # of one kind, sigma^2 (1 + |G|^2)
+            level[k] = float(np.sum(np.abs(res) ** 2)) / (r.size - A.shape[1]) / (1 + abs(coef[0]) ** 2)
+        dof = 2 * (r.size - 4)                     # real degrees of freedom of each bin's scatter
+        out[c] = float(np.sqrt(np.median(level) / (scipy.stats.chi2.median(dof) / dof)))
+    out["zdd"] = float(np.median([out[c] for c in floors]))
+    return out
+
+
 def estimate_noise(run: RunData, *, f_max: float | None = None, stated=None,
                    noise_floor: tuple[float, float] | None = None) -> NoiseEstimate:
     """Noise standard deviation of every channel of ``run``, and where it came from.
@@ -193,6 +255,13 @@ def estimate_noise(run: RunData, *, f_max: float | None = None, stated=None,
     low, high = noise_floor or ((HIGH_BAND_FACTOR * f_max, HIGH_BAND_TOP * fs / 2) if f_max
                                 else (0.25 * fs, 0.45 * fs))
     sigma = high_band_noise(run, low, high)
+    if sigma is None and noise_floor is None:
+        scatter = local_polynomial_noise(run)
+        if scatter is not None:
+            return NoiseEstimate(scatter, NoiseSource.LOCAL_POLYNOMIAL,
+                                 "no quiet lead-in, no band above the structure: the floors' scatter between "
+                                 "neighbouring frequencies (local polynomial; with any distortion of a rig that is not "
+                                 "linear), the table taken as noisy as the floors")
     if sigma is None:
         band = (f"fewer than {MIN_BINS} DFT bins between {low:.3g} and {high:.3g} Hz" if low < high else
                 f"no band above the structure's response ({low:.3g} Hz, {HIGH_BAND_FACTOR:g} x its highest "

@@ -33,7 +33,8 @@ from momentid.errors import IdentificationError
 from momentid.estimation.modal import ModalModel
 from momentid.estimation.modal_checks import ExtraMode, check, extra_modes
 from momentid.estimation.modal_select import select_modes
-from momentid.estimation.noise import quiet_lead_in
+from momentid.estimation.damping import resolve_damping
+from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import response_amplitude
 
 __all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend", "weighted_line"]
@@ -94,8 +95,17 @@ class ModalIdentification:
         The storey modes' damping ratios by the subspace estimate of the same data (NaN: no pole
         stable over model orders there); the fit's are checked against them.
     damping_is_answer : ndarray of bool, shape (d,)
-        False where a damping ratio is not an answer (unstable, or more than 2x off the subspace
-        estimate); the cause is in ``warnings``.
+        False where a damping ratio is not an answer; the reason is in ``damping_refusal``.
+    damping_ratio_equivalent, equivalent_std : ndarray, shape (d,)
+        The linear fit's damping ratios over the whole record (the equivalent linear damping at the
+        record's amplitudes) and their (white-noise) standard errors; ``damping_ratio`` is the damping
+        at small amplitude (:mod:`momentid.estimation.damping`).
+    damping_interval : ndarray, shape (d, 2)
+        95 % intervals of ``damping_ratio``.
+    damping_refusal : tuple of str
+        Per mode, why its damping ratio is not an answer ('' when it is).
+    damping : tuple of ModeDamping
+        Per mode, how the damping answer was reached (source, law, amplitudes, degrees of freedom).
     """
 
     frequency: np.ndarray
@@ -130,16 +140,32 @@ class ModalIdentification:
     extra_modes: tuple = ()
     damping_ratio_subspace: np.ndarray | None = None
     damping_is_answer: np.ndarray | None = None
+    damping_ratio_equivalent: np.ndarray | None = None
+    equivalent_std: np.ndarray | None = None
+    damping_interval: np.ndarray | None = None
+    damping_refusal: tuple = ()
+    damping: tuple = ()
 
     @property
     def storeys(self) -> int:
         return self.frequency.shape[0]
 
+    @property
+    def linear_damping_ratio(self) -> np.ndarray:
+        """The linear fit's (equivalent linear) damping ratios: what replays the record; shape (d,)."""
+        return self.damping_ratio if self.damping_ratio_equivalent is None else self.damping_ratio_equivalent
+
+    @property
+    def linear_damping_ratio_std(self) -> np.ndarray:
+        """Their (white-noise) standard errors, shape (d,)."""
+        return self.damping_ratio_std if self.equivalent_std is None else self.equivalent_std
+
     def modes(self) -> Modes:
-        """Frequencies, damping ratios and shapes as :class:`~momentid.core.analytic.Modes`."""
-        damped = self.frequency * np.sqrt(np.clip(1 - self.damping_ratio ** 2, 0.0, None))
-        return Modes(frequency=self.frequency, damping_ratio=self.damping_ratio, damped_frequency=damped,
-                     shapes=self.shapes)
+        """Frequencies, equivalent linear damping ratios and shapes as :class:`~momentid.core.analytic.Modes`:
+        the linear model that replays the record (consistent with ``C``)."""
+        zeta = self.linear_damping_ratio
+        damped = self.frequency * np.sqrt(np.clip(1 - zeta ** 2, 0.0, None))
+        return Modes(frequency=self.frequency, damping_ratio=zeta, damped_frequency=damped, shapes=self.shapes)
 
     def to_dict(self) -> dict:
         """JSON-friendly dict in SI units; ``frequency_hz`` and ``damping_ratio`` lists, mode 1 first."""
@@ -164,25 +190,39 @@ class ModalIdentification:
             "damping_ratio_subspace": None if self.damping_ratio_subspace is None else
             [None if np.isnan(z) else float(z) for z in self.damping_ratio_subspace],
             "damping_is_answer": None if self.damping_is_answer is None else [bool(a) for a in self.damping_is_answer],
+            "damping_ratio_equivalent": lst(self.damping_ratio_equivalent),
+            "damping_interval_95": lst(self.damping_interval),
+            "damping_refusal": [r or None for r in self.damping_refusal],
+            "damping": [m.to_dict() for m in self.damping],
             "units": MODAL_UNITS,
         }
+
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.estimation.summary_html.modal_html`)."""
+        from momentid.estimation.summary_html import modal_html
+        return modal_html(self)
 
     def table(self, warnings: bool = True) -> str:
         """Plain-text report: modes with standard errors and the subspace estimate's damping, extra
         modes, matrices, sensors, notes and (``warnings=True``) warnings.  The CLI prints the warnings
         on stderr instead, once."""
         lines = [f"runs: {', '.join(self.runs)} (no added mass: modal fit, {self.estimator})",
-                 "mode  frequency (Hz)        damping ratio (%)     subspace (%)  shape (floor 1..top)"]
+                 "mode  frequency (Hz)        damping at small amplitude (%)   from           equiv. linear (%)  "
+                 "subspace (%)  shape (floor 1..top)"]
         independent = (np.full(self.storeys, np.nan) if self.damping_ratio_subspace is None
                        else self.damping_ratio_subspace)
         answer = np.ones(self.storeys, bool) if self.damping_is_answer is None else self.damping_is_answer
+        equivalent = self.damping_ratio if self.damping_ratio_equivalent is None else self.damping_ratio_equivalent
         for i in range(self.storeys):
             shape = " ".join(f"{x:+.3f}" for x in self.shapes[:, i])
             check = "      -     " if np.isnan(independent[i]) else f"{100 * independent[i]:9.3f}   "
-            flag = "" if answer[i] else "  (damping NOT AN ANSWER: see warnings)"
-            lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  "
-                         f"{100 * self.damping_ratio[i]:7.3f} +- {100 * self.damping_ratio_std[i]:.3f}  {check} "
-                         f"{shape}{flag}")
+            std = self.damping_ratio_std[i]
+            z = f"{100 * self.damping_ratio[i]:7.3f} +- {100 * std:.3f}" if np.isfinite(std) else "      -         "
+            flag = "          " if answer[i] else " NOT AN ANSWER"
+            source = self.damping[i].source if self.damping else "linear fit"
+            lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  {z}{flag:<16} "
+                         f"{source:<16}{100 * equivalent[i]:8.3f}          {check} {shape}")
         if self.extra_modes:
             lines.append(f"extra modes (beyond the {self.storeys} storey modes; fitted so that they do not distort them):")
             for m in self.extra_modes:
@@ -330,13 +370,30 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     warnings, check_notes, answer = check(selection, values, std, selected, gain, offset, masses)
     notes += _notes(fit, selected, offset, values, len(selected)) + list(selection.notes) + list(fit.notes)
     notes += check_notes
+    equivalent, equivalent_std = values["damping_ratio"].copy(), std["damping_ratio"].copy()
+    sigma = [estimate_noise(r, f_max=fit.f_max, stated=stated).sigma for r in selected]
+    with threadpool_limits(limits=1, user_api="blas"):
+        damping = resolve_damping(selected, selection, sigma=sigma)
+    order = np.argsort([model.omega(fit.theta)[i] for i in selection.storey])     # storey order -> ascending
+    damping = tuple(damping[k] for k in order)
+    answer = answer & np.array([m.is_answer for m in damping])
+    for i, m in enumerate(damping):
+        if not m.is_answer:
+            warnings.append(f"mode {i + 1} at {values['frequency'][i]:.4g} Hz: damping at small amplitude NOT AN "
+                            f"ANSWER: {m.refusal}; the equivalent linear damping over the record is "
+                            f"{100 * m.equivalent:.3g} %")
+        else:
+            notes.append(f"mode {i + 1} at {values['frequency'][i]:.4g} Hz: {m.words()}")
+    notes.append("C and M^-1 C hold the equivalent linear damping of the record (what replays it); the damping "
+                 "ratios are the structure's at small amplitude")
     if selection.extra:
         notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more than the "
                      f"{d} storeys: the extra ones are fitted with the storey modes and reported apart")
     has_k = masses is not None
     return ModalIdentification(
         frequency=values["frequency"], frequency_std=std["frequency"],
-        damping_ratio=values["damping_ratio"], damping_ratio_std=std["damping_ratio"],
+        damping_ratio=np.array([m.damping_ratio for m in damping]),
+        damping_ratio_std=np.array([m.damping_ratio_std for m in damping]),
         shapes=values["shapes"], shapes_std=std["shapes"],
         stiffness_over_mass=values["stiffness_over_mass"], stiffness_over_mass_std=std["stiffness_over_mass"],
         damping_over_mass=values["damping_over_mass"], damping_over_mass_std=std["damping_over_mass"],
@@ -347,6 +404,8 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         noise=fit.noise_sources, f_max=fit.f_max, nfev=fit.nfev, notes=tuple(notes), warnings=tuple(warnings),
         extra_modes=extra_modes(selection),
         damping_ratio_subspace=selection.independent[list(selection.storey)], damping_is_answer=answer,
+        damping_ratio_equivalent=equivalent, equivalent_std=equivalent_std, damping_interval=np.array([m.interval for m in damping]),
+        damping_refusal=tuple(m.refusal for m in damping), damping=damping,
     )
 
 
@@ -387,17 +446,29 @@ class AmplitudeTrend:
     damping_slope_std: float
 
     def table(self) -> str:
-        lines = ["run                 RMS response (m/s^2)  mode-1 frequency (Hz)  mode-1 damping (%)"]
+        lines = ["run                 RMS response (m/s^2)  mode-1 frequency (Hz)  mode-1 damping at small "
+                 "amplitude (%)   equiv. linear (%)"]
         for r in self.results:
+            answer = r.damping_is_answer is None or bool(r.damping_is_answer[0])
+            z = (f"{100 * r.damping_ratio[0]:6.3f} +- {100 * r.damping_ratio_std[0]:.3f}" if answer else
+                 "NOT AN ANSWER  ")
             lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {r.frequency[0]:8.4f} +- "
-                         f"{r.frequency_std[0]:.4f}   {100 * r.damping_ratio[0]:6.3f} +- "
-                         f"{100 * r.damping_ratio_std[0]:.3f}")
+                         f"{r.frequency_std[0]:.4f}   {z:<30}{100 * r.linear_damping_ratio[0]:8.3f}")
         lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
-                     f"damping ratio {100 * self.damping_slope:+.3g} +- {100 * self.damping_slope_std:.2g} % per m/s^2"
-                     f" ({self._verdict()})")
+                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} +- {100 * self.damping_slope_std:.2g} "
+                     f"% per m/s^2"
+                     f" ({self.verdict()})")
         return "\n".join(lines)
 
-    def _verdict(self) -> str:
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.estimation.summary_html.trend_html`)."""
+        from momentid.estimation.summary_html import trend_html
+        return trend_html(self)
+
+    def verdict(self) -> str:
+        """The trend in words: ``not linear: larger responses are softer ...`` or ``no trend beyond two
+        standard errors``."""
         softer = self.frequency_slope < -2 * self.frequency_slope_std
         damped = self.damping_slope > 2 * self.damping_slope_std
         if softer or damped:
@@ -471,7 +542,8 @@ def amplitude_trend(results) -> AmplitudeTrend:
         raise IdentificationError(f"{len(results)} run(s): an amplitude trend needs at least two")
     x = np.array([r.amplitude[0] for r in results])
     fs, fstd = (np.array([getattr(r, k)[0] for r in results]) for k in ("frequency", "frequency_std"))
-    zs, zstd = (np.array([getattr(r, k)[0] for r in results]) for k in ("damping_ratio", "damping_ratio_std"))
+    zs = np.array([r.linear_damping_ratio[0] for r in results])
+    zstd = np.array([r.linear_damping_ratio_std[0] for r in results])
     f_slope, f_std = _slope(x, fs, np.maximum(fstd, 1e-12))
     z_slope, z_std = _slope(x, zs, np.maximum(zstd, 1e-12))
     return AmplitudeTrend(results, f_slope, f_std, z_slope, z_std)

@@ -34,7 +34,7 @@ try:   # POSIX; elsewhere writing goes on unlocked (see the module docstring)
 except ImportError:  # pragma: no cover
     fcntl = None
 
-__all__ = ["OutputBusyError", "open_locked", "exclusive", "reserve", "write_whole", "partial_path"]
+__all__ = ["OutputBusyError", "busy_error", "open_locked", "exclusive", "reserve", "write_whole", "partial_path"]
 
 #: Outputs this process holds (resolved path -> nesting depth): locking one again is a no-op.
 _HELD: dict[str, int] = {}
@@ -42,7 +42,8 @@ _HELD: dict[str, int] = {}
 _ATTEMPTS = 5
 
 
-def _busy(path: Path) -> OutputBusyError:
+def busy_error(path: Path) -> OutputBusyError:
+    """The one line for an output ``path`` (the one the user gave) another process is writing."""
     return OutputBusyError(f"{path}: another process is writing it now; expected one writer per output: "
                            "wait for it to finish or choose another output path")
 
@@ -55,7 +56,7 @@ def _flock(fd: int, path: Path) -> None:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError as exc:
         if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
-            raise _busy(path) from None
+            raise busy_error(path) from None
         # ENOLCK, EOPNOTSUPP, EINVAL: the file system has no locks; write unlocked
 
 
@@ -76,7 +77,7 @@ def _locked_fd(path: Path, flags: int) -> int:
         if (mine.st_dev, mine.st_ino) == (now.st_dev, now.st_ino):
             return fd
         os.close(fd)
-    raise _busy(path)
+    raise busy_error(path)
 
 
 def open_locked(path) -> BinaryIO:
@@ -173,7 +174,7 @@ def reserve(path) -> Iterator[_Slot]:
     try:
         file = open_locked(temp)
     except OutputBusyError:
-        raise _busy(path) from None   # name the output the user gave, not its temporary file
+        raise busy_error(path) from None   # name the output the user gave, not its temporary file
     except OSError as exc:
         raise OSError(exc.errno, exc.strerror, str(path)) from None
     try:

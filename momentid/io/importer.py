@@ -31,6 +31,7 @@ file (and the row and column where there is one).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -149,7 +150,7 @@ def _description(folder: Path) -> _Description:
         problem = run_name_problem(name)
         if problem:
             raise tab.error("name" if tab.has("name") else "file",
-                            f"a run name of one printable line; {name!r} has {problem}")
+                            f"a run name of one printable line without '/', '\\', '..' or ','; {name!r} has {problem}")
         tab.finish()
         if name in (r.name for r in runs):
             raise tab.error("name" if tab.has("name") else "file",
@@ -188,7 +189,17 @@ def _read_run_file(spec: _RunSpec, fmt: ExportFormat, storeys: int) -> RunData:
                    channels=channels, values=values, meta={"source_file": str(path), "notes": notes})
 
 
-def _read_runs(desc: _Description, storeys: int, sources: dict):
+@dataclass
+class _Sources:
+    """What the sensor files of each run gave: ``runs[name] = (spec, records, channels, first)`` with
+    ``first`` its alignment without common delays; ``delays`` the common delays applied
+    (:func:`common_delays`).  Kept to align a run again once relabelled."""
+
+    runs: dict = dataclasses.field(default_factory=dict)
+    delays: dict = dataclasses.field(default_factory=dict)
+
+
+def _read_runs(desc: _Description, storeys: int, sources: _Sources):
     """Every run, in order: a run file as it is, or the sensor files aligned (:func:`align_sensors`),
     twice when the runs agree on a delay of a floor sensor's data behind its stamps
     (:func:`common_delays`): the second time with that delay applied in every run.  ``sources`` gets
@@ -199,17 +210,30 @@ def _read_runs(desc: _Description, storeys: int, sources: dict):
             yield _read_run_file(spec, fmt, storeys)
         return
     channels = ("zdd", *(f"a{i + 1}" for i in range(storeys)))
-    read, first = [], []
+    seen: dict = {}
     for spec in desc.runs:   # errors of an early run before a later run is read, as one reads them
         records = [fmt.read_sensor(f) for f in spec.files]
-        read.append(records)
-        sources[spec.name] = (spec, records, channels)
-        first.append(align_sensors(records, channels))
-    delays = common_delays(first, [spec.name for spec in desc.runs])
-    for spec, records, aligned in zip(desc.runs, read, first):
-        if delays:
-            aligned = align_sensors(records, channels, delays)
+        for k, record in enumerate(records):
+            _not_copied(record, spec.name, "table" if k == 0 else f"floor {k}", seen)
+        sources.runs[spec.name] = (spec, records, channels, align_sensors(records, channels))
+    sources.delays = common_delays([s[3] for s in sources.runs.values()], list(sources.runs))
+    for spec, records, _, aligned in sources.runs.values():
+        if sources.delays:
+            aligned = align_sensors(records, channels, sources.delays)
         yield _aligned_run(spec, fmt, channels, aligned)
+
+
+def _not_copied(record, run: str, role: str, seen: dict) -> None:
+    """Refuse a sensor file whose samples a file of another run holds too (a copy saved under another
+    name): aligned against sensors it never shook with, it fails to align and blames its clock, or
+    passes for evidence it is not.  ``seen`` maps each file's sample digest to its file, run and role.
+    (Two files of one run with the same samples are refused by :func:`align_sensors`.)"""
+    digest = hashlib.sha256(np.ascontiguousarray(record.time).tobytes() + np.ascontiguousarray(record.acc).tobytes())
+    path, other, other_role = seen.setdefault(digest.hexdigest(), (record.path, run, role))
+    if other != run:
+        raise SensorDataError(f"{record.path}: holds the same samples as {path} (run {other!r}, {other_role}); "
+                              f"expected each run's own recordings (a file of another run copied under this "
+                              f"run's name?)")
 
 
 def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) -> RunData:
@@ -272,7 +296,7 @@ def import_folder(path, *, relabel: bool = True) -> Experiment:
     d = desc.model.storeys
     structure = desc.model if isinstance(desc.model, Structure) else None
     runs: list[RunData] = []
-    sources: dict = {}
+    sources = _Sources()
     for spec, run in zip(desc.runs, _read_runs(desc, d, sources)):
         if runs:
             _agree(runs[0], run, desc.runs[0].files[0], spec.files[0])
@@ -297,31 +321,54 @@ def import_folder(path, *, relabel: bool = True) -> Experiment:
 
 
 def _placement(runs: list[RunData], desc: _Description, toml: Path, relabel: bool,
-               sources: dict) -> list[RunData]:
+               sources: _Sources) -> list[RunData]:
     """The runs with the sensor-placement check's fixes applied and its findings noted (or refused).
 
     A relabelled run of sensor files is aligned again from its files in their new roles: the clocks,
-    axes and signs were read against the listed table's sensor, which may not be the table's."""
+    axes and signs were read against the listed table's sensor, which may not be the table's; so were
+    the common delays of the floors' data behind their stamps, which are read again over every run in
+    its final roles (:func:`_realigned`)."""
     files = {r.name: tuple(r.meta["source_files"]) for r in runs if "source_files" in r.meta}
+    findings = check_placement(runs, desc.statement.masses, files)
+    if not relabel:
+        fixable = next((f for f in findings if f.fixable), None)
+        if fixable is not None:
+            raise SensorDataError(f"{toml}: {fixable.message}; refused (without --refuse-mislabelled the import "
+                                  f"relabels the sensors and notes it)")
+    moved = {f.run: f.permutation for f in findings
+             if f.fixable and f.permutation is not None and f.run in sources.runs}
     out = {r.name: r for r in runs}
-    for finding in check_placement(runs, desc.statement.masses, files):
+    out.update(_realigned(sources, desc.fmt, moved) if moved else {})
+    for finding in findings:
         run = out[finding.run]
         if not finding.fixable:
             out[finding.run] = dataclasses.replace(run, meta=dict(run.meta, notes=[*run.meta.get("notes", ()),
                                                                                    finding.message]))
-        elif relabel and finding.permutation is not None and finding.run in sources:
-            spec, records, channels = sources[finding.run]
-            perm = finding.permutation
-            moved = _RunSpec(spec.name, tuple(spec.files[p] for p in perm), spec.added_mass)
-            again = _aligned_run(moved, desc.fmt, channels, align_sensors([records[p] for p in perm], channels))
+        elif finding.run in moved:
             note = f"{finding.message}; the files aligned again in these roles: relabelled"
-            out[finding.run] = dataclasses.replace(again, meta=dict(again.meta, notes=[*again.meta["notes"], note]))
-        elif relabel:
-            out[finding.run] = corrected(run, finding)
+            out[finding.run] = dataclasses.replace(run, meta=dict(run.meta, notes=[*run.meta["notes"], note]))
         else:
-            raise SensorDataError(f"{toml}: {finding.message}; refused (without --refuse-mislabelled the import "
-                                  f"relabels the sensors and notes it)")
+            out[finding.run] = corrected(run, finding)
     return [out[r.name] for r in runs]
+
+
+def _realigned(sources: _Sources, fmt: ExportFormat, moved: dict) -> dict:
+    """The runs of sensor files to build again once the runs ``moved`` (name -> permutation of the
+    listed files) are relabelled: those runs from their files in the new roles, with the common delays
+    read again over every run in its final roles (:func:`common_delays`); every other run too when
+    those delays differ from the ones it was aligned with."""
+    final = {}
+    for name, (spec, records, channels, first) in sources.runs.items():
+        if name in moved:
+            perm = moved[name]
+            spec = _RunSpec(spec.name, tuple(spec.files[p] for p in perm), spec.added_mass)
+            records = [records[p] for p in perm]
+            first = align_sensors(records, channels)
+        final[name] = (spec, records, channels, first)
+    delays = common_delays([f[3] for f in final.values()], list(final))
+    again = {n for n in final if n in moved or delays != sources.delays}
+    return {name: _aligned_run(spec, fmt, channels, align_sensors(records, channels, delays) if delays else first)
+            for name, (spec, records, channels, first) in final.items() if name in again}
 
 
 def _not_repeated(runs: list[RunData], run: RunData, file: Path) -> None:

@@ -33,7 +33,7 @@ from pathlib import Path
 from collections.abc import Callable, Iterable
 
 from momentid.errors import OutputRefusedError
-from momentid.io.exclusive import exclusive
+from momentid.io.exclusive import exclusive, partial_path
 from momentid.io.mcap_check import MCAP_MAGIC
 
 __all__ = ["MANIFEST", "KINDS", "check_file", "drop_link", "OwnedFolder", "OutputRefusedError"]
@@ -127,8 +127,33 @@ def check_file(path, kind: str, *, option: str = "-o", force: bool = False) -> P
                 other = next((desc for k, (desc, rec) in KINDS.items() if k != kind and rec(head)), None)
                 found = f"an existing file, {other}, not {what}" if other else f"an existing file that is not {what}"
                 raise OutputRefusedError(option, path, found, f"a new path or {what} to replace ({_FORCE})")
+    _check_beside(p, kind, option, force)
     _writable(p.parent, option, path)
     return p
+
+
+def _check_beside(p: Path, kind: str, option: str, force: bool) -> None:
+    """The temporary file a single-file output is written to first (:func:`momentid.io.exclusive.partial_path`,
+    ``rec.mcap.partial``) may be only what an earlier writer of the same kind left there (killed
+    half-way), or an empty file: anything else there is the user's, refused unless ``force`` (which
+    removes a link or a file there, never a folder)."""
+    beside = partial_path(p)
+    if not (beside.exists() or beside.is_symlink()):
+        return
+    what, recognise = KINDS[kind]
+    folder = beside.is_dir() and not beside.is_symlink()
+    if beside.is_file() and not beside.is_symlink():
+        with open(beside, "rb") as f:
+            head = f.read(64)
+        if not head or recognise(head):
+            return          # empty, or what a killed writer of this kind left: written over
+    if force and not folder:
+        beside.unlink()     # a link (the link itself, never the file it points to) or a file
+        return
+    raise OutputRefusedError(option, str(p), f"{beside} beside it is not {what} an earlier momentid left there "
+                                             f"(the output is written to that path first)",
+                             "no other file or folder of that name there: move it away"
+                             + ("" if folder else " (--force removes it)"))
 
 
 def drop_link(path) -> None:
@@ -181,14 +206,25 @@ class OwnedFolder:
                 and not self._mine(n, manifest)]
 
     def _refuse_foreign(self, foreign: list[str], manifest: dict) -> None:
+        folders = [n for n in foreign if (self.path / n).is_dir() and not (self.path / n).is_symlink()]
+        if folders:     # --force replaces files, never a folder (and what it holds)
+            raise self._refuse(f"the folder holds a folder {folders[0]}, where `momentid {self.command}` writes a "
+                               f"file", "no folder of that name in it: move it away (--force replaces files, "
+                                        "never folders)")
         if not foreign or self.force:
             return
         name = foreign[0]
+        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
+        if not (self.path / MANIFEST).exists():    # written before momentid kept one, or by hand
+            raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
+                               f"and no {MANIFEST}, the list of the files momentid wrote there (a folder written "
+                               f"by momentid before it kept that list, or files of yours: it cannot tell which)",
+                               "a new folder, or --force to overwrite these files once you know they are not "
+                               "yours (the folder keeps the list from then on)")
         owner = manifest.get(name, {}).get("command")
         whose = (f"`momentid {owner}` wrote it" if owner and owner != self.command
                  else "it was changed since momentid wrote it" if owner
                  else "momentid did not write it")
-        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
         raise self._refuse(f"the folder holds {name}{more}, which `momentid {self.command}` would overwrite, "
                            f"but {whose}", "a new or empty folder, or one this command wrote before "
                                            "(--force overwrites such files)")
@@ -253,7 +289,11 @@ class OwnedFolder:
                  and self._mine(n, manifest)]
         written = {n: {"command": self.command, "sha256": _sha256(staging / n)} for n in names}
         for name in names:
-            os.replace(staging / name, self.path / name)
+            try:
+                os.replace(staging / name, self.path / name)
+            except OSError as exc:
+                raise self._refuse(f"cannot put {name} in place ({exc.strerror or exc})",
+                                   "a folder this user can write, holding no folder of that name") from None
         for name in stale:
             with contextlib.suppress(FileNotFoundError):
                 (self.path / name).unlink()

@@ -8,7 +8,11 @@ the run complete.  The layout is documented in ``docs/recording-format.md``.
 
 Crash safety: every run is flushed and fsynced before its completion record
 is written, so a writer that dies keeps every completed run; the reader
-recovers them from a truncated file (see :func:`read_recording`).
+recovers them from a truncated file (see :func:`read_recording`).  A
+recording written where a file already stands is written beside it
+(``<name>.partial``) and renamed into place once complete, so a writer that
+fails keeps the previous file whole, and its completed runs in the partial
+file.
 
 This module writes (:class:`RecordingWriter`, :func:`write_experiment`);
 :mod:`momentid.io.recording_reader` reads, and :mod:`momentid.io.recording_format`
@@ -18,9 +22,11 @@ and the format's public names are re-exported here.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +34,8 @@ from mcap.writer import CompressionType, Writer
 
 from momentid.core.series import UNITS, Experiment, RunData, channel_unit, json_safe, run_name_problem
 from momentid.core.structure import LabStatement, Structure
-from momentid.errors import RecordingError
-from momentid.io.exclusive import open_locked
+from momentid.errors import OutputBusyError, RecordingError, RecoveryWarning
+from momentid.io.exclusive import busy_error, exclusive, open_locked, partial_path
 from momentid.io.recording_format import (ABORTED_RECORD, EXPERIMENT_RECORD, FORMAT_VERSION, IMPORT_META_KEYS,
                                           SCHEMA_DATA, SCHEMA_NAME, SENSOR_BLOCK_PROTO, RUN_RECORD, SensorBlock,
                                           check_sample_times, encode_block, run_topic)
@@ -65,10 +71,17 @@ class RecordingWriter:
     before marking it complete.  Leaving the ``with`` block by an exception
     records ``momentid.aborted`` and still finishes the file.
 
+    A file already at ``path`` (a previous recording) stays until the new one
+    is complete: the new one is written to ``<path>.partial`` beside it and
+    renamed over it by :meth:`close`.  When writing fails, ``path`` keeps the
+    previous file and the partial file the completed runs (a
+    :class:`~momentid.errors.RecoveryWarning` says so; with none completed it is
+    removed).
+
     Parameters
     ----------
     path : str or Path
-        The ``.mcap`` file to create (overwritten).
+        The ``.mcap`` file to create (replaced once complete).
     structure : Structure or None
         Nominal model of the rig; fixes the number of storeys ``d`` that
         every run's ``added_mass`` must match.
@@ -107,9 +120,19 @@ class RecordingWriter:
                     f"{self.path}: extra_metadata key {key!r} = {value!r}: expected a str key other "
                     f"than {', '.join(meta)} and a str value")
             meta[key] = value
+        # A previous file stays whole until this one is complete: written beside it, renamed at close().
+        previous = self.path.is_file() and not self.path.is_symlink() and self.path.stat().st_size > 0
+        self._target = partial_path(self.path) if previous else self.path
+        self._held = contextlib.ExitStack()
         try:   # locked before it is truncated: a second writer of the same file is refused, not mixed in
-            self._file = open_locked(self.path)
+            if previous:
+                self._held.enter_context(exclusive(self.path))
+            self._file = open_locked(self._target)
+        except OutputBusyError:
+            self._held.close()
+            raise busy_error(self.path) from None   # the user's path, not the partial file
         except OSError as e:
+            self._held.close()
             if e.errno == errno.ELOOP:
                 raise RecordingError(f"{self.path}: a symbolic link; expected a regular file path (a recording "
                                      "is never written through a link onto another file)") from None
@@ -125,9 +148,11 @@ class RecordingWriter:
             self._sync()
         except OSError as e:
             self._abandon()
+            self._kept_beside()
             raise self._disk_error(e, "the header") from None
         except BaseException:
             self._abandon()
+            self._kept_beside()
             raise
 
     def __enter__(self) -> RecordingWriter:
@@ -142,12 +167,29 @@ class RecordingWriter:
                 error = f"{exc_type.__name__}: {exc}" if str(exc) else exc_type.__name__
                 self._writer.add_metadata(ABORTED_RECORD, {"error": error,
                                                            "runs_written": str(self._completed)})
-            self.close()
+            self._finish()
         except (OSError, RecordingError):
             # The disk refused more bytes (it is full, say): the completed runs are already fsynced
             # and read back as a truncated file; the error that got us here is the one to report.
             self._abandon()
+        self._held.close()
+        self._kept_beside(said=str(self._target) in str(exc))
         return False
+
+    def _kept_beside(self, said: bool = False) -> None:
+        """After a failure beside a previous file: that file stays; the completed runs stay in the
+        partial file (said in a note unless the error ``said`` it), or nothing does."""
+        if self._target == self.path:
+            return
+        kept = self._runs[:self._completed]
+        if not kept:
+            with contextlib.suppress(OSError):
+                self._target.unlink()
+            return
+        if not said:
+            warnings.warn(f"{self.path}: not replaced, the file there is kept; the {len(kept)} completed run(s) "
+                          f"of the new recording ({', '.join(kept)}) are in {self._target}", RecoveryWarning,
+                          stacklevel=3)
 
     def _abandon(self) -> None:
         """Close the file without writing more (after a write failed)."""
@@ -156,13 +198,17 @@ class RecordingWriter:
             self._file.close()
         except OSError:
             pass  # the bytes it still held could not be written either; the recovery note says so
+        finally:
+            self._held.close()
 
     def _disk_error(self, exc: OSError, doing: str) -> RecordingError:
         """A one-line error for a failed write that says what the file still holds."""
         kept = self._runs[:self._completed]
-        runs = (f"the {len(kept)} completed run(s) ({', '.join(kept)}) are on disk and read back "
+        where = "on disk" if self._target == self.path else f"in {self._target}"
+        runs = (f"the {len(kept)} completed run(s) ({', '.join(kept)}) are {where} and read back "
                 "with a note" if kept else "no run was completed")
-        return RecordingError(f"{self.path}: cannot write {doing} ({exc.strerror or exc}); {runs}; "
+        previous = "" if self._target == self.path else "the file there is kept; "
+        return RecordingError(f"{self.path}: cannot write {doing} ({exc.strerror or exc}); {previous}{runs}; "
                               "expected free space on the disk")
 
     def _sync(self) -> None:
@@ -206,7 +252,8 @@ class RecordingWriter:
                                  f"(used: {', '.join(self._runs) or 'none'})")
         problem = run_name_problem(run.name)
         if problem:
-            raise RecordingError(f"{where}: the run name has {problem}; expected a name of one printable line")
+            raise RecordingError(f"{where}: the run name has {problem}; expected a name of one printable line "
+                                 "without '/', '\\', '..' or ','")
         if not isinstance(block_size, int) or block_size < 1:
             raise RecordingError(f"{where}: block_size = {block_size!r}; expected an int >= 1")
         channels = tuple(run.channels)
@@ -254,7 +301,23 @@ class RecordingWriter:
         self._completed += 1
 
     def close(self) -> None:
-        """Write the summary and footer and close the file (idempotent)."""
+        """Write the summary and footer, close the file and (beside a previous file) put it in place
+        of that file (idempotent)."""
+        if self._closed:
+            return
+        self._finish()
+        if self._target != self.path:
+            try:
+                os.replace(self._target, self.path)
+            except OSError as e:
+                raise RecordingError(f"{self.path}: cannot put the new recording in place ({e.strerror or e}); "
+                                     f"the file there is kept and the new one, complete, is {self._target}; "
+                                     f"expected a folder this user can rename files in") from None
+            finally:
+                self._held.close()
+
+    def _finish(self) -> None:
+        """Write the summary and footer, make them durable and close the file where it is written."""
         if self._closed:
             return
         try:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Target", "Place"]
+__all__ = ["Target", "Place", "location_words"]
 
 
 class Target(enum.Enum):
@@ -168,3 +168,48 @@ class Place:
         run's added masses (d,) or each sample's (n, d)."""
         upper = self.nodes[1] if self.target.link else self.index
         return np.asarray(added_mass)[..., upper - 1:].sum(axis=-1)
+
+
+def _range(values, unit: str) -> str:
+    lo, hi = values
+    return f"{lo:.3g}-{hi:.3g} {unit}"
+
+
+def location_words(location: dict) -> str:
+    """A report's ``location`` in words, never as JSON: its own ``words`` when it has them, else a
+    :class:`Place`'s (``storey 2``, ``floors 1 and 3``), else each key it holds said in words (a
+    sensor, a mode's band and its share of the misfit power, a time window).
+
+    Parameters
+    ----------
+    location : dict
+
+    Returns
+    -------
+    str
+    """
+    if not location:
+        return "no particular place"
+    if isinstance(location.get("words"), str):
+        return location["words"]
+    for target in Target:
+        if target.key in location and target is not Target.FLOOR_TABLE:
+            try:
+                return Place.at(target, location).words
+            except (TypeError, ValueError):
+                break
+    parts = []
+    sensor = str(location.get("sensor", ""))
+    if sensor:
+        floor = re.fullmatch(r"a(\d+)", sensor)
+        parts.append(f"the floor-{floor.group(1)} sensor" if floor else f"sensor {sensor}")
+    if "mode" in location:
+        inside = [_range(location["band_hz"], "Hz")] if "band_hz" in location else []
+        if "band_share" in location:
+            inside.append(f"{100 * location['band_share']:.0f} % of its misfit power")
+        parts.append(f"mode-{location['mode']} band" + (f" ({', '.join(inside)})" if inside else ""))
+    if "worst_window_s" in location:
+        parts.append(f"worst in {_range(location['worst_window_s'], 's')}")
+    known = {"sensor", "mode", "band_hz", "band_share", "worst_window_s", "worst_window_nrmse", "words"}
+    parts += [f"{key.replace('_', ' ')} {value}" for key, value in location.items() if key not in known]
+    return ", ".join(parts)

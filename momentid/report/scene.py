@@ -179,7 +179,8 @@ def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict 
 
 
 def load_result(path, experiment: Experiment):
-    """Read an identification saved by ``momentid identify --json``.
+    """Read an identification saved by ``momentid identify --json``: of runs with added mass (M, C, K,
+    mu, kappa) or without (the modes: :func:`momentid.report.modal_result.modal_from_dict`).
 
     Parameters
     ----------
@@ -190,7 +191,7 @@ def load_result(path, experiment: Experiment):
 
     Returns
     -------
-    Identification
+    Identification or ModalIdentification
 
     Raises
     ------
@@ -198,6 +199,7 @@ def load_result(path, experiment: Experiment):
         The file is missing or not such a JSON object, or belongs to another recording.
     """
     from momentid.estimation.identified import Identification
+    from momentid.report.modal_result import MODAL_KEYS, is_modal_payload, modal_from_dict
 
     path = Path(path)
     try:
@@ -206,10 +208,19 @@ def load_result(path, experiment: Experiment):
         raise ViewerError(f"{path}: result file not found") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise ViewerError(f"{path}: not a JSON result of `momentid identify --json` ({exc})") from None
+    if is_modal_payload(data):        # runs without added mass: the modes, and K, C with stated masses
+        result = modal_from_dict(data, str(path))
+        check_result(result, experiment, source=str(path))
+        return result
+    if isinstance(data, dict) and isinstance(data.get("runs"), list) and data["runs"] and \
+            all(isinstance(r, dict) for r in data["runs"]):
+        raise ViewerError(f"{path}: a result of `momentid identify --per-run --json` (one fit per run); "
+                          f"expected one fit: `momentid identify --json --runs RUN` without --per-run")
     missing = [k for k in ("M", "C", "K", "mu", "kappa", "runs") if not isinstance(data, dict) or k not in data]
     if missing:
         raise ViewerError(f"{path}: not a result of `momentid identify --json`: missing "
-                          f"{', '.join(missing)} (expected keys M, C, K, mu, kappa, runs)")
+                          f"{', '.join(missing)} (expected keys M, C, K, mu, kappa, runs with added mass, or "
+                          f"{', '.join(MODAL_KEYS)} without)")
 
     def number(key, default=math.nan):
         value = data.get(key)

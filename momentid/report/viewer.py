@@ -188,8 +188,12 @@ def log_scene(rec, scene: Scene) -> None:
             for i, column in enumerate(q.T):
                 _log_series(rec, f"{root}/reconstructed/q{i + 1}", time, column, f"q{i + 1}: floor {i + 1} (m)",
                             PALETTE[i % len(PALETTE)])
-        for i, column in enumerate(scene.residuals.get(run.name, np.empty((0, 0))).T):
-            _log_series(rec, f"{root}/residual/r{i + 1}", time, column, f"floor {i + 1} (N)",
+        residual = scene.residuals.get(run.name, np.empty((0, 0)))
+        # the weak form of accelerometer-only runs loses half its kernel at each end: centred in the run
+        head = (run.n_samples - residual.shape[0]) // 2
+        residual_time = rr.TimeColumn(TIMELINE, duration=run.time[head:head + residual.shape[0]])
+        for i, column in enumerate(residual.T):
+            _log_series(rec, f"{root}/residual/r{i + 1}", residual_time, column, f"floor {i + 1} (N)",
                         PALETTE[i % len(PALETTE)])
 
 

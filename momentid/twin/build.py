@@ -110,6 +110,12 @@ class Twin:
             "notes": list(self.notes), "warnings": list(self.warnings),
         }
 
+    def _repr_html_(self) -> str:
+        """A notebook's summary: the words of the report page's answer
+        (:func:`momentid.twin.summary_html.twin_html`)."""
+        from momentid.twin.summary_html import twin_html
+        return twin_html(self)
+
     def summary(self) -> str:
         """Plain-text report: the rig, its modes, every trial's NRMSE."""
         p = self.parameters
@@ -175,7 +181,7 @@ def _modal_refusals(result) -> tuple[list, list]:
     from momentid.estimation.plausibility import GAIN_RANGE
 
     reasons = [f"mode {i + 1} at {f:.4g} Hz is unstable (damping ratio {z:.3g})"
-               for i, (f, z) in enumerate(zip(result.frequency, result.damping_ratio)) if not z > 0]
+               for i, (f, z) in enumerate(zip(result.frequency, result.linear_damping_ratio)) if not z > 0]
     gain = np.asarray(result.sensor_gain)
     for r, run in enumerate(result.runs):
         bad = [j for j in range(gain.shape[1]) if not GAIN_RANGE[0] <= gain[r, j] <= GAIN_RANGE[1]]

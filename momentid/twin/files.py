@@ -43,7 +43,7 @@ def output_folder(out, *, force: bool = False) -> OwnedFolder:
     return OwnedFolder(out, "twin", force=force)
 
 
-def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
+def _write_files(twin, experiment, folder: Path, plots: bool, extra=None) -> list:
     from momentid.core.processes import run_forked
     from momentid.twin import plots as plotting
 
@@ -61,10 +61,12 @@ def _write_files(twin, experiment, folder: Path, plots: bool) -> list:
 
         files = plotting.replay_files([replay.run for replay in twin.replays])
         names += run_forked(plot, list(twin.replays) + [None])
+    if extra is not None:
+        names += extra(folder)
     return names
 
 
-def write_twin(twin, experiment, out, *, plots: bool = True, force: bool = False) -> list:
+def write_twin(twin, experiment, out, *, plots: bool = True, force: bool = False, extra=None) -> list:
     """Write ``twin.xml``, ``twin.json`` and the plots into the folder ``out``, each file whole.
 
     The folder follows the one output rule (:class:`momentid.io.outputs.OwnedFolder`): only the
@@ -84,6 +86,9 @@ def write_twin(twin, experiment, out, *, plots: bool = True, force: bool = False
         Write the PNG plots too.
     force : bool
         Overwrite files of the twin's names that ``momentid twin`` did not write.
+    extra : callable, optional
+        ``extra(folder)`` writes more files into the folder being built (the report page of
+        :mod:`momentid.report`, which this layer does not import) and returns their names.
 
     Returns
     -------
@@ -97,7 +102,7 @@ def write_twin(twin, experiment, out, *, plots: bool = True, force: bool = False
     OutputBusyError
         Another process is writing ``out`` (left as that process writes it).
     """
-    return output_folder(out, force=force).write(lambda staging: _write_files(twin, experiment, staging, plots))
+    return output_folder(out, force=force).write(lambda staging: _write_files(twin, experiment, staging, plots, extra))
 
 
 def _sensors(d: dict) -> SensorModel:

@@ -279,7 +279,7 @@ def from_identification(result, experiment: Experiment) -> TwinParameters:
             how = "in the proportions that make the identified mode shapes orthogonal"
             if masses is None:
                 masses, how = np.ones(d), "equal (no positive proportions make the identified shapes orthogonal)"
-            K, C = matrices_from_modes(result.frequency, result.damping_ratio, result.shapes, masses)
+            K, C = matrices_from_modes(result.frequency, result.linear_damping_ratio, result.shapes, masses)
             normalised = True
             notes.append(f"no floor masses stated: a mass-normalised twin, floor masses {how}, "
                          f"{', '.join(f'{m:.4g}' for m in masses)} (mean 1): its modes, damping ratios and sensor "

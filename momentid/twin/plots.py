@@ -1,10 +1,13 @@
-"""PNG plots of a twin: each trial's recorded and twin floor accelerations, and the transfer functions.
+"""Plots of a twin: each trial's recorded and twin floor accelerations, and the transfer functions.
 
 * ``replay_<trial>.png``: per floor sensor, the recorded and the twin's readings over the scored part
   of the trial (left) and over the :data:`ZOOM_S` seconds around the largest recorded response (right);
 * ``transfer.png``: per floor sensor, the magnitude of the table-to-floor transfer function, estimated
-  from each calibration trial (H1: cross-spectrum over the table's auto-spectrum, where the coherence
-  exceeds :data:`MIN_COHERENCE`) against the twin's (:func:`momentid.twin.replay.transfer`).
+  from each calibration trial (H1, :func:`momentid.estimation.frf.measured_transfer`, where the
+  coherence reaches :data:`MIN_COHERENCE`) against the twin's (:func:`momentid.twin.replay.transfer`).
+
+The ``*_figure`` functions return the matplotlib figure (the report page draws them as SVG); the
+``plot_*`` functions save it as PNG.
 """
 
 from __future__ import annotations
@@ -14,22 +17,18 @@ import re
 from pathlib import Path
 
 import numpy as np
-import scipy.signal
 
+from momentid.estimation.noise import quiet_lead_in
+from momentid.estimation.frf import MIN_COHERENCE, SEGMENT, measured_transfer
 from momentid.twin.replay import Replay, transfer
 
-__all__ = ["plot_replay", "plot_transfer", "replay_file", "replay_files", "pyplot", "envelope", "ENVELOPE_BINS",
-           "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
+__all__ = ["plot_replay", "plot_transfer", "replay_figure", "transfer_figure", "overlay_figure", "replay_file",
+           "replay_files", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
 
 #: Stretches a whole-trial panel is drawn as (minimum and maximum of each): about its width in pixels.
 ENVELOPE_BINS = 1500
 #: Width (s) of the zoom on the largest response.
 ZOOM_S = 4.0
-#: Least coherence of a recorded transfer estimate shown: below it the table barely drives that band
-#: (a sine trial between its harmonics), and the estimate is noise.
-MIN_COHERENCE = 0.8
-#: Longest Welch segment (samples): at 120 Hz, 0.03 Hz bins, a few across a 0.3 %-damped 17 Hz mode.
-SEGMENT = 4096
 _RECORDED, _TWIN = "0.15", "tab:orange"
 
 
@@ -75,13 +74,39 @@ def replay_files(runs) -> dict[str, str]:
     return {run: replay_file(run) for run in runs}
 
 
-def plot_replay(replay: Replay, path: Path) -> Path:
-    """Recorded and twin floor accelerations of one trial, whole and zoomed; returns ``path``."""
+def overlay_figure(t: np.ndarray, recorded: np.ndarray, models: dict, start: int, *, title: str,
+                   panel_titles=None, unit: str = "m/s²", label: str = "floor {j} sensor",
+                   bins: int = ENVELOPE_BINS):
+    """Recorded channels against model replays: per channel (top floor on top), the record from sample
+    ``start`` on (left, drawn as :func:`envelope` of ``bins`` stretches) and the :data:`ZOOM_S` seconds
+    around the largest recorded response (right).
+
+    Parameters
+    ----------
+    t : ndarray, shape (n,)
+        s.
+    recorded : ndarray, shape (n, d)
+    models : dict
+        Label -> ``(values (n, d), colour)``, drawn in order over the recorded channels.
+    start : int
+        First sample shown on the left (after a quiet lead-in).
+    title : str
+    panel_titles : sequence of str, optional
+        One per channel, over its left panel.
+    unit : str
+        Of the channels.
+    label : str
+        A channel's axis label, ``{j}`` its number (1-based).
+    bins : int
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     plt = pyplot()
-    d = replay.recorded.shape[1]
-    s = replay.start
-    t, rec, twin = replay.time, replay.recorded, replay.twin
-    peak = s + int(np.argmax(np.max(np.abs(rec[s:] - rec[s:].mean(axis=0)), axis=1)))
+    d = recorded.shape[1]
+    s = start
+    peak = s + int(np.argmax(np.max(np.abs(recorded[s:] - recorded[s:].mean(axis=0)), axis=1)))
     zoom = (t >= t[peak] - ZOOM_S / 2) & (t <= t[peak] + ZOOM_S / 2)
     fig, axes = plt.subplots(d, 2, figsize=(13, 2.3 * d + 0.8), sharex="col", squeeze=False,
                              gridspec_kw={"width_ratios": [3, 2]})
@@ -89,72 +114,98 @@ def plot_replay(replay: Replay, path: Path) -> Path:
         row = d - 1 - j                    # top floor on top
         for col, keep in enumerate((slice(s, None), zoom)):
             ax = axes[row, col]
-            thin = envelope if col == 0 else (lambda a, b: (a, b))
-            ax.plot(*thin(t[keep], rec[keep, j]), color=_RECORDED, lw=0.6, label="recorded")
-            ax.plot(*thin(t[keep], twin[keep, j]), color=_TWIN, lw=0.6, alpha=0.85, label="twin")
-            ax.set_ylabel(f"floor {j + 1} sensor (m/s²)" if col == 0 else "")
+            thin = (lambda a, b: envelope(a, b, bins)) if col == 0 else (lambda a, b: (a, b))
+            ax.plot(*thin(t[keep], recorded[keep, j]), color=_RECORDED, lw=0.6, label="recorded")
+            for name, (values, colour) in models.items():
+                ax.plot(*thin(t[keep], values[keep, j]), color=colour, lw=0.6, alpha=0.85, label=name)
+            ax.set_ylabel(f"{label.format(j=j + 1)} ({unit})" if col == 0 else "")
             ax.grid(alpha=0.3)
-        axes[row, 0].set_title(f"floor {j + 1} sensor: NRMSE {100 * replay.nrmse_floors[j]:.1f} %", fontsize=9,
-                               loc="left")
+        if panel_titles is not None:
+            axes[row, 0].set_title(panel_titles[j], fontsize=9, loc="left")
     axes[0, 1].set_title(f"the {ZOOM_S:g} s around the largest response", fontsize=9, loc="left")
     axes[0, 0].legend(loc="upper right", fontsize=8)
     for col in range(2):
         axes[-1, col].set_xlabel("time (s)")
-    sensors = "sensors calibrated on this trial" if replay.calibrated else "nominal sensors (trial not calibrated on)"
-    fig.suptitle(f"trial {replay.run}: recorded and twin floor accelerations, NRMSE {100 * replay.nrmse:.1f} % "
-                 f"(sensor noise alone: {100 * replay.noise_nrmse:.1f} %); {sensors}", fontsize=10)
+    fig.suptitle(title, fontsize=10)
     _margins(fig, d)
+    return fig
+
+
+def replay_figure(replay: Replay, bins: int = ENVELOPE_BINS):
+    """Recorded and twin floor accelerations of one trial, whole and zoomed (:func:`overlay_figure`)."""
+    sensors = "sensors calibrated on this trial" if replay.calibrated else "nominal sensors (trial not calibrated on)"
+    return overlay_figure(
+        replay.time, replay.recorded, {"twin": (replay.twin, _TWIN)}, replay.start, bins=bins,
+        title=f"trial {replay.run}: recorded and twin floor accelerations, NRMSE {100 * replay.nrmse:.1f} % "
+              f"(sensor noise alone: {100 * replay.noise_nrmse:.1f} %); {sensors}",
+        panel_titles=[f"floor {j + 1} sensor: NRMSE {100 * x:.1f} %" for j, x in enumerate(replay.nrmse_floors)])
+
+
+def plot_replay(replay: Replay, path: Path) -> Path:
+    """:func:`replay_figure` as a PNG; returns ``path``."""
+    return _save(replay_figure(replay), path)
+
+
+def _save(fig, path: Path) -> Path:
     fig.savefig(path, dpi=110)
-    plt.close(fig)
+    pyplot().close(fig)
     return path
 
 
-def _recorded_transfer(run, d: int, start: int):
-    """H1 estimate of ``a_j / zdd`` for one trial: frequencies (Hz), magnitudes (nf, d) (NaN where the
-    coherence is below :data:`MIN_COHERENCE`)."""
-    fs = run.sample_rate
-    zdd = run["zdd"][start:]
-    nperseg = int(min(SEGMENT, 2 ** np.floor(np.log2(max(zdd.size // 4, 16)))))
-    f, pzz = scipy.signal.welch(zdd, fs=fs, nperseg=nperseg)
-    out = np.empty((f.size, d))
-    for j in range(d):
-        a = run[f"a{j + 1}"][start:]
-        _, pza = scipy.signal.csd(zdd, a, fs=fs, nperseg=nperseg)
-        _, coherence = scipy.signal.coherence(zdd, a, fs=fs, nperseg=nperseg)
-        out[:, j] = np.where(coherence >= MIN_COHERENCE, np.abs(pza) / np.maximum(pzz, 1e-300), np.nan)
-    return f, out
+def transfer_figure(params, experiment, runs, top: float, *, model: str = "twin (nominal sensors)",
+                    title: str = "table-to-floor transfer functions: recorded (coherence >= {c:g}) and twin"):
+    """Magnitude of each floor sensor's transfer from the table: each run's H1 estimate after its quiet
+    lead-in and the model's (:func:`momentid.twin.replay.transfer` of ``params``).
 
+    Parameters
+    ----------
+    params : TwinParameters or None
+        None: the recorded estimates alone.
+    experiment : Experiment
+    runs : sequence of str
+        The runs whose estimates are drawn.
+    top : float
+        The highest modelled resonance (Hz): the plot runs to 1.5 x it (below 0.45 x the sample rate).
+    model, title : str
+        The model curve's label and the figure's title (``{c}``: the coherence threshold).
 
-def plot_transfer(twin, experiment, path: Path) -> Path:
-    """Magnitude of each floor sensor's transfer from the table: every calibration trial's estimate
-    and the twin's; returns ``path``."""
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     plt = pyplot()
-    p = twin.parameters
-    d = p.storeys
+    d = experiment.storeys
     fs = min(r.sample_rate for r in experiment.runs)
-    top = max([*twin.modes.frequency, *(e.frequency for e in p.extra_modes)])
     f_max = min(1.5 * top, 0.45 * fs)
     f = np.linspace(0.0, f_max, 2000)[1:]
-    model = np.abs(transfer(p, f))
+    curve = None if params is None else np.abs(transfer(params, f))
     fig, axes = plt.subplots(d, 1, figsize=(10, 2.4 * d + 0.8), sharex=True, squeeze=False)
     colours = plt.get_cmap("tab10")
-    for k, replay in enumerate(r for r in twin.replays if r.calibrated):
-        fr, h = _recorded_transfer(experiment.run(replay.run), d, replay.start)
-        keep = fr <= f_max
+    for k, name in enumerate(runs):
+        run = experiment.run(name)
+        measured = measured_transfer(run, d, quiet_lead_in(run))
+        keep = measured.frequency <= f_max
+        shown = measured.shown()
         for j in range(d):
-            axes[d - 1 - j, 0].semilogy(fr[keep], h[keep, j], color=colours(k % 10), lw=0.8, alpha=0.8,
-                                        label=f"recorded: {replay.run}")
+            axes[d - 1 - j, 0].semilogy(measured.frequency[keep], shown[keep, j], color=colours(k % 10), lw=0.8,
+                                        alpha=0.8, label=f"recorded: {name}")
     for j in range(d):
         ax = axes[d - 1 - j, 0]
-        ax.semilogy(f, model[:, j], color="black", lw=1.4, label="twin (nominal sensors)")
+        if curve is not None:
+            ax.semilogy(f, curve[:, j], color="black", lw=1.4, label=model)
         ax.set_ylabel(f"floor {j + 1} / table")
         ax.set_title(f"floor {j + 1} sensor over table sensor: magnitude", fontsize=9, loc="left")
         ax.grid(alpha=0.3, which="both")
     axes[0, 0].legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("frequency (Hz)")
-    fig.suptitle(f"table-to-floor transfer functions: recorded (coherence >= {MIN_COHERENCE:g}) and twin",
-                 fontsize=10)
+    fig.suptitle(title.format(c=MIN_COHERENCE), fontsize=10)
     _margins(fig, d)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return fig
+
+
+def plot_transfer(twin, experiment, path: Path) -> Path:
+    """Every calibration trial's transfer estimate and the twin's (:func:`transfer_figure`) as a PNG;
+    returns ``path``."""
+    top = max([*twin.modes.frequency, *(e.frequency for e in twin.parameters.extra_modes)])
+    return _save(transfer_figure(twin.parameters, experiment, [r.run for r in twin.replays if r.calibrated], top),
+                 path)

@@ -6,11 +6,11 @@ outcome class (the figures of docs/reliability.md); ``pytest tests/bad_input`` r
 
 from __future__ import annotations
 
-from . import at2, cli, csv_import, import_faults, imu_import, recording, scenario, shipped_faults
+from . import at2, cli, csv_import, import_faults, imu_import, recording, scenario, second_sweep, shipped_faults
 from ._core import Case, Group, Observed, Outcome, check, observe
 
 __all__ = ["CASES", "Case", "Group", "Observed", "Outcome", "check", "observe"]
 
 #: Every case, by the module that holds it (each case names its entry point, :class:`Group`).
 CASES: list[Case] = [*scenario.CASES, *at2.CASES, *csv_import.CASES, *imu_import.CASES, *recording.CASES,
-                     *cli.CASES, *import_faults.CASES, *shipped_faults.CASES]
+                     *cli.CASES, *import_faults.CASES, *shipped_faults.CASES, *second_sweep.CASES]

@@ -183,6 +183,18 @@ def _clock_step(k, header, rows):
             rows[i] = ",".join(cells)
 
 
+def _duplicated_row(k, header, rows):
+    """Floor 2's export writes its row 500 twice (an exactly duplicated line)."""
+    if k == 2:
+        rows.insert(501, rows[500])
+
+
+def _trailing_commas(k, header, rows):
+    """Floor 2's export ends every data row in a comma (an empty cell beyond the header's columns)."""
+    if k == 2:
+        rows[:] = [row + "," for row in rows]
+
+
 CASES = [
     # The table's sensor stops at half its 7307 rows: the run keeps the 3653 samples all four share.
     Case(Group.IMU, "shipped-table-stops-halfway", Outcome.RECOVERY,
@@ -222,6 +234,12 @@ CASES = [
          _importing(None, TOML.replace("masses = [0.160, 0.160, 0.142]\n", "").replace(
              '"f1.csv", "f2.csv"', '"f2.csv", "f1.csv"')),
          ("appear swapped",)),
+    # Issue 32: harmless export variants were refused ("repeats the stamp of row 509", "the row has 12
+    # fields, expected 11"); they read exactly as the shipped file, with a note.
+    Case(Group.IMU, "shipped-duplicated-row", Outcome.RECOVERY, _importing(_duplicated_row, check=_same_as_clean),
+         ("row 510: repeat(s) an earlier row exactly", "dropped")),
+    Case(Group.IMU, "shipped-trailing-commas", Outcome.RECOVERY, _importing(_trailing_commas, check=_same_as_clean),
+         ("every data row (rows 9-7316) ends in a comma", "ignored")),
     # A clock step with the packet counter running on used to be named "6 samples lost".
     Case(Group.IMU, "shipped-clock-step", Outcome.ERROR, _importing(_clock_step),
          ("f1.csv", "'SampleTimeFine'", "the device clock stepped +50.0 ms and no packet was lost")),

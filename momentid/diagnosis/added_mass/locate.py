@@ -30,7 +30,7 @@ from momentid.diagnosis.thresholds import EXCESS
 from momentid.mechanisms.base import drifts
 from momentid.mechanisms.coulomb_friction import SCREENING_SMOOTHING
 
-__all__ = ["Localisation", "locate", "plot_localisation"]
+__all__ = ["Localisation", "locate", "plot_localisation", "localisation_figure"]
 
 #: Band of "the modes": from this fraction of the lowest natural frequency to ...
 MODES_BELOW = 0.7
@@ -212,13 +212,15 @@ def _words(loc: Localisation, rows) -> str:
     return ", ".join(parts) + "."
 
 
-def plot_localisation(where: dict, path, title: str = "") -> None:
-    """``locate.png``: the storey shear residual over noise by storey, run, time and drift amplitude.
+def localisation_figure(where: dict, title: str = ""):
+    """The storey shear residual over noise by storey, run, time and drift amplitude (a matplotlib figure).
 
     Parameters
     ----------
     where : dict
         :meth:`Localisation.to_dict` (as stored in ``report.json``).
+    title : str
+        Default: the localisation in words.
     """
     import matplotlib
     matplotlib.use("Agg")
@@ -252,5 +254,13 @@ def plot_localisation(where: dict, path, title: str = "") -> None:
         a.set_ylim(bottom=0.5)   # 1 = the noise level: keep it in view
     fig.suptitle(title or where["words"], fontsize=9)
     fig.tight_layout()
+    return fig
+
+
+def plot_localisation(where: dict, path, title: str = "") -> None:
+    """``locate.png``: :func:`localisation_figure` as a PNG."""
+    import matplotlib.pyplot as plt
+
+    fig = localisation_figure(where, title)
     fig.savefig(path, dpi=90)
     plt.close(fig)

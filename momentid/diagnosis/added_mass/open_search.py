@@ -40,8 +40,8 @@ from momentid.mechanisms.data_driven import TERMS
 from momentid.mechanisms.place import Place, Target
 
 __all__ = ["Discovery", "Found", "discover", "search", "found_terms", "challenge", "as_unexplained", "plot_discovered",
-           "ACCEPTED_SHARE", "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS", "SCALE_TOLERANCE",
-           "PLOT_POINTS"]
+           "discovered_figure", "ACCEPTED_SHARE", "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS",
+           "SCALE_TOLERANCE", "PLOT_POINTS"]
 
 #: A discovered force is reported when its model removes this share of the held-out run's replay
 #: misfit above the noise (0.5: the misfit's excess power at least halves).
@@ -386,8 +386,8 @@ def found_terms(found: Found, scale: float) -> list[dict]:
     return out
 
 
-def plot_discovered(discovery: Discovery, path) -> None:
-    """``discovered.png``: the residual's force at the place against ``x``, measured and discovered."""
+def discovered_figure(discovery: Discovery):
+    """The residual's force at the place against ``x``, measured and discovered (a matplotlib figure)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -403,5 +403,13 @@ def plot_discovered(discovery: Discovery, path) -> None:
                  f"{100 * discovery.nrmse_after:.2f} %", fontsize=10)
     ax.legend(fontsize=8)
     fig.tight_layout()
+    return fig
+
+
+def plot_discovered(discovery: Discovery, path) -> None:
+    """``discovered.png``: :func:`discovered_figure` as a PNG."""
+    import matplotlib.pyplot as plt
+
+    fig = discovered_figure(discovery)
     fig.savefig(path, dpi=90)
     plt.close(fig)

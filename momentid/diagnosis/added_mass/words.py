@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +12,7 @@ from momentid.diagnosis import figures
 from momentid.diagnosis.result import Diagnosis, Evidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
-from momentid.mechanisms.place import Place
+from momentid.mechanisms.place import Place, location_words
 
 if TYPE_CHECKING:
     from momentid.diagnosis.added_mass.locate import Localisation
@@ -96,19 +95,19 @@ def summary(diag: Diagnosis) -> str:
         lines.append("No missing physics: the linear model explains the recordings to the noise level.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.outside_library is not None:
         out = selection.outside_library
-        lines.append(f"Unexplained by the library at {json.dumps(loc)}: its best model, "
-                     f"{out.mechanism.replace('_', ' ')} at {json.dumps(out.location)}, leaves training NRMSE "
+        lines.append(f"Unexplained by the library at {location_words(loc)}: its best model, "
+                     f"{out.mechanism.replace('_', ' ')} at {location_words(out.location)}, leaves training NRMSE "
                      f"{100 * out.named:.2f} % (noise alone {100 * out.noise:.2f} %); the force below, outside the "
                      f"library, {100 * out.discovered:.2f} %.")
     elif diag.verdict is Verdict.UNEXPLAINED and selection.partial is not None:
         part = selection.partial
-        lines.append(f"Unexplained mismatch at {json.dumps(loc)}: the best candidate, "
-                     f"{part.candidate.mechanism.replace('_', ' ')} at {json.dumps(part.candidate.location)}, removes "
-                     f"only {100 * max(selection.explained, 0):.0f} % of the training runs' misfit above noise "
+        lines.append(f"Unexplained mismatch at {location_words(loc)}: the best candidate, "
+                     f"{part.candidate.mechanism.replace('_', ' ')} at {location_words(part.candidate.location)}, "
+                     f"removes only {100 * max(selection.explained, 0):.0f} % of the training runs' misfit above noise "
                      f"(NRMSE {100 * selection.linear:.2f} % -> {100 * selection.augmented:.2f} %, noise alone "
                      f"{100 * selection.noise:.2f} %); the model is left linear.")
     elif diag.verdict is Verdict.UNEXPLAINED:
-        lines.append(f"Unexplained mismatch at {json.dumps(loc)} (largest at {worst}); no candidate mechanism "
+        lines.append(f"Unexplained mismatch at {location_words(loc)} (largest at {worst}); no candidate mechanism "
                      f"explains at least {int(EXPLAINED * 100)} % of it.")
     else:
         if len(diag.mechanisms) > 1:

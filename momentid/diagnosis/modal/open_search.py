@@ -41,8 +41,9 @@ from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.lab.sensors import gain_and_delay
 from momentid.mechanisms.data_driven import TERMS, term_signal
 
-__all__ = ["ModalDiscovery", "discover_modal", "plot_modal_discovered", "HIGH_PASS_OVER_MODE_1", "MIN_GAIN",
-           "MAX_TERMS", "MIN_HELD_OUT_GAIN", "ITERATIONS", "DISSIPATIVE", "MODAL_UNITS"]
+__all__ = ["ModalDiscovery", "discover_modal", "plot_modal_discovered", "modal_discovered_figure",
+           "HIGH_PASS_OVER_MODE_1", "MIN_GAIN", "MAX_TERMS", "MIN_HELD_OUT_GAIN", "ITERATIONS", "DISSIPATIVE",
+           "MODAL_UNITS"]
 
 #: The integrals of ``eta''`` keep frequencies above this multiple of the first mode (below it a
 #: double integral of sensor noise and offsets is all drift).
@@ -547,9 +548,9 @@ def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str,
               "law": sum(th * col.signal[pick] for col, th in zip(law, theta))})
 
 
-def plot_modal_discovered(discovery: ModalDiscovery, path) -> None:
-    """``discovered.png``: the mode's restoring force per unit modal mass beyond the law's linear part,
-    against its displacement, from the data (equation form) and from the discovered law's terms."""
+def modal_discovered_figure(discovery: ModalDiscovery):
+    """The mode's restoring force per unit modal mass beyond the law's linear part, against its
+    displacement, from the data (equation form) and from the discovered law's terms (a matplotlib figure)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -565,5 +566,13 @@ def plot_modal_discovered(discovery: ModalDiscovery, path) -> None:
                  f"the linear model)", fontsize=10)
     ax.legend(fontsize=8)
     fig.tight_layout()
+    return fig
+
+
+def plot_modal_discovered(discovery: ModalDiscovery, path) -> None:
+    """``discovered.png``: :func:`modal_discovered_figure` as a PNG."""
+    import matplotlib.pyplot as plt
+
+    fig = modal_discovered_figure(discovery)
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -13,6 +12,7 @@ from momentid.diagnosis.modal.open_search import MIN_GAIN
 from momentid.diagnosis.result import Diagnosis, Evidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED
 from momentid.diagnosis.verdict import Verdict
+from momentid.mechanisms.place import location_words
 
 if TYPE_CHECKING:
     from momentid.diagnosis.modal.check import AmplitudeModel
@@ -95,13 +95,13 @@ def _summary_lines(verdict, location, held, before, after, noise, explained, tre
                      f"{EXCESS:g} x the noise level.")
     elif verdict is Verdict.MECHANISM:
         lines.append(f"Verdict: amplitude dependence (modes shift with the response amplitude); the held-out misfit "
-                     f"left is largest at {json.dumps(location)}.")
+                     f"left is largest at {location_words(location)}.")
         if after > EXCESS * noise:
             lines.append(f"WARNING: amplitude dependence explains only part of the mismatch: the held-out NRMSE is "
                          f"still {100 * after:.2f} % ({after / noise:.1f} x noise); the rest is unexplained.")
     else:
-        lines.append(f"Verdict: unexplained mismatch at {json.dumps(location)} (worst floor sensor, and the band "
-                     f"around that mode holding that share of its residual power).")
+        lines.append(f"Verdict: unexplained mismatch at {location_words(location)} (the worst floor sensor, and the "
+                     f"band around that mode holding that share of its residual power).")
     lines += [f"Finding: {f}" for f in findings]
     return lines
 

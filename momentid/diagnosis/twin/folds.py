@@ -102,7 +102,7 @@ def linear_start(experiment: Experiment, names) -> twin_fit.FittedRig:
     if ident.K is None:
         raise IdentificationError(f"{experiment.source}: no floor masses stated: the twin needs them "
                                   f"(experiment.toml [structure] masses)")
-    return twin_fit.FittedRig(np.asarray(ident.masses, float), ident.K, np.clip(ident.damping_ratio, 1e-4, None))
+    return twin_fit.FittedRig(np.asarray(ident.masses, float), ident.K, np.clip(ident.linear_damping_ratio, 1e-4, None))
 
 
 @dataclass(frozen=True)

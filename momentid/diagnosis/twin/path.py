@@ -140,7 +140,7 @@ def diagnose_twin(experiment: Experiment, *, hold_out: str | None = None) -> Dia
                             excluded=tuple(state.sentence(r) for r in state.outliers), channel_nrmse=per,
                             fits=fits, reference=reference,
                             twin_xml=twin.xml if twin is not None else _xml(fold.linear.model, tr.dt),
-                            seconds=seconds, fold=fold)
+                            seconds=seconds, fold=fold, per_run=tuple(per_run))
     return Diagnosis(verdict=verdict, mechanism=named[0].mechanism if named else verdict.value, location=location,
                      parameters={}, std={}, mechanisms=named, held_out=held, nrmse_before=float(before),
                      nrmse_after=fold.nrmse_after, noise_nrmse=fold.noise_nrmse, evidence=evidence,
@@ -239,9 +239,9 @@ def _reference(per_run, training, held: str, start: twin_fit.FittedRig, tr) -> d
         return {"mechanism": "amplitude_dependent_viscous_damping", "not_fitted": "training amplitudes too alike"}
     _, _, residues = twin_fit.twin_modes(start)
     coef = {}
-    for key in ("frequency", "damping_ratio"):
-        coef[key] = [weighted_line(x, np.array([getattr(r, key)[m] for r in train]),
-                                   np.maximum(np.array([getattr(r, key + "_std")[m] for r in train]), 1e-12))[0]
+    for key, name in (("frequency", "frequency"), ("damping_ratio", "linear_damping_ratio")):
+        coef[key] = [weighted_line(x, np.array([getattr(r, name)[m] for r in train]),
+                                   np.maximum(np.array([getattr(r, name + "_std")[m] for r in train]), 1e-12))[0]
                      for m in range(residues.shape[0])]
     f = np.array([c[0] + c[1] * amplitude[held] for c in coef["frequency"]])
     zeta = np.clip([c[0] + c[1] * amplitude[held] for c in coef["damping_ratio"]], 1e-5, None)

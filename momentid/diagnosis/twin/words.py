@@ -43,6 +43,9 @@ class TwinEvidence(Evidence):
         Wall-clock seconds per stage, and the CPU seconds of the whole.
     fold : Fold
         The three fitted twins and their NRMSE (:class:`~momentid.diagnosis.twin.folds.Fold`).
+    per_run : tuple of ModalIdentification
+        Each trial's own modal identification (the rig-state check's and the amplitude reference's
+        points), in recording order.
     """
 
     training: tuple[str, ...]
@@ -54,6 +57,7 @@ class TwinEvidence(Evidence):
     twin_xml: str
     seconds: dict = field(default_factory=dict)
     fold: object = field(default=None, repr=False, compare=False)
+    per_run: tuple = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict:
         return {"training": list(self.training), "reference": self.reference, "rig_state": self.state.to_dict(),

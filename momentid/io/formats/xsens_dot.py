@@ -26,7 +26,9 @@ Such rows are dropped and every sample is placed by its stamp; a missing
 sample (lost, or an empty cell) is then interpolated linearly when at most
 :data:`~momentid.io.formats.base.MAX_REPAIR_GAP` are missing in a row, with a
 note naming the rows; a longer gap is an error naming them.  An export in g
-(gravity reads ~1) is converted to m/s^2 with a note.
+(gravity reads ~1) is converted to m/s^2 with a note.  Variants that change no
+sample are undone with a note: a trailing comma (header or data rows), empty
+lines, a last row cut short and a row that repeats an earlier row exactly.
 """
 
 from __future__ import annotations
@@ -102,12 +104,12 @@ def _decimal_commas(lines: list[str], h: int) -> tuple[list[str], list[str]]:
     return lines[:h] + rows, ["cells separated by ';' with decimal commas (a locale's export): read as such"]
 
 
-def _parse_slowly(path: Path, rows: list[str], names: tuple[str, ...], first_row: int) -> np.ndarray:
+def _parse_slowly(path: Path, rows: list[str], names: tuple[str, ...], numbers: np.ndarray) -> np.ndarray:
     out = np.empty((len(rows), len(names)))
     for i, line in enumerate(rows):
         fields = line.split(",")
         if len(fields) != len(names):
-            raise _error(path, first_row + i, f"'{names[min(len(fields), len(names) - 1)]}'",
+            raise _error(path, int(numbers[i]), f"'{names[min(len(fields), len(names) - 1)]}'",
                          f"the row has {len(fields)} fields, expected {len(names)} ({','.join(names)})")
         for j, cell in enumerate(fields):
             text = cell.strip()
@@ -117,24 +119,72 @@ def _parse_slowly(path: Path, rows: list[str], names: tuple[str, ...], first_row
             try:
                 out[i, j] = float(text)
             except ValueError:
-                raise _error(path, first_row + i, f"'{names[j]}'",
+                raise _error(path, int(numbers[i]), f"'{names[j]}'",
                              f"{text!r} is not a number; expected a decimal number or an empty cell "
                              f"for a missing sample") from None
     return out
 
 
-def _parse(path: Path, body: str, names: tuple[str, ...], first_row: int) -> np.ndarray:
-    n = body.count("\n") + 1
+def _parse(path: Path, rows: list[str], names: tuple[str, ...], numbers: np.ndarray) -> np.ndarray:
+    """The cells of ``rows`` (their line numbers: ``numbers``) as floats, one column per name."""
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            data = np.loadtxt(io.StringIO(body), delimiter=",", comments=None, quotechar=None,
+            data = np.loadtxt(io.StringIO("\n".join(rows)), delimiter=",", comments=None, quotechar=None,
                               dtype=float, ndmin=2)
     except ValueError:
         data = None
-    if data is None or data.shape != (n, len(names)):
-        data = _parse_slowly(path, body.split("\n"), names, first_row)
+    if data is None or data.shape != (len(rows), len(names)):
+        data = _parse_slowly(path, rows, names, numbers)
     return data
+
+
+def _harmless_variants(names: tuple[str, ...], rows: list[str], first_row: int):
+    """Export variants that change no sample, undone with a note: a trailing comma (an empty cell
+    beyond the header's columns, on the header or on data rows), empty lines, a last row cut short (an
+    export that ends mid-row: the sample is lost, as at any end) and a row that repeats an earlier row
+    exactly (every cell; genuine rows never do: each has its own stamp and packet count).
+
+    Returns
+    -------
+    names : tuple of str
+    rows : list of str
+        The data rows kept, trailing commas removed.
+    numbers : ndarray of int
+        Their line numbers (1-based) in the file.
+    notes : list of str
+    """
+    notes = []
+    if len(names) > 1 and names[-1] == "":
+        names = names[:-1]
+    width = len(names) - 1                    # commas in a row of the header's width
+    trailing = [i for i, row in enumerate(rows) if row.count(",") == width + 1 and not row.rsplit(",", 1)[1].strip()]
+    if trailing:
+        for i in trailing:
+            rows[i] = rows[i].rsplit(",", 1)[0]
+        which = (f"every data row (rows {first_row}-{first_row + len(rows) - 1}) ends" if len(trailing) == len(rows)
+                 else f"{_row_list(first_row + np.array(trailing))} end")
+        notes.append(f"{which} in a comma (an empty cell beyond the header's {len(names)} columns): ignored")
+    blank = [i for i, row in enumerate(rows) if not row.strip()]
+    filled = [i for i, row in enumerate(rows) if row.strip()]
+    cut = filled[-1:] if filled and rows[filled[-1]].count(",") < width else []
+    seen, repeated = set(), []
+    for i in filled:
+        if rows[i] in seen:
+            repeated.append(i)
+        seen.add(rows[i])
+    numbers = first_row + np.arange(len(rows))
+    for dropped, why in ((blank, "empty: skipped"),
+                         (cut, f"cut short ({rows[cut[0]].count(',') + 1 if cut else 0} of {len(names)} cells: the "
+                               f"export ends mid-row): dropped"),
+                         (repeated, "repeat(s) an earlier row exactly (every cell; a duplicated export line): "
+                                    "dropped")):
+        if dropped:
+            notes.append(f"{_row_list(numbers[dropped])}: {why}")
+    if blank or cut or repeated:
+        keep = np.setdiff1d(np.arange(len(rows)), blank + cut + repeated)
+        rows, numbers = [rows[i] for i in keep], numbers[keep]
+    return names, rows, numbers, notes
 
 
 def _placeholders(path: Path, acc: np.ndarray, ticks: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, list[str]]:
@@ -301,19 +351,19 @@ def read_xsens_dot(path) -> SensorRecord:
             raise _error(path, h + 1, f"'{column}'", f"missing from the header {lines[h]!r}; expected "
                                                      f"{CLOCK_COLUMN} and {', '.join(ACC_COLUMNS)}")
     first_row = h + 2
-    body = "\n".join(lines[h + 1:])
-    if len(lines) - h - 1 < MIN_SAMPLES or not body.strip():
+    if len(lines) - h - 1 < MIN_SAMPLES or not "".join(lines[h + 1:]).strip():
         raise _error(path, first_row, f"'{CLOCK_COLUMN}'",
                      f"{len(lines) - h - 1} data rows; expected at least {MIN_SAMPLES} samples")
     require_table_memory(path, len(lines) - h - 1, len(names))
-    data = _parse(path, body, names, first_row)
-    rows = first_row + np.arange(data.shape[0])
+    names, body, rows, variants = _harmless_variants(names, lines[h + 1:], first_row)
+    data = _parse(path, body, names, rows)
     acc = data[:, [names.index(c) for c in ACC_COLUMNS]]
     ticks = data[:, names.index(CLOCK_COLUMN)]
+    rows_read = rows
     if np.all(acc[0] == 0.0):  # written before the device measures
         acc, ticks, rows = acc[1:], ticks[1:], rows[1:]
     lost, notes = _placeholders(path, acc, ticks, rows)
-    notes = locale + notes
+    notes = locale + variants + notes
     acc, ticks, rows = acc[~lost], ticks[~lost], rows[~lost]
     if COUNTER_COLUMN in names:
         counter = data[:, names.index(COUNTER_COLUMN)][data.shape[0] - lost.size:][~lost]
@@ -334,7 +384,7 @@ def read_xsens_dot(path) -> SensorRecord:
     full[index] = acc
     gaps = int(full.shape[0] - index.size)
 
-    dropped = np.flatnonzero(lost) + (data.shape[0] - lost.size) + first_row
+    dropped = rows_read[data.shape[0] - lost.size:][lost]
 
     def span(a: int, b: int) -> str:
         """The file rows of grid samples a..b-1 (a lost sample lies between two rows)."""

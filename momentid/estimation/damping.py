@@ -1,0 +1,478 @@
+"""The damping answer: each storey mode's damping ratio at small amplitude, right or refused.
+
+The linear modal fit (:mod:`momentid.estimation.modal_select`) gives every mode one damping ratio for a
+whole record.  A real rig's damping is not one number: its joints slip more as it shakes harder, so its
+damping grows and its frequency falls with amplitude inside one trial; strong shaking drives what no
+modal model holds; a sine table forces a mode at its harmonics.  The linear fit's ratio (the
+*equivalent linear* damping of that record, kept as :attr:`ModeDamping.equivalent`) then lies far
+above the structure's own damping: 0.44-2.4 % on the stiff 1-storey rig, whose free decays fall at
+0.15-0.3 %.
+
+:func:`resolve_damping` answers with the damping at small amplitude:
+
+* **from the linear fit** when it explains the record to the noise level (:data:`LINEAR_MISFIT`): the
+  structure is linear at the record's amplitudes;
+* **from free decays** (:mod:`momentid.estimation.ringdown`) when the record holds them, at least
+  :data:`~momentid.estimation.ringdown.MIN_CYCLES` cycles of the mode ringing on its own: the envelope
+  against the mode's own phase, a constant or amplitude-dependent law by evidence, the limit at small
+  amplitude with a Newey-West standard error over the envelope's correlation time (and the spread of
+  the laws' extrapolations when the damping depends on amplitude);
+* **from the forced response** otherwise: the linear modal model refitted on consecutive windows of
+  :data:`WINDOW_CYCLES` cycles of mode 1 (each with its own transient, the record's sensor gains and
+  clock offsets), the windows' damping ratios pooled with a random effect for what they scatter beyond
+  their own errors (model error), Student's t on the windows.
+
+A damping ratio is refused, with the reason in words, when its standard error exceeds
+:data:`MAX_RELATIVE_STD` of itself, when it is not positive, or when too few independent stretches
+carry it (:data:`MIN_DOF`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+import scipy.stats
+
+from momentid.core.series import RunData
+from momentid.errors import MomentidError
+from momentid.estimation import ringdown
+from momentid.estimation.eiv import spectra
+from momentid.estimation.modal import refine
+
+__all__ = ["Source", "ModeDamping", "resolve_damping", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES"]
+
+#: A linear fit whose residual stays within this factor of the noise level explains the record: the
+#: structure is linear at its amplitudes and the fit's damping is the answer (a rig that is not, 2-50x
+#: on the shipped real trials, is answered from its free decays).
+LINEAR_MISFIT = 1.5
+#: ... and so does one whose residual is below this share of the floors' response power (noise-free
+#: simulated data, where the residual is the integrator's round-off, many times a noise level of ~0).
+NOISE_FREE = 1e-10
+#: A record the linear fit explains (:data:`LINEAR_MISFIT`) is believed to hold an amplitude-dependent
+#: damping only when the dependence stands out by this many standard errors (the free decays' and the
+#: windows' errors are Newey-West and random-effects estimates, not exact: at two a linear rig's beats
+#: and leakage read as a trend now and then).
+STRONG_SIGMAS = 4.0
+#: ... and between this many and that, the hint sends the answer to the windows' value at zero amplitude
+#: (an extrapolation, its error as wide as it is) instead of the linear fit's.
+HINT_SIGMAS = 3.0
+#: A damping ratio whose standard error exceeds this share of itself is not an answer (its 95 % interval
+#: then reaches zero: the data do not tell the damping from none).
+MAX_RELATIVE_STD = 0.5
+#: Fewest degrees of freedom (independent stretches less the parameters) of an answer's error.
+MIN_DOF = 2
+#: Windows of the forced-response estimate hold this many cycles of mode 1 ...
+WINDOW_CYCLES = 25
+#: ... and a record is cut into at least this many (shorter windows when it is short).
+MIN_WINDOWS = 6
+#: A forced response is refused when the mode's frequency spreads across the windows by more than this
+#: share of its half-power half-width (``zeta f``): the spread a linear fit of the record reads as damping.
+DRIFT_LIMIT = 1.0
+#: The windows' pooled damping and the whole record's may differ by this many of the windows' standard
+#: errors when no amplitude dependence explains it; beyond, the windows' estimate is not one.
+CONSISTENCY_SIGMAS = 3.0
+#: A window refit may move a mode's frequency this far (relative) from the whole record's.
+WINDOW_FREQUENCY_SPAN = 0.05
+
+
+class Source:
+    """Where a damping answer came from (closed set of names)."""
+
+    LINEAR = "linear fit"
+    FREE_DECAY = "free decays"
+    FORCED = "forced response"
+
+
+@dataclass(frozen=True)
+class ModeDamping:
+    """One storey mode's damping answer (:func:`resolve_damping`).
+
+    Attributes
+    ----------
+    damping_ratio, damping_ratio_std : float
+        At small amplitude (1), and its standard error (model error included).
+    interval : tuple of float
+        95 % interval (Student's t with ``dof`` degrees of freedom).
+    dof : int
+    source : str
+        A :class:`Source` name.
+    amplitude_dependent : bool
+        The free decays show a damping that grows (or falls) with amplitude.
+    slope, exponent : float
+        ``zeta = zeta0 + slope E^exponent`` (E: envelope in m/s^2 on the mode's strongest floor); 0, 0 for a
+        constant law.
+    frequency, frequency_slope : float
+        Frequency at small amplitude (Hz) and its change per m/s^2 (free decays; the linear fit's
+        frequency and 0 otherwise).
+    amplitude_range : tuple of float
+        10th and 90th percentiles of the amplitudes (m/s^2) the answer rests on.
+    equivalent : float
+        The linear fit's damping ratio over the whole record (the equivalent linear damping).
+    cycles : float
+        Cycles of the mode the answer rests on.
+    evidence : float
+        How many standard errors the amplitude dependence stands out by (0: none tried).
+    refusal : str
+        Why the damping ratio is not an answer ('' when it is).
+    """
+
+    damping_ratio: float
+    damping_ratio_std: float
+    interval: tuple
+    dof: int
+    source: str
+    amplitude_dependent: bool
+    slope: float
+    exponent: float
+    frequency: float
+    frequency_slope: float
+    amplitude_range: tuple
+    equivalent: float
+    cycles: float
+    refusal: str = ""
+    evidence: float = 0.0
+
+    @property
+    def is_answer(self) -> bool:
+        return not self.refusal
+
+    def to_dict(self) -> dict:
+        return {"damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
+                "interval_95": list(self.interval), "dof": self.dof, "source": self.source,
+                "amplitude_dependent": self.amplitude_dependent, "slope_per_m_s2_power": self.slope,
+                "exponent": self.exponent, "frequency_hz": self.frequency,
+                "frequency_slope_hz_per_m_s2": self.frequency_slope,
+                "amplitude_range_m_s2": list(self.amplitude_range),
+                "equivalent_linear_damping_ratio": self.equivalent, "cycles": self.cycles,
+                "refusal": self.refusal or None}
+
+    def words(self) -> str:
+        """One line: the answer (or the refusal) and where it came from."""
+        if self.refusal:
+            return f"damping NOT AN ANSWER: {self.refusal}"
+        law = (f", rising as {self.slope:.3g} E^{self.exponent:g} with the envelope E (m/s^2)"
+               if self.amplitude_dependent else "")
+        lo, hi = self.amplitude_range
+        return (f"damping {100 * self.damping_ratio:.3g} +- {100 * self.damping_ratio_std:.2g} % at small amplitude "
+                f"(95 %: {100 * self.interval[0]:.3g}-{100 * self.interval[1]:.3g} %), from {self.cycles:.0f} cycles "
+                f"of {self.source} at {lo:.2g}-{hi:.2g} m/s^2{law}; equivalent linear over the record "
+                f"{100 * self.equivalent:.3g} %")
+
+
+def _window_runs(run: RunData, length: int) -> list:
+    """Consecutive windows of ``length`` samples as runs of their own (time from 0)."""
+    out = []
+    for a in range(0, run.n_samples - length + 1, length):
+        s = slice(a, a + length)
+        out.append(RunData(name=f"{run.name}@{a / run.sample_rate:.3g}s", added_mass=run.added_mass,
+                           time=run.time[s] - run.time[a], channels=run.channels, values=run.values[s]))
+    return out
+
+
+def _meta(z: np.ndarray, s: np.ndarray, X: np.ndarray):
+    """Random-effects least squares ``z = X b + u + e``: ``e`` the windows' own errors ``s``, ``u`` what they
+    scatter beyond them (variance by the method of moments, DerSimonian-Laird); coefficients and their
+    covariance."""
+    def wls(v):
+        W = 1 / v
+        cov = np.linalg.inv(X.T @ (W[:, None] * X))
+        return cov @ X.T @ (W * z), cov
+    b, _ = wls(s ** 2)
+    w = 1 / s ** 2
+    q = float(np.sum(w * (z - X @ b) ** 2))
+    P = np.diag(w) - (w[:, None] * X) @ np.linalg.inv(X.T @ (w[:, None] * X)) @ (X.T * w[None, :])
+    tau2 = max((q - (z.size - X.shape[1])) / max(float(np.trace(P)), 1e-300), 0.0)
+    return wls(s ** 2 + tau2)
+
+
+def _forced(runs, selection, sigma: dict, storey_index: list) -> list:
+    """Per storey mode: the windows' (damping ratio, its standard error, frequency (Hz), its standard
+    error, amplitude (m/s^2)) of the linear model refitted window by window."""
+    model, fit = selection.model, selection.fit
+    d = model.d
+    f1 = float(np.min(model.omega(fit.theta)[storey_index]) / (2 * np.pi))
+    out = [[] for _ in storey_index]
+    w0 = model.omega(fit.theta)
+    bounds = {i: (w0[i] / (2 * np.pi) * (1 - WINDOW_FREQUENCY_SPAN), w0[i] / (2 * np.pi) * (1 + WINDOW_FREQUENCY_SPAN))
+              for i in range(model.n)}
+    for r, run in enumerate(runs):
+        length = int(min(WINDOW_CYCLES / f1, run.n_samples / run.sample_rate / MIN_WINDOWS) * run.sample_rate)
+        theta = fit.theta.copy()
+        single = type(model)(d, 1, model.n - d, model.quadrature)
+        theta1 = np.concatenate([theta[:model.n_modal], theta[model.sensor_slice(r)]])
+        free = np.arange(single.p) < single.n_modal              # the record's sensors stay as they are
+        for window in _window_runs(run, max(length, 8)):
+            try:
+                sp = [spectra(window, d, fit.f_max, sigma=sigma[r], groups=["a"])]
+                w_fit = refine(single, sp, [("whole record", theta1)], sample_rates=[run.sample_rate], f_max=fit.f_max,
+                               free=free, fix_nuisance=False,
+                               frequency_bounds=bounds)
+            except (MomentidError, np.linalg.LinAlgError, ValueError):
+                continue                   # a window the model cannot fit adds no estimate
+            sd = np.sqrt(np.clip(np.diag(w_fit.covariance), 0, None))
+            w = single.omega(w_fit.theta) / (2 * np.pi)
+            for k, i in enumerate(storey_index):
+                z, s = float(w_fit.theta[single.n + i]), float(sd[single.n + i])
+                if np.isfinite(z) and np.isfinite(s) and s > 0:
+                    out[k].append((z, s, float(w[i]), float(w[i] * sd[i]), _window_amplitude(window, w_fit, single, i)))
+    return out
+
+
+def _window_amplitude(window: RunData, w_fit, model, i: int) -> float:
+    """RMS (m/s^2) of mode ``i``'s relative acceleration on its strongest floor in a window, read from the
+    record band-passed around the mode's frequency there."""
+    R = model.residues(w_fit.theta)
+    j = int(np.argmax(np.abs(R[i])))
+    f = float(model.omega(w_fit.theta)[i] / (2 * np.pi))
+    band = ringdown.band_for(f, [f], window.sample_rate)
+    env, _, _ = ringdown.envelope(window["zdd"] - window[f"a{j + 1}"], band, window.sample_rate)
+    return float(np.sqrt(np.mean(env ** 2) / 2))
+
+
+def resolve_damping(runs, selection, *, sigma) -> tuple:
+    """Each storey mode's damping at small amplitude, with an honest error, or its refusal.
+
+    Per mode, in this order: the free decays when they show a damping that changes with amplitude;
+    else the linear fit when it explains the record to the noise level; else the free decays (a
+    constant damping); else the forced response (refused outright when the table's motion is periodic).
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        The runs of ``selection`` (``zdd``, ``a1..ad``, m/s^2).
+    selection : ModeSelection
+        The linear modal fit (:func:`momentid.estimation.modal_select.select_modes`).
+    sigma : sequence of dict
+        Per run, the noise standard deviation (m/s^2) of every channel (``zdd``, ``a1``, ...).
+
+    Returns
+    -------
+    tuple of ModeDamping
+        One per storey mode, in the order of ``selection.storey``.
+    """
+    model, fit = selection.model, selection.fit
+    freq, zeta = model.omega(fit.theta) / (2 * np.pi), model.zeta(fit.theta)
+    linear, exact = _explains(runs, fit, sigma, model.d)
+    sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
+    seconds = sum(run.n_samples / run.sample_rate for run in runs)
+    windows = None if exact else _forced(runs, selection, sigma, list(selection.storey))
+    out = []
+    for k, i in enumerate(selection.storey):
+        decay = None if exact else _free_decays(runs, selection, sigma, i)
+        said = None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+        # a record the linear fit explains must show a strong amplitude dependence (of the damping, or of
+        # the frequency: a joint that slips softens too) before it is believed
+        needed = STRONG_SIGMAS if linear else ringdown.SLOPE_SIGMAS
+        evidence = max(decay.evidence if decay is not None else 0.0,
+                       max(said.evidence, abs(_frequency_trend(windows[k])[1])) if said is not None else 0.0)
+        changes = evidence > needed
+        if decay is not None and (changes or not linear):
+            out.append(replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
+                                       decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
+                                       decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
+                               evidence=decay.evidence))
+        elif exact or (linear and evidence <= HINT_SIGMAS):
+            # a linear structure at these amplitudes: the linear fit's damping with its own error
+            out.append(_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), Source.LINEAR, False,
+                               0.0, 0.0, float(freq[i]), 0.0, said.amplitude_range if said else (0.0, 0.0),
+                               float(zeta[i]), seconds * freq[i]))
+        elif periodic := _periodic_refusal(runs, float(freq[i])):
+            out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
+        elif linear:
+            # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
+            # amplitude, with the error of that extrapolation
+            out.append(_windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i], trend=True))
+        else:
+            out.append(said)
+    return tuple(out)
+
+
+def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
+    """Whether the linear fit explains the record to its noise level, and whether to round-off (noise-free
+    data: nothing else can tell more)."""
+    floors = np.mean([np.var(run.group("a", d)) for run in runs])
+    noise = np.mean([np.mean([sg[f"a{j + 1}"] ** 2 for j in range(d)]) for sg in sigma])
+    exact = fit.scale * noise <= NOISE_FREE * floors
+    return exact or fit.scale <= LINEAR_MISFIT ** 2, exact
+
+
+def _free_decays(runs, selection, sigma, i: int):
+    """:class:`~momentid.estimation.ringdown.DecayFit` of mode ``i``'s free decays, or None (too few)."""
+    model, theta = selection.model, selection.fit.theta
+    freq, zeta, R = model.omega(theta) / (2 * np.pi), model.zeta(theta), model.residues(theta)
+    j = int(np.argmax(np.abs(R[i])))
+    rings, corr = [], 1
+    for r, run in enumerate(runs):
+        fs = run.sample_rate
+        gain, offset = model.sensors(theta, r)
+        floor = ringdown.advance(offset[j], run[f"a{j + 1}"], fs) / gain[j]
+        band = ringdown.band_for(freq[i], [freq[k] for k in selection.storey], fs)
+        corr = int(round(ringdown.correlation_time(band, freq[i]) * fs))
+        rings += ringdown.ring_downs(run.name, run["zdd"], run["zdd"] - floor, fs, freq[i], zeta[i], R[i, j], band,
+                                     sigma[r]["zdd"], float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"])))
+    if not rings or sum(rg.cycles for rg in rings) < ringdown.MIN_CYCLES:
+        return None
+    return ringdown.fit_decay(rings, corr)
+
+
+def _unknown(equivalent: float, f0: float) -> ModeDamping:
+    """No estimate at all (refused: the reason is set by the caller or says so)."""
+    return _answer(equivalent, np.inf, 1, Source.FORCED, False, 0.0, 0.0, f0, 0.0, (0.0, 0.0), equivalent, 0.0)
+
+
+def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bool = False) -> ModeDamping:
+    """The forced-response answer from the windows: their damping ratios' trend in amplitude when they
+    show one or ``trend`` asks for it (its value at zero amplitude), else their random-effects mean;
+    refused when the mode's
+    frequency moves across the windows by more than :data:`DRIFT_LIMIT` of its half-power half-width (a
+    linear fit reads that spread as damping)."""
+    if len(windows) < 2:
+        return _unknown(equivalent, f0)
+    z, s, f, sf, amp = (np.array(x) for x in zip(*windows))
+    b, cov = _meta(z, s, np.column_stack([np.ones_like(amp), amp]))
+    evidence = float(b[1] / np.sqrt(cov[1, 1])) if z.size > 3 and cov[1, 1] > 0 else 0.0     # growing only
+    dependent = evidence > ringdown.SLOPE_SIGMAS or (trend and z.size > 3)
+    if not dependent:
+        b, cov = _meta(z, s, np.ones((z.size, 1)))
+    answer = _answer(float(b[0]), float(np.sqrt(cov[0, 0])), z.size - b.size, Source.FORCED, dependent,
+                     float(b[1]) if dependent else 0.0, 1.0 if dependent else 0.0, f0, 0.0,
+                     tuple(np.percentile(amp, [10, 90])), equivalent, cycles)
+    slope, _ = _frequency_trend(windows)
+    refusal = _drift_refusal(windows, equivalent) or answer.refusal
+    if not refusal and not dependent:
+        # windows that read the same damping as the whole record, or their estimate is not one: a window
+        # too short for the mode, or edges the windows' transients cannot hold
+        gap = abs(answer.damping_ratio - equivalent) / max(answer.damping_ratio_std, 1e-12)
+        if gap > CONSISTENCY_SIGMAS:
+            refusal = (f"the windows of the record read {100 * answer.damping_ratio:.3g} +- "
+                       f"{100 * answer.damping_ratio_std:.2g} % where the whole record reads {100 * equivalent:.3g} %, "
+                       f"{gap:.2g} standard errors apart, with no amplitude to explain it")
+    return replace(answer, evidence=evidence, frequency_slope=slope, refusal=refusal)
+
+
+def _frequency_trend(windows) -> tuple[float, float]:
+    """The windows' frequency trend in amplitude (Hz per m/s^2, random effects) and its t statistic."""
+    if len(windows) < 4:
+        return 0.0, 0.0
+    _, _, f, sf, amp = (np.array(x) for x in zip(*windows))
+    if np.ptp(amp) <= 0:
+        return 0.0, 0.0
+    b, cov = _meta(f, np.maximum(sf, 1e-12), np.column_stack([np.ones_like(amp), amp]))
+    sd = float(np.sqrt(max(cov[1, 1], 0.0)))
+    return float(b[1]), float(b[1] / sd) if sd > 0 else 0.0
+
+
+def _drift_refusal(windows, equivalent: float) -> str:
+    """Why the windows' damping cannot be read from a forced response ('' when it can): the mode's
+    frequency moves with its amplitude across the windows by more than :data:`DRIFT_LIMIT` of its
+    half-power half-width (a linear fit reads that spread as damping)."""
+    if len(windows) < 2:
+        return ""
+    z, _, f, sf, amp = (np.array(x) for x in zip(*windows))
+    spread = _drift(f, sf, amp) / float(np.median(f))
+    width = max(min(float(np.median(z)), equivalent), 1e-5)
+    if spread <= DRIFT_LIMIT * width:
+        return ""
+    return (f"the mode's frequency moves by {100 * spread:.2g} % ({spread / width:.2g} half-power half-widths) "
+            f"across the record, with its amplitude, and it never rings free: a forced response reads that "
+            f"spread as damping")
+
+
+def _drift(f: np.ndarray, sf: np.ndarray, amp: np.ndarray) -> float:
+    """How far (Hz) the windows' frequency moves with their amplitude over the amplitudes they span: the
+    random-effects trend's change from the quietest to the strongest window when the trend is beyond
+    :data:`~momentid.estimation.ringdown.SLOPE_SIGMAS` standard errors, else 0 (a linear rig's windows
+    scatter, they do not drift)."""
+    if f.size < 4:
+        return 0.0
+    b, cov = _meta(f, np.maximum(sf, 1e-12), np.column_stack([np.ones_like(amp), amp]))
+    if abs(b[1]) <= ringdown.SLOPE_SIGMAS * np.sqrt(cov[1, 1]):
+        return 0.0
+    return float(abs(b[1]) * np.ptp(amp))
+
+
+def _answer(z, sd, dof, source, dependent, slope, exponent, f0, f_slope, amplitudes, equivalent, cycles) -> ModeDamping:
+    tq = float(scipy.stats.t.ppf(0.975, max(dof, 1)))
+    return ModeDamping(
+        damping_ratio=float(z), damping_ratio_std=float(sd), interval=(float(z - tq * sd), float(z + tq * sd)),
+        dof=int(dof), source=source, amplitude_dependent=bool(dependent), slope=float(slope),
+        exponent=float(exponent), frequency=float(f0), frequency_slope=float(f_slope),
+        amplitude_range=tuple(float(a) for a in amplitudes), equivalent=float(equivalent), cycles=float(cycles),
+        refusal=_refusal(float(z), float(sd), int(dof), float(f0), source))
+
+
+def _refusal(z: float, sd: float, dof: int, f0: float, source: str) -> str:
+    if not np.isfinite(sd):
+        return (f"the mode at {f0:.4g} Hz neither rings free in the record nor leaves enough forced windows to "
+                f"measure its damping")
+    if dof < MIN_DOF:
+        return (f"the {source} of the mode at {f0:.4g} Hz hold {dof + 1} independent stretch(es): too few to tell "
+                f"model error from damping")
+    if z <= 0:
+        return f"its damping ratio comes out {100 * z:.3g} % from the {source} (not positive): not a passive mode's"
+    if sd > MAX_RELATIVE_STD * z:
+        return (f"not determined by the {source}: {100 * z:.3g} +- {100 * sd:.2g} %, the standard error more than "
+                f"{MAX_RELATIVE_STD:.0%} of the ratio")
+    return ""
+
+
+#: A table motion is periodic when lines at the multiples of one fundamental (within
+#: :data:`LINE_BINS` bins) hold this share of its power.
+PERIODIC_SHARE = 0.8
+LINE_BINS = 2
+#: Fundamentals (Hz) tried: the table's strongest lines and their halves and thirds, down to this.
+MIN_FUNDAMENTAL = 0.3
+
+
+def periodic_fundamental(table: np.ndarray, sample_rate: float):
+    """The fundamental (Hz) of a periodic table motion (a sine test and its harmonics), or None.
+
+    The table's power (Hann window) is periodic when lines at the multiples of one frequency hold
+    :data:`PERIODIC_SHARE` of it; the fundamentals tried are the five strongest lines and their halves
+    and thirds.
+    """
+    u = np.asarray(table, float) - np.mean(table)
+    n = u.size
+    power = np.abs(np.fft.rfft(u * np.hanning(n))) ** 2
+    freq = np.fft.rfftfreq(n, 1.0 / sample_rate)
+    keep = freq > MIN_FUNDAMENTAL
+    total = float(np.sum(power[keep]))
+    if total <= 0:
+        return None
+    df = freq[1]
+    found = []
+    for k in np.argsort(power * keep)[::-1][:5]:
+        for m in (1, 2, 3):
+            f0 = freq[k] / m
+            if f0 < MIN_FUNDAMENTAL:
+                continue
+            lines = np.zeros(freq.size, bool)
+            for h in np.arange(1, int(freq[-1] / f0) + 1):
+                lines |= np.abs(freq - h * f0) <= LINE_BINS * df
+            if float(np.sum(power[lines & keep])) / total >= PERIODIC_SHARE:
+                found.append(float(f0))
+    return max(found) if found else None          # the sparsest comb that holds the power
+
+
+def _periodic_refusal(runs, f_mode: float) -> str:
+    """Why a mode forced only by a periodic table cannot give its damping ('' when the table is not periodic)."""
+    for run in runs:
+        f0 = periodic_fundamental(run["zdd"], run.sample_rate)
+        if f0 is None:
+            continue
+        k = int(np.floor(f_mode / f0))
+        n = run.n_samples
+        power = np.abs(np.fft.rfft((run["zdd"] - np.mean(run["zdd"])) * np.hanning(n))) ** 2
+        freq = np.fft.rfftfreq(n, 1.0 / run.sample_rate)
+        df = freq[1]
+        at = [float(np.max(power[np.abs(freq - h * f0) <= LINE_BINS * df])) for h in (k, k + 1)
+              if h >= 1 and h * f0 < freq[-1] - LINE_BINS * df]
+        between = (freq > k * f0 + 3 * df) & (freq < (k + 1) * f0 - 3 * df)
+        level = float(np.median(power[between])) if between.any() else 0.0
+        ratio = min(at) / max(level, 1e-300) if at else np.inf
+        return (f"the table's motion in run {run.name!r} is periodic at {f0:.4g} Hz and never leaves the mode at "
+                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} "
+                f"Hz), and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
+                f"the detuning, not the damping")
+    return ""

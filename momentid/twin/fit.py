@@ -119,8 +119,8 @@ class FittedRig:
     def to_dict(self) -> dict:
         return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
                 "damping_ratio": np.asarray(self.damping_ratio).tolist(),
-                "friction": [{**registry.get(m.type).place(m.location).location, **dict(m.parameters)}
-                             for m in self.friction],
+                "friction": [{"type": m.type, **registry.get(m.type).place(m.location).location,
+                              **dict(m.parameters)} for m in self.friction],
                 "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
 
 

@@ -206,8 +206,7 @@ def _table(rig, rows, verdict) -> list:
     for r in rows:
         m = r.get("trend_match")
         trend = f"{m['frequency_slope_sigmas']:.1f}, {m['damping_slope_sigmas']:.1f}" if m else "-"
-        sel = ", ".join(f"{n} {v['ratio_to_linear']:.2f}" + (" dropped" if v.get("dropped_at_checkpoint") else "")
-                        for n, v in r["selection"].items() if n != "linear")
+        sel = ", ".join(f"{n} {v['ratio_to_linear']:.2f}" for n, v in r["selection"].items() if n != "linear")
         lines.append(f"| {r['held_out']} | {r['chosen']} ({r['inner_held_out']}; {sel}) | "
                      f"{100 * r['nrmse_linear_refit']:.1f} % | {100 * r['nrmse_after']:.1f} % | "
                      f"{100 * r['nrmse_linear_own']:.1f} % | {100 * r['noise_nrmse']:.1f} % | "

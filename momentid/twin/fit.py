@@ -37,7 +37,7 @@ from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
 from momentid.twin.replay import nrmse as replay_nrmse
 
-__all__ = ["FittedRig", "Dropped", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
+__all__ = ["FittedRig", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
            "sensor_jacobian", "FIT_ENERGY", "friction_start", "mechanism_start", "storey_levels", "twin_modes",
            "joint_tendon_stiffness", "workers", "each"]
 
@@ -435,9 +435,8 @@ def sensor_jacobian(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
 class _Problem:
     """Residual and Jacobian of the output-error fit, sharing the simulations of the current point."""
 
-    def __init__(self, layout: _Layout, trials, substeps: int | None, max_nfev: int, checkpoint=None):
+    def __init__(self, layout: _Layout, trials, substeps: int | None, max_nfev: int):
         self.layout, self.trials, self.substeps = layout, tuple(trials), substeps
-        self.checkpoint, self.jacobians = checkpoint, 0
         self.sizes = [(t.fit_stop - t.start) * layout.d for t in self.trials]
         self.cache_key, self.cache = None, None
         self.nsim = 0
@@ -474,11 +473,6 @@ class _Problem:
             # scipy's trust-region loop takes the Jacobian of its last accepted point even when its
             # evaluations are spent and it stops without using it: re-simulating it would be wasted
             return self.last_jacobian
-        self.jacobians += 1
-        if self.checkpoint is not None and self.jacobians == self.checkpoint[0]:
-            model = self.layout.unpack(theta)
-            if not self.checkpoint[1](model):
-                raise Dropped(model, self.nsim)
         self.last_jacobian = self._jacobian(theta)
         return self.last_jacobian
 
@@ -521,17 +515,8 @@ class _Problem:
         return J
 
 
-class Dropped(Exception):
-    """A fit stopped at its checkpoint (:func:`fit_twin`'s ``checkpoint``): its model there and the
-    simulations it cost."""
-
-    def __init__(self, model: FittedRig, nsim: int):
-        super().__init__("dropped at its checkpoint")
-        self.model, self.nsim = model, nsim
-
-
 def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
-             max_nfev: int = MAX_NFEV, shared: bool = False, checkpoint=None) -> FitResult:
+             max_nfev: int = MAX_NFEV, shared: bool = False) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
     Parameters
@@ -542,10 +527,6 @@ def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
     shared : bool
         One joint's parameters for every friction storey (the first storey's start), instead of one set
         per storey.
-    checkpoint : (int, callable), optional
-        ``(n, keep)``: before the ``n``-th Jacobian (at the optimiser's current point, after ``n - 1``
-        accepted steps) ``keep(model)`` is asked; False stops the fit (:class:`Dropped`).  The fits it
-        keeps run exactly as without it.
 
     Raises
     ------
@@ -557,7 +538,7 @@ def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
         raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
                                   f"or a joint stiffer than its storey: {start.to_dict()}")
     layout = _Layout(start, shared, storey_levels(start, trials))
-    problem = _Problem(layout, trials, substeps, max_nfev, checkpoint)
+    problem = _Problem(layout, trials, substeps, max_nfev)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
     result = scipy.optimize.least_squares(problem.evaluate, theta0, jac=problem.jacobian, bounds=(lo, hi),

@@ -40,7 +40,7 @@ from momentid.estimation.scaled import amplitude_trend as trend_of, identify_mod
 from momentid.mechanisms import registry
 
 __all__ = ["Fold", "Candidate", "candidates", "select", "inner_hold_out", "hold_out", "linear_start",
-           "amplitude_trend", "FRICTION_STARTS", "CHECKPOINT"]
+           "amplitude_trend", "FRICTION_STARTS"]
 
 #: Starts of the augmented fit (stiffness lost at the reference drift as a share of the storey's,
 #: slip drift in m, exponent); the fit keeps the one that explains the training trials best.
@@ -50,11 +50,6 @@ FRICTION_STARTS = ((0.02, 0.03, -0.5),)
 #: 10 hold every criterion (after/refit 0.24-0.61); 12 cost ~20 % more CPU (on the sine_2p0 fold they
 #: reached 18.6 % against 20.4 % held-out NRMSE, in a probe without the command's one-thread BLAS).
 AUGMENTED_NFEV = 10
-#: The choice's early drop: before its fit's this-th Jacobian (after this many less one accepted steps), a
-#: candidate that does not yet predict the inner held-out trial better than the linear twin is dropped (its
-#: remaining Jacobians, ~70 % of its fit, are not spent); the candidates kept are fitted exactly as without
-#: it (the choice changes only when a candidate no better than linear at its checkpoint would have won).
-CHECKPOINT = 3
 #: The kind fitted when the training trials are too few to choose (two: an inner fit needs two of its
 #: own): joint friction, whose softening and damping both grow with the drift.
 UNCHOSEN = "joint_friction"
@@ -163,17 +158,16 @@ def _augmented_start(linear: twin_fit.FittedRig, candidate: Candidate, starts, t
 
 def select(trials: dict, training, *, substeps: int | None = None, max_nfev: int = twin_fit.MAX_NFEV,
            augmented_nfev: int = AUGMENTED_NFEV, starts=FRICTION_STARTS, start: twin_fit.FittedRig,
-           pool=None, checkpoint: int | None = CHECKPOINT) -> tuple:
+           pool=None) -> tuple:
     """The physics the training trials alone choose: every :func:`candidates` fitted on the training trials
     but :func:`inner_hold_out`, replayed on that one; the lowest NRMSE wins (the linear twin when no
-    physics predicts it better).  A candidate no better than the linear twin there at its fit's
-    ``checkpoint``-th Jacobian is dropped (:data:`CHECKPOINT`; None: every fit runs to its end).
+    physics predicts it better).
 
     Returns
     -------
     (Candidate, str, dict)
         The winner, the inner held-out trial, and per candidate name its inner held-out NRMSE and ratio to
-        the inner linear refit's (``dropped_at_checkpoint``: at its checkpoint).
+        the inner linear refit's.
     """
     training = list(training)
     d = trials[training[0]].a.shape[1]
@@ -184,30 +178,17 @@ def select(trials: dict, training, *, substeps: int | None = None, max_nfev: int
     train = [trials[n] for n in training if n != inner]
     linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
 
-    floor = twin_fit.nrmse(linear.model, trials[inner], substeps)
-    keep = (checkpoint, lambda model: twin_fit.nrmse(model, trials[inner], substeps) < floor) if checkpoint else None
-
     def fit(candidate):
-        """(model, dropped) of ``candidate``'s fit on ``train``."""
         if candidate.kind is None:
-            return linear.model, False
-        fits, dropped = [], []
-        for guess in _augmented_start(linear.model, candidate, starts, train):
-            try:
-                fits.append(twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev,
-                                              shared=candidate.shared, checkpoint=keep))
-            except twin_fit.Dropped as stop:
-                dropped.append(stop.model)
-        if fits:
-            return min(fits, key=lambda f: f.cost).model, False
-        return dropped[0], True
+            return linear
+        fits = [twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, shared=candidate.shared)
+                for guess in _augmented_start(linear.model, candidate, starts, train)]
+        return min(fits, key=lambda f: f.cost)
 
     fits = (pool or twin_fit.each)(fit, cands)
-    score = {c.name: floor if c.kind is None else twin_fit.nrmse(m, trials[inner], substeps)
-             for c, (m, _) in zip(cands, fits)}
-    table = {c.name: {"inner_nrmse": score[c.name], "ratio_to_linear": score[c.name] / floor,
-                      **({"dropped_at_checkpoint": True} if gone else {})} for c, (_, gone) in zip(cands, fits)}
-    best = min((c for c, (_, gone) in zip(cands, fits) if not gone), key=lambda c: score[c.name])
+    score = {c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(cands, fits)}
+    table = {n: {"inner_nrmse": v, "ratio_to_linear": v / score["linear"]} for n, v in score.items()}
+    best = min(cands, key=lambda c: score[c.name])
     return best, inner, table
 
 

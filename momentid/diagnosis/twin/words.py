@@ -140,9 +140,7 @@ def _selection_lines(diag: Diagnosis) -> list[str]:
 
     words = {c.name: c.words(d) for c in candidates(d)}
     ranked = sorted(table, key=lambda n: table[n]["inner_nrmse"])
-    parts = "; ".join(f"{words.get(n, n)} {table[n]['ratio_to_linear']:.2f} x"
-                      + (" (dropped early, no better than linear)" if table[n].get("dropped_at_checkpoint") else "")
-                      for n in ranked if n != "linear")
+    parts = "; ".join(f"{words.get(n, n)} {table[n]['ratio_to_linear']:.2f} x" for n in ranked if n != "linear")
     return [f"Physics chosen on the training trials alone (each candidate fitted on the others, NRMSE on "
             f"{fold.inner_held_out} as a multiple of the linear refit's): {parts}; chosen: {_physics_words(diag)}."]
 

@@ -59,8 +59,8 @@ def summary(amplitude, frequency) -> list:
 
 
 def _model(d: dict) -> twin_fit.FittedRig:
-    friction = tuple(Mechanism("joint_friction", f["storey"], tuple((k, f[k]) for k in ("stiffness", "slip_drift",
-                                                                                         "exponent")))
+    friction = tuple(Mechanism(f.get("type", "joint_friction"), f["storey"],
+                               tuple((k, v) for k, v in f.items() if k not in ("type", "storey")))
                      for f in d["friction"])
     return twin_fit.FittedRig(np.array(d["masses_kg"]), np.array(d["stiffness_n_per_m"]), np.array(d["damping_ratio"]),
                           friction, np.array(d["sensor_gain"]), np.array(d["sensor_offset_s"]))

@@ -14,6 +14,11 @@ EXCESS = 1.3
 #: A screened candidate must explain this share of the excess (on held-out blocks) to be named.
 EXPLAINED = 0.5
 
+#: A rig is linear within its trials when the linear twin refitted to the training trials predicts a
+#: held-out trial within this factor of a linear twin fitted to that trial itself: no model without
+#: amplitude dependence does better than that fit, so the room left for physics is within the fits' scatter.
+LINEAR_ROOM = 1.2
+
 #: ... and its augmented model must remove this share of the training runs' replay misfit above the
 #: noise (0.75: the misfit at least halves when noise is negligible).
 ACCEPTED = 0.75

@@ -478,6 +478,13 @@ class MechanismKind:
         """Fitted parameters and standard errors as the report states them."""
         return params, std
 
+    def twin_parameters(self, stiffness: float, damping: float, drift: float, velocity: float) -> dict:
+        """For ``real_rig`` kinds fitted by :func:`momentid.twin.fit.fit_twin`: per parameter ``(scale, start,
+        low, high)`` (the parameter's units) at a storey of linear stiffness ``stiffness`` (N/m) and viscous
+        damping ``damping`` (N s/m) whose training trials reach ``drift`` (m) and ``velocity`` (m/s) at their
+        peaks: the fit searches ``value / scale`` within ``[low, high]`` from ``start``."""
+        raise NotImplementedError(f"{self.name} declares no fit on a real rig's twin")
+
     def describe(self, place: Place, params: dict, std: dict) -> str:
         """The report's sentence naming this mechanism with its fitted parameters."""
         p = ", ".join(f"{k} = {v:.4g}" + (f" +/- {std[k]:.2g}" if k in std else "") for k, v in params.items())

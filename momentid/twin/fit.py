@@ -1,7 +1,9 @@
-"""Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without joint friction.
+"""Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without physics beyond it.
 
 The twin (:class:`~momentid.lab.FittedRig`: stated floor masses, a full stiffness matrix, modal
-damping, ``joint_friction`` in chosen storeys, one gain and clock offset per floor sensor) is fitted by
+damping, records of the registry's real-rig kinds in chosen storeys (``joint_friction``,
+``cubic_spring``, ``quadratic_damping``: each MJCF-only, no Python in the loop), one gain and clock
+offset per floor sensor) is fitted by
 output error: every training trial is re-simulated through MuJoCo under its recorded table
 acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
 that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
@@ -36,7 +38,8 @@ from momentid.mechanisms import registry
 from momentid.twin.replay import nrmse as replay_nrmse
 
 __all__ = ["FittedRig", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
-           "sensor_jacobian", "FIT_ENERGY", "friction_start", "twin_modes", "joint_tendon_stiffness", "workers", "each"]
+           "sensor_jacobian", "FIT_ENERGY", "friction_start", "mechanism_start", "storey_levels", "twin_modes",
+           "joint_tendon_stiffness", "workers", "each"]
 
 #: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
 FIT_ENERGY = 0.99
@@ -74,7 +77,8 @@ class FittedRig:
     damping_ratio : ndarray, shape (d,)
         Modal viscous damping ratios (1) on the modes of (M, K), ascending frequency.
     friction : tuple of Mechanism
-        ``joint_friction`` records (at most one per storey); empty: the linear twin.
+        Records of real-rig kinds (``joint_friction``, ``cubic_spring``, ``quadratic_damping``; at most one
+        of a kind per storey; the field keeps its first kind's name); empty: the linear twin.
     gain, offset : ndarray, shape (d,)
         Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
     """
@@ -115,8 +119,8 @@ class FittedRig:
     def to_dict(self) -> dict:
         return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
                 "damping_ratio": np.asarray(self.damping_ratio).tolist(),
-                "friction": [{**registry.get(m.type).place(m.location).location, **dict(m.parameters)}
-                             for m in self.friction],
+                "friction": [{"type": m.type, **registry.get(m.type).place(m.location).location,
+                              **dict(m.parameters)} for m in self.friction],
                 "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
 
 
@@ -186,36 +190,120 @@ class FitResult:
     nfev: int
 
 
-class _Layout:
-    """The parameter vector: K's upper triangle (N/m), damping ratios, per friction storey (log of the
-    stiffness its secant has lost at :data:`REFERENCE_DRIFT`, log slip drift, exponent), then log-gains and
-    clock offsets of the sensors.  Below the slip drift a joint's loss grows as a power of the drift, so
-    its stiffness and slip drift are nearly interchangeable; the loss at a drift the rig reaches is what
-    the trials determine."""
+class _JointCodec:
+    """A ``joint_friction`` record's three fitted numbers: log of the stiffness its secant has lost at
+    :data:`REFERENCE_DRIFT`, log slip drift, exponent.  Below the slip drift a joint's loss grows as a power
+    of the drift, so its stiffness and slip drift are nearly interchangeable; the loss at a drift the rig
+    reaches is what the trials determine."""
 
-    def __init__(self, template: FittedRig, storeys: tuple):
+    size = 3
+
+    def pack(self, p: dict) -> list:
+        lost = p["stiffness"] * jf.lost_fraction(REFERENCE_DRIFT, p["slip_drift"], p["exponent"])
+        return [np.log(lost), np.log(p["slip_drift"]), p["exponent"]]
+
+    def unpack(self, x) -> dict:
+        slip, chi = float(np.exp(x[1])), float(x[2])
+        return {"stiffness": float(np.exp(x[0])) / jf.lost_fraction(REFERENCE_DRIFT, slip, chi), "slip_drift": slip,
+                "exponent": chi}
+
+    def bounds(self):
+        # (the first bound is on the stiffness lost at REFERENCE_DRIFT, N/m)
+        return ([np.log(FRICTION_BOUNDS[0][0]), np.log(FRICTION_BOUNDS[1][0]), FRICTION_BOUNDS[2][0]],
+                [np.log(FRICTION_BOUNDS[0][1]), np.log(FRICTION_BOUNDS[1][1]), FRICTION_BOUNDS[2][1]])
+
+    def scale(self, p: dict) -> list:
+        return [1.0, 1.0, 1.0]
+
+    def share(self, p: dict, weight: float) -> dict:
+        return {**p, "stiffness": p["stiffness"] * weight}
+
+
+class _ParamCodec:
+    """Any other real-rig kind's fitted numbers: each parameter over its scale, within the bounds and from
+    the start its kind declares for the storey (:meth:`~momentid.mechanisms.base.MechanismKind.twin_parameters`)."""
+
+    def __init__(self, kind, spec: dict):
+        self.names = [p.name for p in kind.params]
+        self.spec = spec
+        self.size = len(self.names)
+
+    def pack(self, p: dict) -> list:
+        return [p[n] / self.spec[n][0] for n in self.names]
+
+    def unpack(self, x) -> dict:
+        return {n: float(v * self.spec[n][0]) for n, v in zip(self.names, x)}
+
+    def bounds(self):
+        return ([self.spec[n][2] / self.spec[n][0] for n in self.names],
+                [self.spec[n][3] / self.spec[n][0] for n in self.names])
+
+    def scale(self, p: dict) -> list:
+        return [1.0] * self.size
+
+    def share(self, p: dict, weight: float) -> dict:
+        return dict(p)
+
+
+def storey_levels(model: FittedRig, trials) -> dict:
+    """Per storey ``(stiffness N/m, viscous damping N s/m, peak drift m, peak drift velocity m/s)`` of
+    ``model``'s linear part and the ``trials``: the drift and its velocity from the storey's recorded
+    relative acceleration (floor less the level below; the table's for storey 1) at its 99th percentile,
+    divided by the squared and the first power of mode 1's angular frequency."""
+    omega = float(np.min(twin_modes(model)[0]))
+    K, C = np.asarray(model.stiffness), np.asarray(model.damping)
+    out = {}
+    for s in range(1, model.storeys + 1):
+        rel = [np.abs(t.a[t.start:, s - 1] - (t.zdd[t.start:] if s == 1 else t.a[t.start:, s - 2])) for t in trials]
+        peak = max(float(np.percentile(r, 99)) for r in rel)
+        out[s] = (pair_coefficient(K, s - 1, s), pair_coefficient(C, s - 1, s), peak / omega ** 2, peak / omega)
+    return out
+
+
+def _codec(kind_name: str, level):
+    if kind_name == "joint_friction":
+        return _JointCodec()
+    kind = registry.get(kind_name)
+    return _ParamCodec(kind, kind.twin_parameters(*level))
+
+
+class _Layout:
+    """The parameter vector: K's upper triangle (N/m), damping ratios, each mechanism record's numbers
+    (:class:`_JointCodec`, :class:`_ParamCodec`), then log-gains and clock offsets of the sensors.
+    ``shared`` (records of one kind): one block of numbers for every record, a joint in each storey as
+    stiff as the first's times the ratio of their storeys' stiffness in the template (one law, fewer
+    parameters)."""
+
+    def __init__(self, template: FittedRig, shared: bool = False, levels: dict | None = None):
         self.template = template
         self.d = template.storeys
-        self.storeys = tuple(storeys)
+        self.records = tuple(template.friction)
+        kinds = {m.type for m in self.records}
+        self.shared = bool(shared) and len(self.records) > 1 and len(kinds) == 1
+        self.codecs = [_codec(m.type, (levels or {}).get(m.location))
+                       for m in self.records[:1 if self.shared else len(self.records)]]
+        # shared: each storey's joint stiffness relative to the first's, as the start's storeys' stiffness
+        K0 = np.asarray(template.stiffness)
+        tendon = [joint_tendon_stiffness(K0, m) for m in self.records] if self.shared else []
+        self.weights = [t / tendon[0] for t in tendon]
         self.iu = np.triu_indices(self.d)
-        self.n_phys = len(self.iu[0]) + self.d + 3 * len(self.storeys)
+        mech = sum(c.size for c in self.codecs)
+        self.n_phys = len(self.iu[0]) + self.d + mech
         # each parameter's typical size, for the difference steps: K's entries (N/m), damping ratios,
-        # the friction's logs and exponents, the sensors' log-gains and clock offsets (s)
-        k = len(self.iu[0])
-        K = np.abs(np.asarray(template.stiffness))
+        # the mechanisms' numbers, the sensors' log-gains and clock offsets (s)
+        K = np.abs(K0)
+        own = [c.scale(dict(m.parameters)) for c, m in zip(self.codecs, self.records)]
         self.scale = np.concatenate([np.maximum(K[self.iu], 0.01 * K.max()), np.full(self.d, 0.01),
-                                     np.ones(3 * len(self.storeys)), np.full(self.d, 0.01), np.full(self.d, 1e-3)])
-        assert self.scale.size == k + self.d + 3 * len(self.storeys) + 2 * self.d
+                                     np.ravel(np.concatenate(own)) if own else np.zeros(0), np.full(self.d, 0.01),
+                                     np.full(self.d, 1e-3)])
+        assert self.scale.size == self.n_phys + 2 * self.d
 
     def pack(self, model: FittedRig) -> np.ndarray:
-        friction = {m.location: dict(m.parameters) for m in model.friction}
         parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
-        for s in self.storeys:
-            p = friction[s]
-            lost = p["stiffness"] * jf.lost_fraction(REFERENCE_DRIFT, p["slip_drift"], p["exponent"])
-            parts.append([np.log(lost), np.log(p["slip_drift"]), p["exponent"]])
+        for codec, m in zip(self.codecs, model.friction):
+            parts.append(codec.pack(dict(m.parameters)))
         parts += [np.log(model.gain), model.offset]
-        return np.concatenate([np.ravel(p) for p in parts])
+        return np.concatenate([np.ravel(np.asarray(p, float)) for p in parts])
 
     def unpack(self, theta) -> FittedRig:
         d, k = self.d, len(self.iu[0])
@@ -225,23 +313,23 @@ class _Layout:
         zeta = np.asarray(theta[k:k + d])
         i = k + d
         params = []
-        for _ in self.storeys:
-            slip, chi = float(np.exp(theta[i + 1])), float(theta[i + 2])
-            stiffness = float(np.exp(theta[i])) / jf.lost_fraction(REFERENCE_DRIFT, slip, chi)
-            params.append({"stiffness": stiffness, "slip_drift": slip, "exponent": chi})
-            i += 3
-        return replace(self.template, stiffness=K, damping_ratio=zeta,
-                       friction=friction_records(self.storeys, params),
+        for codec in self.codecs:
+            params.append(codec.unpack(theta[i:i + codec.size]))
+            i += codec.size
+        if self.shared:       # one law in every place (a joint's stiffness in proportion to its storey's)
+            params = [self.codecs[0].share(params[0], w) for w in self.weights]
+        records = tuple(replace(m, parameters=tuple(p.items())) for m, p in zip(self.records, params))
+        return replace(self.template, stiffness=K, damping_ratio=zeta, friction=records,
                        gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]))
 
     def bounds(self):
         k = len(self.iu[0])
         lo = [-np.inf] * k + [DAMPING_BOUNDS[0]] * self.d
         hi = [np.inf] * k + [DAMPING_BOUNDS[1]] * self.d
-        for _ in self.storeys:
-            lo += [np.log(FRICTION_BOUNDS[0][0]), np.log(FRICTION_BOUNDS[1][0]), FRICTION_BOUNDS[2][0]]
-            hi += [np.log(FRICTION_BOUNDS[0][1]), np.log(FRICTION_BOUNDS[1][1]), FRICTION_BOUNDS[2][1]]
-        # (the first friction bound is on the stiffness lost at REFERENCE_DRIFT, N/m)
+        for codec in self.codecs:
+            low, high = codec.bounds()
+            lo += list(low)
+            hi += list(high)
         lo += [GAIN_BOUNDS[0]] * self.d + [OFFSET_BOUNDS[0]] * self.d
         hi += [GAIN_BOUNDS[1]] * self.d + [OFFSET_BOUNDS[1]] * self.d
         return np.array(lo), np.array(hi)
@@ -251,7 +339,8 @@ def _valid(model: FittedRig) -> bool:
     K = np.asarray(model.stiffness)
     if np.any(np.linalg.eigvalsh(K) <= 0):
         return False
-    return all(dict(m.parameters)["stiffness"] < joint_tendon_stiffness(K, m) for m in model.friction)
+    return all(dict(m.parameters)["stiffness"] < joint_tendon_stiffness(K, m) for m in model.friction
+               if m.type == "joint_friction")
 
 
 def joint_tendon_stiffness(K: np.ndarray, mech) -> float:
@@ -427,7 +516,7 @@ class _Problem:
 
 
 def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
-             max_nfev: int = MAX_NFEV) -> FitResult:
+             max_nfev: int = MAX_NFEV, shared: bool = False) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
     Parameters
@@ -435,6 +524,9 @@ def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
     trials : sequence of Trial
     start : RigModel
         Starting point; its ``friction`` records say which storeys carry joint friction.
+    shared : bool
+        One joint's parameters for every friction storey (the first storey's start), instead of one set
+        per storey.
 
     Raises
     ------
@@ -445,7 +537,7 @@ def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
     if not _valid(start):
         raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
                                   f"or a joint stiffer than its storey: {start.to_dict()}")
-    layout = _Layout(start, tuple(m.location for m in start.friction))
+    layout = _Layout(start, shared, storey_levels(start, trials))
     problem = _Problem(layout, trials, substeps, max_nfev)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
@@ -477,6 +569,16 @@ def twin_modes(model: FittedRig):
     phi = psi / m_half[:, None]                       # mass-normalised shapes, columns
     gamma = phi.T @ m
     return np.sqrt(w2), np.asarray(model.damping_ratio, float), gamma[:, None] * phi.T
+
+
+def mechanism_start(linear: FittedRig, kind_name: str, storeys, trials) -> FittedRig:
+    """A start for the augmented fit with a real-rig kind other than ``joint_friction`` in ``storeys``: each
+    record at its kind's declared start (:meth:`~momentid.mechanisms.base.MechanismKind.twin_parameters`
+    at the storey's :func:`storey_levels`), the linear part as it is."""
+    kind, levels = registry.get(kind_name), storey_levels(linear, trials)
+    records = tuple(Mechanism(kind_name, int(s), tuple((n, float(v[1])) for n, v in
+                                                         kind.twin_parameters(*levels[s]).items())) for s in storeys)
+    return replace(linear, friction=records)
 
 
 def friction_start(linear: FittedRig, storeys, loss: float, slip_drift: float,

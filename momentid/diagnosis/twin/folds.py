@@ -1,12 +1,18 @@
-"""Held-out proof of the joint-friction twin on a real rig's trials: one fold per held-out trial.
+"""Held-out proof of the augmented twin on a real rig's trials: one fold per held-out trial, its physics
+chosen by evidence from the training trials alone.
 
 For a held-out trial, with the other trials of the same rig state for training:
 
-* ``nrmse_linear_refit``: the linear twin (:class:`~momentid.twin.fit.FittedRig` without friction)
+* the choice (:func:`select`): every :func:`candidates` (the linear twin; each real-rig kind of the
+  registry, :func:`~momentid.mechanisms.registry.real_rig_kinds`: joint friction, cubic spring,
+  quadratic damping, in every storey, each storey its own law or one law shared) is fitted on the
+  training trials but one (:func:`inner_hold_out`) and replayed on that one; the lowest NRMSE wins;
+* ``nrmse_linear_refit``: the linear twin (:class:`~momentid.twin.fit.FittedRig` without mechanisms)
   fitted to the training trials by re-simulation (:func:`~momentid.twin.fit.fit_twin`),
   replayed on the held-out trial;
-* ``nrmse_after``: the augmented twin (the same plus ``joint_friction`` in every storey) fitted the
-  same way, from the linear twin, replayed on the held-out trial;
+* ``nrmse_after``: the augmented twin (the same plus the chosen physics) fitted the same way on all the
+  training trials, from the linear twin, replayed on the held-out trial (the linear refit's own when
+  the choice is the linear twin);
 * ``nrmse_linear_own``: a linear twin fitted to the held-out trial itself (the best any model without
   amplitude dependence does on it);
 * ``noise_nrmse``: what the held-out trial's sensor noise alone leaves
@@ -31,8 +37,10 @@ from momentid.twin import fit as twin_fit
 from momentid.errors import IdentificationError
 from momentid.estimation.noise import estimate_noise
 from momentid.estimation.scaled import amplitude_trend as trend_of, identify_modal
+from momentid.mechanisms import registry
 
-__all__ = ["Fold", "hold_out", "linear_start", "amplitude_trend", "FRICTION_STARTS"]
+__all__ = ["Fold", "Candidate", "candidates", "select", "inner_hold_out", "hold_out", "linear_start",
+           "amplitude_trend", "FRICTION_STARTS"]
 
 #: Starts of the augmented fit (stiffness lost at the reference drift as a share of the storey's,
 #: slip drift in m, exponent); the fit keeps the one that explains the training trials best.
@@ -42,6 +50,9 @@ FRICTION_STARTS = ((0.02, 0.03, -0.5),)
 #: 10 hold every criterion (after/refit 0.24-0.61); 12 cost ~20 % more CPU (on the sine_2p0 fold they
 #: reached 18.6 % against 20.4 % held-out NRMSE, in a probe without the command's one-thread BLAS).
 AUGMENTED_NFEV = 10
+#: The kind fitted when the training trials are too few to choose (two: an inner fit needs two of its
+#: own): joint friction, whose softening and damping both grow with the drift.
+UNCHOSEN = "joint_friction"
 #: Seed of the sensor noise added to a simulated trial before it is identified.
 NOISE_SEED = 7
 
@@ -61,6 +72,9 @@ class Fold:
     own: twin_fit.FitResult
     seconds: float = 0.0
     cpu_seconds: float = 0.0
+    chosen: object = None
+    inner_held_out: str = ""
+    selection: dict = None
 
     def to_dict(self) -> dict:
         return {"held_out": self.held_out, "training": list(self.training),
@@ -71,7 +85,8 @@ class Fold:
                 "training_nrmse": {"linear": self.linear.nrmse, "augmented": self.augmented.nrmse},
                 "linear": self.linear.model.to_dict(), "augmented": self.augmented.model.to_dict(),
                 "own": self.own.model.to_dict(), "seconds": self.seconds,
-                "cpu_seconds": self.cpu_seconds}
+                "cpu_seconds": self.cpu_seconds, "chosen": self.chosen.name if self.chosen else None,
+                "inner_held_out": self.inner_held_out, "selection": self.selection or {}}
 
 
 def linear_start(experiment: Experiment, names) -> twin_fit.FittedRig:
@@ -90,10 +105,99 @@ def linear_start(experiment: Experiment, names) -> twin_fit.FittedRig:
     return twin_fit.FittedRig(np.asarray(ident.masses, float), ident.K, np.clip(ident.linear_damping_ratio, 1e-4, None))
 
 
+@dataclass(frozen=True)
+class Candidate:
+    """One physics the augmented twin may carry: a real-rig kind (:func:`~momentid.mechanisms.registry.real_rig_kinds`)
+    in every storey, each storey with its own parameters or one law ``shared`` by all; ``kind`` None: the
+    linear twin (no physics)."""
+
+    kind: str | None
+    shared: bool = False
+
+    @property
+    def name(self) -> str:
+        if self.kind is None:
+            return "linear"
+        return self.kind + ("_shared" if self.shared else "")
+
+    def words(self, storeys: int) -> str:
+        if self.kind is None:
+            return "no physics (the linear twin)"
+        where = "storey 1" if storeys == 1 else ("every storey, one law shared" if self.shared
+                                                  else "every storey, each its own")
+        return f"{self.kind.replace('_', ' ')} at {where}"
+
+
+def candidates(storeys: int) -> tuple:
+    """The linear twin, then every real-rig kind per storey and (more than one storey) shared."""
+    out = [Candidate(None)]
+    for kind in registry.real_rig_kinds():
+        out.append(Candidate(kind.name))
+        if storeys > 1:
+            out.append(Candidate(kind.name, shared=True))
+    return tuple(out)
+
+
+def inner_hold_out(trials: dict, training) -> str:
+    """The training trial the selection holds out: the last whose RMS floor response lies inside the other
+    training trials' (an interpolation, as the outer hold-out's default), else the last."""
+    level = {n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))) for n in training}
+    for name in reversed(list(training)):
+        others = [v for n, v in level.items() if n != name]
+        if others and min(others) <= level[name] <= max(others):
+            return name
+    return list(training)[-1]
+
+
+def _augmented_start(linear: twin_fit.FittedRig, candidate: Candidate, starts, train) -> list:
+    storeys = tuple(range(1, linear.storeys + 1))
+    if candidate.kind != "joint_friction":
+        return [twin_fit.mechanism_start(linear, candidate.kind, storeys, train)]
+    return [twin_fit.friction_start(linear, storeys, loss, slip, chi) for loss, slip, chi in starts]
+
+
+def select(trials: dict, training, *, substeps: int | None = None, max_nfev: int = twin_fit.MAX_NFEV,
+           augmented_nfev: int = AUGMENTED_NFEV, starts=FRICTION_STARTS, start: twin_fit.FittedRig,
+           pool=None) -> tuple:
+    """The physics the training trials alone choose: every :func:`candidates` fitted on the training trials
+    but :func:`inner_hold_out`, replayed on that one; the lowest NRMSE wins (the linear twin when no
+    physics predicts it better).
+
+    Returns
+    -------
+    (Candidate, str, dict)
+        The winner, the inner held-out trial, and per candidate name its inner held-out NRMSE and ratio to
+        the inner linear refit's.
+    """
+    training = list(training)
+    d = trials[training[0]].a.shape[1]
+    cands = candidates(d)
+    if len(training) < 3:            # an inner fit needs two trials: no evidence to choose by
+        return Candidate(UNCHOSEN), "", {}
+    inner = inner_hold_out(trials, training)
+    train = [trials[n] for n in training if n != inner]
+    linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
+
+    def fit(candidate):
+        if candidate.kind is None:
+            return linear
+        fits = [twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, shared=candidate.shared)
+                for guess in _augmented_start(linear.model, candidate, starts, train)]
+        return min(fits, key=lambda f: f.cost)
+
+    fits = (pool or twin_fit.each)(fit, cands)
+    score = {c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(cands, fits)}
+    table = {n: {"inner_nrmse": v, "ratio_to_linear": v / score["linear"]} for n, v in score.items()}
+    best = min(cands, key=lambda c: score[c.name])
+    return best, inner, table
+
+
 def hold_out(experiment: Experiment, held: str, training, *, substeps: int | None = None,
              max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
-             starts=FRICTION_STARTS, start: twin_fit.FittedRig | None = None) -> Fold:
-    """Fit the linear and the augmented twin on ``training`` and check them on ``held`` (module docstring).
+             starts=FRICTION_STARTS, start: twin_fit.FittedRig | None = None,
+             candidate: Candidate | None = None) -> Fold:
+    """Choose the physics on ``training`` (:func:`select`), fit the linear and the chosen twin on all of
+    ``training`` and check them on ``held`` (module docstring).
 
     Parameters
     ----------
@@ -105,6 +209,8 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int | Non
         The training runs (``held`` not among them).
     start : RigModel, optional
         The linear fit's start (default: the modal identification of the quietest training run).
+    candidate : Candidate, optional
+        The physics to fit without choosing (default: :func:`select`'s).
     """
     import time
 
@@ -114,29 +220,41 @@ def hold_out(experiment: Experiment, held: str, training, *, substeps: int | Non
     train = [trials[n] for n in training]
     quietest = min(training, key=lambda n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))))
     start = linear_start(experiment, quietest) if start is None else start
-    linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
 
-    def augmented_fit(guess):
-        return twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev)
+    def linear_fit():
+        return twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
 
     def own_fit(model):
         return twin_fit.fit_twin([trials[held]], model, substeps=substeps, max_nfev=max_nfev)
 
-    # the held-out trial's own fit runs beside the augmented fits (threads: MuJoCo releases the GIL), filling
-    # the cores while the augmented fit's single rollouts and Python run; each fit is the same on its own
-    guesses = [twin_fit.friction_start(linear.model, tuple(range(1, d + 1)), loss, slip, chi)
-               for loss, slip, chi in starts]
-    jobs = [lambda: own_fit(linear.model)] + [lambda guess=guess: augmented_fit(guess) for guess in guesses]
-    fits = twin_fit.each(lambda job: job(), jobs)
+    def choose():
+        if candidate is not None:
+            return candidate, "", {}
+        return select(trials, training, substeps=substeps, max_nfev=max_nfev, augmented_nfev=augmented_nfev,
+                      starts=starts, start=start, pool=lambda fn, items: [fn(x) for x in items])
+
+    # the selection (its inner fits one after another) runs beside the linear refit (threads: MuJoCo
+    # releases the GIL); then the held-out trial's own fit beside the chosen physics' fits
+    linear, (chosen, inner, table) = twin_fit.each(lambda job: job(), [linear_fit, choose])
+    if chosen.kind is None:
+        fits = [own_fit(linear.model), linear]
+    else:
+        guesses = _augmented_start(linear.model, chosen, starts, train)
+        jobs = [lambda: own_fit(linear.model)] + [
+            lambda guess=guess: twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev,
+                                                  shared=chosen.shared) for guess in guesses]
+        fits = twin_fit.each(lambda job: job(), jobs)
     own, augmented = fits[0], min(fits[1:], key=lambda fit: fit.cost)
     tr = trials[held]
     omega, zeta, residues = twin_fit.twin_modes(own.model)
     noise = mc.noise_nrmse(omega, zeta, residues, own.model.gain, experiment.run(held), experiment)
+    refit = twin_fit.nrmse(linear.model, tr, substeps)
     return Fold(held_out=held, training=tuple(training),
-                nrmse_linear_refit=twin_fit.nrmse(linear.model, tr, substeps),
-                nrmse_after=twin_fit.nrmse(augmented.model, tr, substeps),
+                nrmse_linear_refit=refit,
+                nrmse_after=refit if chosen.kind is None else twin_fit.nrmse(augmented.model, tr, substeps),
                 nrmse_linear_own=own.nrmse[held], noise_nrmse=noise, linear=linear, augmented=augmented, own=own,
-                seconds=time.perf_counter() - began, cpu_seconds=time.process_time() - cpu)
+                seconds=time.perf_counter() - began, cpu_seconds=time.process_time() - cpu,
+                chosen=chosen, inner_held_out=inner, selection=table)
 
 
 def _simulated_experiment(experiment: Experiment, model: twin_fit.FittedRig, names, substeps: int | None) -> Experiment:

@@ -13,20 +13,24 @@ masses:
 3. **The linear twin** (``nrmse_before``): ``momentid twin`` calibrated on the training trials
    (:func:`momentid.twin.build_twin`), replayed on the held-out trial with its nominal sensors; its
    MJCF is ``twin.xml``.
-4. **Re-simulation** (:func:`~momentid.diagnosis.twin.folds.hold_out`): from that twin, the linear
-   twin refitted to all training trials at once through MuJoCo (``nrmse_linear_refit``), the twin
-   with ``joint_friction`` in every storey fitted the same way (``nrmse_after``; its MJCF is
-   ``model_augmented.xml``), a linear twin fitted to the held-out trial itself (``nrmse_linear_own``)
-   and what its sensor noise alone leaves (``noise_nrmse``).
+4. **Re-simulation** (:func:`~momentid.diagnosis.twin.folds.hold_out`): from that twin, the physics
+   the training trials alone choose (each real-rig kind of the registry, per storey or shared, and the
+   linear twin, fitted with one training trial held out and scored on it), the linear twin refitted to
+   all training trials at once through MuJoCo (``nrmse_linear_refit``), the twin with the chosen physics
+   fitted the same way (``nrmse_after``; its MJCF is ``model_augmented.xml``), a linear twin fitted to
+   the held-out trial itself (``nrmse_linear_own``) and what its sensor noise alone leaves
+   (``noise_nrmse``).
 5. **Reference**: amplitude-dependent viscous damping (each mode's frequency and damping ratio
    regressed on the training trials' response amplitude, predicted at the held-out trial's) replayed
    on the linear refit's modes: a figure to compare with, not an answer.
 6. **Verdict** (:class:`~momentid.diagnosis.verdict.Verdict`): ``ANOTHER_RIG_STATE`` when the held-out
    trial is one the rig-state check left out (its misfit is a different rig, not missing physics);
-   ``NONE`` when a linear twin is within ``EXCESS`` x noise; ``MECHANISM`` (``joint_friction``, one
-   entry per storey at its place) when the augmented twin removes at least ``EXPLAINED`` of the linear
-   refit's held-out misfit above noise (a WARNING when what is left is still above noise); otherwise
-   ``UNEXPLAINED``, located in words (floor sensor, mode band).
+   ``NONE`` when a linear twin is within ``EXCESS`` x noise, or when the training trials chose the
+   linear twin and its refit is within ``LINEAR_ROOM`` x the held-out trial's own linear fit (the rig
+   is linear within its trials); ``MECHANISM`` (the chosen kind, one entry per storey at its place) when
+   the augmented twin removes at least ``EXPLAINED`` of the linear refit's held-out misfit above noise
+   (a WARNING when what is left is still above noise); otherwise ``UNEXPLAINED``, located in words
+   (floor sensor, mode band).
 
 The result is the :class:`~momentid.diagnosis.result.Diagnosis` of every recording, with a
 :class:`~momentid.diagnosis.twin.words.TwinEvidence`, which words it.
@@ -46,7 +50,7 @@ from momentid.diagnosis.twin import folds as twin_folds
 from momentid.twin import fit as twin_fit
 from momentid.diagnosis.result import Diagnosis
 from momentid.estimation.rig_state import StateCheck, check_state
-from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
+from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, LINEAR_ROOM, removed_share
 from momentid.diagnosis.twin.words import TwinEvidence
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.errors import IdentificationError, MomentidError
@@ -127,7 +131,8 @@ def diagnose_twin(experiment: Experiment, *, hold_out: str | None = None) -> Dia
         for j in range(experiment.storeys)}
     fits = {"linear_refit": fold.linear.model.to_dict(), "augmented": fold.augmented.model.to_dict(),
             "own": fold.own.model.to_dict(), "training_nrmse": {"linear_refit": fold.linear.nrmse,
-                                                                "augmented": fold.augmented.nrmse}}
+                                                                "augmented": fold.augmented.nrmse},
+            "chosen": fold.chosen.name, "inner_held_out": fold.inner_held_out, "selection": fold.selection}
     notes = tuple(experiment.notes) + ((twin_note,) if twin_note else ())
     seconds["total"] = time.perf_counter() - clock["began"]
     seconds["cpu"] = time.process_time() - clock["cpu"]
@@ -168,6 +173,10 @@ def _verdict(before: float, fold) -> Verdict:
     noise = fold.noise_nrmse
     if min(before, fold.nrmse_linear_refit) <= EXCESS * noise:
         return Verdict.NONE
+    if fold.chosen is not None and fold.chosen.kind is None:
+        # the training trials chose no physics: linear within its trials when the refit is as good as the
+        # held-out trial's own linear fit allows, else a mismatch no candidate explains
+        return Verdict.NONE if fold.nrmse_linear_refit <= LINEAR_ROOM * fold.nrmse_linear_own else Verdict.UNEXPLAINED
     if removed_share(fold.nrmse_linear_refit, fold.nrmse_after, noise) >= EXPLAINED:
         return Verdict.MECHANISM
     return Verdict.UNEXPLAINED
@@ -201,10 +210,14 @@ def _location(measured: np.ndarray, model: np.ndarray, fold, dt: float) -> dict:
 
 
 def _named(model: twin_fit.FittedRig) -> tuple:
-    """The augmented twin's joints as ``report.json`` mechanisms: per storey, N/m, N and mm."""
+    """The augmented twin's mechanisms as ``report.json`` mechanisms: joints per storey in N/m, N and mm;
+    another kind's parameters in its own units."""
     out = []
     for m in model.friction:
         p = dict(m.parameters)
+        if m.type != "joint_friction":
+            out.append(Named(m.type, registry.get(m.type).place(m.location).location, p, {}))
+            continue
         out.append(Named(m.type, registry.get(m.type).place(m.location).location, {
             "stiffness_n_per_m": p["stiffness"], "slip_drift_mm": 1e3 * p["slip_drift"], "exponent": p["exponent"],
             "slip_force_n": float(jf.backbone(p, p["slip_drift"])),

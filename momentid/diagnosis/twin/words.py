@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from momentid.diagnosis.result import Diagnosis, Evidence
-from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, removed_share
+from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, LINEAR_ROOM, removed_share
 from momentid.diagnosis.verdict import Verdict
 from momentid.mechanisms import registry
 
@@ -76,7 +76,7 @@ class TwinEvidence(Evidence):
 
 _ROWS = (("nrmse_before", "linear twin (`momentid twin` on the training trials)"),
          ("nrmse_linear_refit", "linear twin refitted to the training trials by re-simulation"),
-         ("nrmse_after", "twin with joint friction, fitted the same way"),
+         ("nrmse_after", "twin with the physics the training trials chose, fitted the same way"),
          ("nrmse_linear_own", "linear twin fitted to the held-out trial itself"),
          ("noise_nrmse", "sensor noise alone"))
 
@@ -94,7 +94,14 @@ def summary(diag: Diagnosis) -> str:
                      f"modes set by the held-out trial's own amplitude, {ref['held_out_amplitude_m_s2']:.3g} m/s^2)")
     refit, after, noise = diag.nrmse_linear_refit, diag.nrmse_after, diag.noise_nrmse
     share = removed_share(refit, after, noise)
-    if diag.verdict is Verdict.NONE:
+    lines += _selection_lines(diag)
+    physics = _physics_words(diag)
+    if diag.verdict is Verdict.NONE and min(diag.nrmse_before, refit) > EXCESS * noise:
+        lines.append(f"No missing physics: the rig is linear within its trials. The linear refit's held-out NRMSE is "
+                     f"{refit / diag.nrmse_linear_own:.2f} x that of a linear twin fitted to the trial itself (within "
+                     f"{LINEAR_ROOM:g} x: no room for amplitude-dependent physics), and no candidate predicts a "
+                     f"held-out training trial better than the linear twin.")
+    elif diag.verdict is Verdict.NONE:
         lines.append(f"No missing physics: a linear twin explains the held-out trial to within {EXCESS:g} x the noise.")
     elif diag.verdict is Verdict.MECHANISM:
         lines += _mechanism_lines(diag, share)
@@ -103,7 +110,7 @@ def summary(diag: Diagnosis) -> str:
                      f"missing physics (largest at the {diag.location['words']}); hold out a trial recorded with the "
                      f"others to test the physics.")
     else:
-        lines.append(f"Verdict: unexplained mismatch at the {diag.location['words']}: joint friction removes "
+        lines.append(f"Verdict: unexplained mismatch at the {diag.location['words']}: {physics} removes "
                      f"{100 * share:.0f} % of the linear refit's held-out misfit above noise ({100 * EXPLAINED:.0f} % "
                      f"needed).")
     lines += [f"Rig state: {s}." for s in evidence.excluded]
@@ -114,21 +121,47 @@ def summary(diag: Diagnosis) -> str:
     return "\n".join(lines)
 
 
+def _physics_words(diag: Diagnosis) -> str:
+    """The chosen physics in words ("joint friction at every storey, each its own"; "no physics")."""
+    fold = diag.evidence.fold
+    chosen = getattr(fold, "chosen", None)
+    return chosen.words(diag.evidence.fold.linear.model.storeys) if chosen is not None else "joint friction"
+
+
+def _selection_lines(diag: Diagnosis) -> list[str]:
+    """How the training trials alone chose the physics: each candidate's NRMSE on the training trial held out
+    inside the fit, as a multiple of the linear refit's there."""
+    fold = diag.evidence.fold
+    table = getattr(fold, "selection", None) or {}
+    if not table:
+        return []
+    d = fold.linear.model.storeys
+    from momentid.diagnosis.twin.folds import candidates
+
+    words = {c.name: c.words(d) for c in candidates(d)}
+    ranked = sorted(table, key=lambda n: table[n]["inner_nrmse"])
+    parts = "; ".join(f"{words.get(n, n)} {table[n]['ratio_to_linear']:.2f} x" for n in ranked if n != "linear")
+    return [f"Physics chosen on the training trials alone (each candidate fitted on the others, NRMSE on "
+            f"{fold.inner_held_out} as a multiple of the linear refit's): {parts}; chosen: {_physics_words(diag)}."]
+
+
 def _mechanism_lines(diag: Diagnosis, share: float) -> list[str]:
     """The verdict's lines when the augmented twin explains the held-out misfit: each joint by its kind's
     own sentence at its place, the stiffness it loses to slip, a WARNING on what is left."""
     refit, after, noise = diag.nrmse_linear_refit, diag.nrmse_after, diag.noise_nrmse
-    lines = [f"Verdict: joint friction (micro-slip in the storeys' joints): it removes {100 * share:.0f} % of "
+    lines = [f"Verdict: {_physics_words(diag)}: it removes {100 * share:.0f} % of "
              f"the linear refit's held-out misfit above noise ({100 * EXPLAINED:.0f} % needed); "
              f"{after / refit:.2f} x the linear refit, {after / diag.nrmse_linear_own:.2f} x the trial's own "
              f"linear fit."]
     for record, named in zip(diag.evidence.fold.augmented.model.friction, diag.mechanisms):
         kind = registry.get(record.type)
+        lost = named.parameters.get("stiffness_lost_at_1mm_n_per_m")
         lines.append("  " + kind.describe(kind.place(record.location), dict(record.parameters), {})
-                     + f" Stiffness lost to slip: {named.parameters['stiffness_lost_at_1mm_n_per_m']:.3g} N/m at 1 mm, "
-                       f"{named.parameters['stiffness_lost_at_5mm_n_per_m']:.3g} N/m at 5 mm of drift.")
+                     + ("" if lost is None else
+                        f" Stiffness lost to slip: {lost:.3g} N/m at 1 mm, "
+                        f"{named.parameters['stiffness_lost_at_5mm_n_per_m']:.3g} N/m at 5 mm of drift."))
     if after > EXCESS * noise:
-        lines.append(f"WARNING: joint friction explains only part of the mismatch: the held-out NRMSE is still "
+        lines.append(f"WARNING: {_physics_words(diag)} explains only part of the mismatch: the held-out NRMSE is still "
                      f"{100 * after:.2f} % ({after / noise:.1f} x noise); the rest is largest at the "
                      f"{diag.location['words']}.")
     return lines

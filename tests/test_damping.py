@@ -123,7 +123,7 @@ def test_a_mode_in_the_noise_or_at_the_nyquist_limit_gives_no_damping():
     # 20 s at 100 Hz, 0.01 m/s^2 of white noise on table and floor: a 15 Hz response of 0.1 m/s^2 amplitude
     # stands ~20x above the noise in its +-10 % band; one of 0.002 m/s^2 stands below it (the threshold is
     # 3x: these sit an order of magnitude either side, so the noise's draw cannot flip them)
-    from momentid.estimation.damping import _weak_refusal
+    from momentid.estimation.damping import weak_refusal
 
     rng = np.random.default_rng(3)
     t = np.arange(2000) / 100.0
@@ -133,6 +133,6 @@ def test_a_mode_in_the_noise_or_at_the_nyquist_limit_gives_no_damping():
         return _Run(100.0, zdd=rng.normal(0, 0.01, t.size),
                     a1=amplitude * np.sin(2 * np.pi * f_hz * t) + rng.normal(0, 0.01, t.size))
 
-    assert _weak_refusal([run(0.1)], _one_mode(15.0), sigma, 0) == ""
-    assert "barely above the sensor noise" in _weak_refusal([run(0.002)], _one_mode(15.0), sigma, 0)
-    assert "Nyquist" in _weak_refusal([run(0.1, 49.9)], _one_mode(49.9), sigma, 0)
+    assert weak_refusal([run(0.1)], _one_mode(15.0), sigma, 0) == ""
+    assert "barely above the sensor noise" in weak_refusal([run(0.002)], _one_mode(15.0), sigma, 0)
+    assert "Nyquist" in weak_refusal([run(0.1, 49.9)], _one_mode(49.9), sigma, 0)

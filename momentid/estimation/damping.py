@@ -259,7 +259,7 @@ def resolve_damping(runs, selection, *, sigma) -> tuple:
     windows = None if exact else _forced(runs, selection, sigma, list(selection.storey))
     out = []
     for k, i in enumerate(selection.storey):
-        weak = "" if exact else _weak_refusal(runs, selection, sigma, i)
+        weak = "" if exact else weak_refusal(runs, selection, sigma, i)
         if weak:
             out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=weak))
             continue
@@ -310,10 +310,29 @@ def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
 MIN_SIGNAL_TO_NOISE = 3.0
 
 
-def _weak_refusal(runs, selection, sigma, i: int) -> str:
-    """Why mode ``i``'s damping cannot be read at all ('' when it can): in no run does its relative
-    acceleration on its strongest floor, band-passed around it, stand :data:`MIN_SIGNAL_TO_NOISE` times
-    above the white sensor noise in that band (or the mode sits at the sampling's Nyquist limit)."""
+def weak_refusal(runs, selection, sigma, i: int) -> str:
+    """Why mode ``i``'s damping cannot be read at all ('' when it can).
+
+    In no run does its relative acceleration on its strongest floor, band-passed around it, stand
+    :data:`MIN_SIGNAL_TO_NOISE` times above the white sensor noise in that band, or the mode sits at
+    the sampling's Nyquist limit.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        The runs of ``selection`` (``zdd``, ``a1..ad``, m/s^2), each with its ``sample_rate`` (Hz).
+    selection : ModeSelection
+        The linear modal fit: ``model.omega`` and ``model.residues`` at ``fit.theta``, ``storey``.
+    sigma : sequence of dict
+        Per run, the white noise standard deviation (m/s^2) of ``zdd`` and each ``a<j>``.
+    i : int
+        The mode's index in the model.
+
+    Returns
+    -------
+    str
+        The refusal in words, or ``''``.
+    """
     model, theta = selection.model, selection.fit.theta
     freq, R = model.omega(theta) / (2 * np.pi), model.residues(theta)
     j = int(np.argmax(np.abs(R[i])))

@@ -1,10 +1,9 @@
 """Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without physics beyond it.
 
 The twin (:class:`~momentid.lab.FittedRig`: stated floor masses, a full stiffness matrix, modal
-damping, records of the registry's real-rig kinds in chosen storeys (``joint_friction``,
-``cubic_spring``, ``quadratic_damping``: each MJCF-only, no Python in the loop), one gain and clock
-offset per floor sensor) is fitted by
-output error: every training trial is re-simulated through MuJoCo under its recorded table
+damping, records of the registry's real-rig kinds in chosen storeys (``joint_friction``, ``cubic_spring``,
+``quadratic_damping``: each MJCF-only, no Python in the loop), one gain and clock offset per floor
+sensor) is fitted by output error: every training trial is re-simulated through MuJoCo under its recorded table
 acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
 that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
 parameter set explains them all).  The optimiser is scipy's trust-region least squares; the Jacobian's

@@ -101,6 +101,7 @@ def test_cubic_stiffness_and_a_floor_accelerometer_gain():
         ("sensor_gain", json.dumps({"channel": "a1"})): ("gain", 0.005)})
 
 
+@pytest.mark.slow    # a minute on 2 cores; the compound matrix (python -m benchmarks.diagnosis_compound) holds it too
 def test_extra_damper_and_p_delta_in_another_storey(tmp_path):
     diag = _diagnosed(DAMPER_PDELTA)
     # The damper 3 N s/m from the damping pattern of a C refitted with the P-Delta force (observed

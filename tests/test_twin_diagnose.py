@@ -73,6 +73,7 @@ def test_linear_rig_on_the_twin(tmp_path, capsys):
     assert "{" not in out["summary"]                                  # places in words, never JSON
 
 
+@pytest.mark.slow    # half a minute on 2 cores: a third twin diagnosis beside the two of the default run
 def test_hold_out_names_any_trial():
     experiment = lab(run("r1", 0.3, 1), run("r2", 0.6, 2), run("r3", 0.45, 3))
     diag = diagnose(experiment, hold_out="r2")

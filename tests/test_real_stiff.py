@@ -43,11 +43,13 @@ def test_every_trial_identifies_with_no_wrong_refusal():
 
 def test_mode_one_is_where_the_peer_puts_it():
     _, results = per_run()
-    for name in ("el_centro_1", "el_centro_2", "sine_2"):
-        # the 1 % (SRIM reads the rig at the amplitudes of each trial; so does the linear fit)
+    for name in ("el_centro_1", "el_centro_2", "northridge_1"):
+        # the 1 % on the earthquake trials (SRIM reads the rig at the amplitudes of each trial; so does
+        # the linear fit, now that a pole beside the mode that barely lowers the misfit is not an extra mode)
         assert abs(results[name].frequency[0] / SRIM_FREQUENCY[name] - 1) < 0.01, (name, results[name].frequency)
-    for name in ("northridge_1", "sine_1"):
-        # SRIM's 21.82 and 21.61 Hz are its large-amplitude frequencies; the rig rings at 22.1-22.2 Hz once free
+    for name in ("sine_1", "sine_2"):
+        # a 2 Hz table forces the mode only at its harmonics (20, 22, 24 Hz): SRIM's 21.61 and 22.04 Hz and the
+        # linear fit's read the detuning; the rig rings at 22.1-22.2 Hz once free (observed +1.9 % and +1.1 %)
         assert abs(results[name].frequency[0] / SRIM_FREQUENCY[name] - 1) < 0.025, (name, results[name].frequency)
 
 

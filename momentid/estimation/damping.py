@@ -176,12 +176,12 @@ def _meta(z: np.ndarray, s: np.ndarray, X: np.ndarray):
     covariance."""
     def wls(v):
         W = 1 / v
-        cov = np.linalg.inv(X.T @ (W[:, None] * X))
+        cov = np.linalg.pinv(X.T @ (W[:, None] * X))      # pinv: windows of one amplitude leave no slope
         return cov @ X.T @ (W * z), cov
     b, _ = wls(s ** 2)
     w = 1 / s ** 2
     q = float(np.sum(w * (z - X @ b) ** 2))
-    P = np.diag(w) - (w[:, None] * X) @ np.linalg.inv(X.T @ (w[:, None] * X)) @ (X.T * w[None, :])
+    P = np.diag(w) - (w[:, None] * X) @ np.linalg.pinv(X.T @ (w[:, None] * X)) @ (X.T * w[None, :])
     tau2 = max((q - (z.size - X.shape[1])) / max(float(np.trace(P)), 1e-300), 0.0)
     return wls(s ** 2 + tau2)
 
@@ -214,20 +214,31 @@ def _forced(runs, selection, sigma: dict, storey_index: list) -> list:
             w = single.omega(w_fit.theta) / (2 * np.pi)
             for k, i in enumerate(storey_index):
                 z, s = float(w_fit.theta[single.n + i]), float(sd[single.n + i])
-                if np.isfinite(z) and np.isfinite(s) and s > 0:
-                    out[k].append((z, s, float(w[i]), float(w[i] * sd[i]), _window_amplitude(window, w_fit, single, i)))
+                # a window whose frequency ends at its bound (no standard error: held there) read no mode
+                if not (np.isfinite(z) and np.isfinite(s) and s > 0 and sd[i] > 0):
+                    continue
+                amplitude, noise = _window_amplitude(window, w_fit, single, i, sigma[r])
+                # a window where the mode stands barely above the sensor noise (a quiet lead-in or tail)
+                # reads the noise's ripple, not the mode: it would lever any trend in amplitude
+                if amplitude >= MIN_SIGNAL_TO_NOISE * noise:
+                    out[k].append((z, s, float(w[i]), float(w[i] * sd[i]), amplitude))
     return out
 
 
-def _window_amplitude(window: RunData, w_fit, model, i: int) -> float:
+def _window_amplitude(window: RunData, w_fit, model, i: int, sigma: dict) -> tuple[float, float]:
     """RMS (m/s^2) of mode ``i``'s relative acceleration on its strongest floor in a window, read from the
-    record band-passed around the mode's frequency there."""
+    record band-passed around the mode's frequency there, and the white sensor noise's RMS in that band."""
     R = model.residues(w_fit.theta)
     j = int(np.argmax(np.abs(R[i])))
     f = float(model.omega(w_fit.theta)[i] / (2 * np.pi))
     band = ringdown.band_for(f, [f], window.sample_rate)
     env, _, _ = ringdown.envelope(window["zdd"] - window[f"a{j + 1}"], band, window.sample_rate)
-    return float(np.sqrt(np.mean(env ** 2) / 2))
+    return float(np.sqrt(np.mean(env ** 2) / 2)), _band_noise(sigma, j, band, window.sample_rate)
+
+
+def _band_noise(sigma: dict, j: int, band, sample_rate: float) -> float:
+    """RMS (m/s^2) of the white sensor noise of ``zdd - a<j+1>`` (standard deviations ``sigma``) in ``band`` (Hz)."""
+    return float(np.hypot(sigma["zdd"], sigma[f"a{j + 1}"]) * np.sqrt(2 * (band[1] - band[0]) / sample_rate))
 
 
 def resolve_damping(runs, selection, *, sigma) -> tuple:
@@ -272,7 +283,9 @@ def resolve_damping(runs, selection, *, sigma) -> tuple:
         # a record the linear fit explains must show a strong amplitude dependence (of the damping, or of
         # the frequency: a joint that slips softens too) before it is believed
         needed = STRONG_SIGMAS if linear else ringdown.SLOPE_SIGMAS
-        evidence = max(decay.evidence if decay is not None else 0.0,
+        # a trend read from fewer independent stretches than an answer needs is no evidence (Newey-West
+        # errors over two stretches are themselves a guess)
+        evidence = max(decay.evidence if decay is not None and decay.dof >= MIN_DOF else 0.0,
                        max(said.evidence, abs(_frequency_trend(windows[k])[1])) if said is not None else 0.0)
         changes = evidence > needed
         if decay is not None and (changes or not linear):
@@ -344,7 +357,7 @@ def weak_refusal(runs, selection, sigma, i: int) -> str:
             continue
         env, _, _ = ringdown.envelope(run["zdd"] - run[f"a{j + 1}"], band, fs)
         rms = float(np.sqrt(np.mean(env ** 2) / 2))
-        noise = float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"]) * np.sqrt(2 * (band[1] - band[0]) / fs))
+        noise = _band_noise(sigma[r], j, band, fs)
         if best is None or rms / max(noise, 1e-300) > best[0]:
             best = (rms / max(noise, 1e-300), rms, noise, band)
     if best is None:

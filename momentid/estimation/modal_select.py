@@ -22,9 +22,11 @@ too large (one mode fitted to two 1 % apart).  :func:`select_modes`:
    below 1 % and 50 %), a residue beyond :data:`SEEN_SIGMAS` standard errors on at least one sensor,
    separated from every other mode by more than the larger half-power half-width (closer than that,
    two poles describe one resonance's shape, not two modes), no mode fitted before turned unstable;
-   a residual-peak candidate must also remove :data:`NEIGHBOUR_MIN_SHARE` of the misfit above the
-   noise level (a rig that is not linear leaves residual beside every mode, which one more linear mode
-   lowers significantly but by a sliver).  Repeat, up to :data:`MAX_EXTRA` extra modes.
+   a residual-peak candidate, and a subspace pole within :data:`NEIGHBOURHOOD` of a fitted mode when
+   the misfit is far above the noise, must also remove :data:`NEIGHBOUR_MIN_SHARE` of the misfit above
+   the noise level (a rig that is not linear leaves residual beside every mode, which one more linear
+   mode lowers significantly but by a sliver; its subspace estimate holds a pole there stable too).
+   Repeat, up to :data:`MAX_EXTRA` extra modes.
 4. **Complex pairs.**  Two modes closer than :data:`CLOSE_PAIR` half-power half-widths, an
    appendage's and a storey's, share their damping in proportions the classical model cannot hold
    (their floors move out of phase): each such pair is tried with quadrature residues (complex modes),
@@ -288,10 +290,11 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
             if not why and np.any((model.zeta(fit.theta) > 0) & (np.delete(big.zeta(big_fit.theta), new) <= 0)):
                 why = "a mode fitted before turns unstable beside it"
             share = (fit.cost - big_fit.cost) / max(fit.cost - fit.dof, NOISE_FLOOR_SHARE * fit.dof)
-            if not why and source == "neighbour" and share < NEIGHBOUR_MIN_SHARE:
+            f_new = float(big.omega(big_fit.theta)[new] / (2 * np.pi))
+            if not why and share < NEIGHBOUR_MIN_SHARE and (source == "neighbour" or _beside_mode(
+                    model, fit, f_new)):
                 why = (f"it removes {share:.0%} of the misfit above the noise level (a residual beside a mode that "
                        f"one more linear mode barely lowers is the rig's nonlinearity)")
-            f_new = float(big.omega(big_fit.theta)[new] / (2 * np.pi))
             if why:
                 notes.append(f"a mode at {f_new:.4g} Hz was tried and rejected: {why}")
             elif best is None or big_fit.cost < best[1].cost:
@@ -308,6 +311,15 @@ def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
     extra = tuple(sorted((i for i in range(model.n) if i not in storey), key=lambda i: freq[i]))
     return ModeSelection(model=model, fit=fit, storey=storey, extra=extra, subspace=subspace,
                          independent=_independent(freq, subspace), notes=tuple(notes))
+
+
+def _beside_mode(model: ModalModel, fit: ModalFit, f_new: float) -> bool:
+    """Whether a new mode at ``f_new`` (Hz) lies within :data:`NEIGHBOURHOOD` of a fitted mode while the fit
+    leaves a misfit far above the noise (variance factor beyond :data:`NEIGHBOUR_SEARCH_SCALE`): a rig
+    whose mode moves with its amplitude leaves a pole beside it that a subspace estimate holds stable
+    over orders too, and one more linear mode there must take most of the misfit away to be believed."""
+    freq = model.omega(fit.theta) / (2 * np.pi)
+    return bool(fit.scale > NEIGHBOUR_SEARCH_SCALE and np.any(np.abs(f_new / freq - 1) < NEIGHBOURHOOD))
 
 
 def _drop_non_modes(model: ModalModel, fit: ModalFit, spectra_list, rates, f_max: float, masses, notes: list):

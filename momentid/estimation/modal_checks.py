@@ -187,7 +187,7 @@ def check(selection, values: dict, std: dict, runs, gain, offset, masses) -> tup
         elif np.isnan(independent[i]):
             notes.append(f"mode {i + 1} at {f[i]:.4g} Hz: no subspace pole is stable over model orders there, so "
                          f"its damping ratio has no second opinion from these data")
-    for e, mode in enumerate(extra_modes(selection)):
+    for mode in extra_modes(selection):
         disagreement = _disagreement(mode.damping_ratio, mode.damping_independent)
         if disagreement:
             out.append(f"extra mode at {mode.frequency:.4g} Hz: damping ratio {100 * mode.damping_ratio:.3g} % "

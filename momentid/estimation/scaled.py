@@ -37,7 +37,8 @@ from momentid.estimation.damping import resolve_damping
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import response_amplitude
 
-__all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend", "weighted_line"]
+__all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run",
+           "amplitude_trend", "weighted_line"]
 
 #: A residual variance factor above this says the linear model does not explain
 #: the data to the noise level (standard errors are inflated by its square root).
@@ -224,7 +225,8 @@ class ModalIdentification:
             lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  {z}{flag:<16} "
                          f"{source:<16}{100 * equivalent[i]:8.3f}          {check} {shape}")
         if self.extra_modes:
-            lines.append(f"extra modes (beyond the {self.storeys} storey modes; fitted so that they do not distort them):")
+            lines.append(f"extra modes (beyond the {self.storeys} storey modes; "
+                         "fitted so that they do not distort them):")
             for m in self.extra_modes:
                 seen = ", ".join(m.seen_by) or "no sensor beyond 3 standard errors"
                 lines.append(f"   +  {m.frequency:8.4f} +- {m.frequency_std:.4f}  {100 * m.damping_ratio:7.3f} +- "
@@ -387,8 +389,8 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     notes.append("C and M^-1 C hold the equivalent linear damping of the record (what replays it); the damping "
                  "ratios are the structure's at small amplitude")
     if selection.extra:
-        notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more than the "
-                     f"{d} storeys: the extra ones are fitted with the storey modes and reported apart")
+        notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more "
+                     f"than the {d} storeys: the extra ones are fitted with the storey modes and reported apart")
     has_k = masses is not None
     return ModalIdentification(
         frequency=values["frequency"], frequency_std=std["frequency"],
@@ -404,7 +406,8 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         noise=fit.noise_sources, f_max=fit.f_max, nfev=fit.nfev, notes=tuple(notes), warnings=tuple(warnings),
         extra_modes=extra_modes(selection),
         damping_ratio_subspace=selection.independent[list(selection.storey)], damping_is_answer=answer,
-        damping_ratio_equivalent=equivalent, equivalent_std=equivalent_std, damping_interval=np.array([m.interval for m in damping]),
+        damping_ratio_equivalent=equivalent, equivalent_std=equivalent_std,
+        damping_interval=np.array([m.interval for m in damping]),
         damping_refusal=tuple(m.refusal for m in damping), damping=damping,
     )
 
@@ -455,8 +458,8 @@ class AmplitudeTrend:
             lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {r.frequency[0]:8.4f} +- "
                          f"{r.frequency_std[0]:.4f}   {z:<30}{100 * r.linear_damping_ratio[0]:8.3f}")
         lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
-                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} +- {100 * self.damping_slope_std:.2g} "
-                     f"% per m/s^2"
+                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} "
+                     f"+- {100 * self.damping_slope_std:.2g} % per m/s^2"
                      f" ({self.verdict()})")
         return "\n".join(lines)
 

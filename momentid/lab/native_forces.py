@@ -125,19 +125,23 @@ _CALLBACKS: list = []   # [(control, act_dyn)] once compiled, [None] when unavai
 def _compile():
     """The control and act_dyn callbacks (numba ``cfunc``), or None when they cannot be built here."""
     try:
-        import numba
-        from llvmlite import ir
-        from numba import carray, types
-        from numba.core import cgutils
-        from numba.extending import intrinsic
+        pointer, call_force, call_rate = _intrinsics()   # numba's and llvmlite's parts imported
     except ImportError:
         return None
     offsets = _offsets()
     if offsets is None:
         return None
-    d_time, d_qpos, d_qvel, d_act, d_qfrc = (offsets[f"d_{f}"] for f in ("time", "qpos", "qvel", "act",
-                                                                          "qfrc_applied"))
-    m_nnumeric, m_numadr, m_numdata = offsets["m_nnumeric"], offsets["m_numeric_adr"], offsets["m_numeric_data"]
+    word, program = _readers(offsets, pointer)
+    return (_control_callback(offsets, pointer, word, program, call_force),
+            _act_dyn_callback(offsets, pointer, word, program, call_rate))
+
+
+def _intrinsics():
+    """numba intrinsics: an address as a pointer, and calls of a compiled law's force and rate at an address."""
+    from llvmlite import ir
+    from numba import types
+    from numba.core import cgutils
+    from numba.extending import intrinsic
 
     @intrinsic
     def pointer(typingctx, address):
@@ -165,6 +169,16 @@ def _compile():
         f8 = types.float64
         return f8(types.int64, types.int64, f8, f8, f8), codegen
 
+    return pointer, call_force, call_rate
+
+
+def _readers(offsets: dict[str, int], pointer):
+    """Jitted readers: the 8-byte word at an address, and the address of a model's program."""
+    import numba
+    from numba import carray
+
+    m_numadr, m_numdata = offsets["m_numeric_adr"], offsets["m_numeric_data"]
+
     @numba.njit(inline="always")
     def word(address):
         return carray(pointer(address), 1, np.int64)[0]
@@ -173,6 +187,18 @@ def _compile():
     def program(m):
         """Address of the model's program (its first numeric)."""
         return word(m + m_numdata) + 8 * np.int64(carray(pointer(word(m + m_numadr)), 1, np.int32)[0])
+
+    return word, program
+
+
+def _control_callback(offsets: dict[str, int], pointer, word, program, call_force):
+    """The control callback: every force of the model's program into ``qfrc_applied``."""
+    import numba
+    from numba import carray, types
+
+    d_time, d_qpos, d_qvel, d_act, d_qfrc = (offsets[f"d_{f}"] for f in ("time", "qpos", "qvel", "act",
+                                                                          "qfrc_applied"))
+    m_nnumeric = offsets["m_nnumeric"]
 
     @numba.njit(inline="always")
     def stretch(prog, k, qpos, qvel):
@@ -219,6 +245,16 @@ def _compile():
                 out[np.int64(prog[k + 3])] += f      # ... and on its lower one
             k += HEADER + np.int64(prog[k + 6])
 
+    return control
+
+
+def _act_dyn_callback(offsets: dict[str, int], pointer, word, program, call_rate):
+    """The actuator-dynamics callback: the state rate of the force whose state ``actuator`` holds."""
+    import numba
+    from numba import carray, types
+
+    d_qpos, d_qvel, d_act = offsets["d_qpos"], offsets["d_qvel"], offsets["d_act"]
+
     @numba.cfunc(types.float64(types.int64, types.int64, types.int32))
     def act_dyn(m, d, actuator):
         base = program(m)
@@ -240,7 +276,7 @@ def _compile():
             k += HEADER + np.int64(head[6])
         return 0.0
 
-    return control, act_dyn
+    return act_dyn
 
 
 def _callbacks():

@@ -22,18 +22,19 @@ Standard errors of every derived quantity: delta method from the fit's covarianc
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from momentid.core.analytic import Modes
-from momentid.core.series import Experiment
+from momentid.core.series import Experiment, RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.modal import ModalModel
 from momentid.estimation.modal_checks import ExtraMode, check, extra_modes
-from momentid.estimation.modal_select import select_modes
-from momentid.estimation.damping import resolve_damping
+from momentid.estimation.modal_select import ModeSelection, select_modes
+from momentid.estimation.damping import ModeDamping, resolve_damping
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import response_amplitude
 
@@ -330,28 +331,10 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         No noise source, fewer resonances than storeys, a singular fit, or a floor sensor whose gain
         the data put outside 0.5-2 of the table's.
     """
-    from momentid.io.run_checks import check_run
-
-    selected = experiment.select(runs)
-    if not selected:
-        raise IdentificationError(f"{experiment.source}: no runs to identify from")
-    d = experiment.storeys
     notes: list[str] = []
-    checked = []
-    for run in selected:
-        run, repairs = check_run(run, experiment.source)
-        notes.extend(repairs)
-        checked.append(run)
-    selected = tuple(checked)
-    added = selected[0].added_mass
-    if any(not np.array_equal(r.added_mass, added) for r in selected):
-        raise IdentificationError(
-            f"{experiment.source}: runs {[r.name for r in selected]} carry different added masses: one modal "
-            f"model fits runs of one structure; fit them one by one (--per-run)")
-    masses = _masses(experiment, notes)
-    if masses is not None and np.any(added):
-        masses = tuple(float(m) for m in np.asarray(masses) + added)
-        notes.append(f"masses include the run's added mass: {list(masses)} kg")
+    selected = _checked_runs(experiment, runs, notes)
+    d = experiment.storeys
+    masses = _run_masses(experiment, selected[0].added_mass, notes)
     stated = dict(experiment.statement.noise) if experiment.statement is not None else None
     with threadpool_limits(limits=1, user_api="blas"):     # small dense products: threads only add waiting
         selection = select_modes(selected, d, masses=masses, stated=stated)
@@ -362,32 +345,14 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     m_arr = None if masses is None else np.asarray(masses, float)
     values = _derived(storey_model, theta, m_arr)
     std = _delta(storey_model, theta, cov, m_arr)
-    sd_all = np.sqrt(np.clip(np.diag(cov), 0, None))
-    gain = np.array([storey_model.sensors(theta, r)[0] for r in range(len(selected))])
-    offset = np.array([storey_model.sensors(theta, r)[1] for r in range(len(selected))])
-    slices = [storey_model.sensor_slice(r) for r in range(len(selected))]
-    gain_std = np.array([gain[r] * sd_all[s.start:s.start + d] for r, s in enumerate(slices)])
-    offset_std = np.array([sd_all[s.start + d:s.stop] for s in slices])
+    gain, offset, gain_std, offset_std = _sensor_estimates(storey_model, theta, cov, len(selected))
     amplitude = np.array([response_amplitude(r, d, quiet_lead_in(r)) for r in selected])
     warnings, check_notes, answer = check(selection, values, std, selected, gain, offset, masses)
     notes += _notes(fit, selected, offset, values, len(selected)) + list(selection.notes) + list(fit.notes)
     notes += check_notes
     equivalent, equivalent_std = values["damping_ratio"].copy(), std["damping_ratio"].copy()
-    sigma = [estimate_noise(r, f_max=fit.f_max, stated=stated).sigma for r in selected]
-    with threadpool_limits(limits=1, user_api="blas"):
-        damping = resolve_damping(selected, selection, sigma=sigma)
-    order = np.argsort([model.omega(fit.theta)[i] for i in selection.storey])     # storey order -> ascending
-    damping = tuple(damping[k] for k in order)
+    damping = _small_amplitude_damping(selected, selection, stated, values["frequency"], warnings, notes)
     answer = answer & np.array([m.is_answer for m in damping])
-    for i, m in enumerate(damping):
-        if not m.is_answer:
-            warnings.append(f"mode {i + 1} at {values['frequency'][i]:.4g} Hz: damping at small amplitude NOT AN "
-                            f"ANSWER: {m.refusal}; the equivalent linear damping over the record is "
-                            f"{100 * m.equivalent:.3g} %")
-        else:
-            notes.append(f"mode {i + 1} at {values['frequency'][i]:.4g} Hz: {m.words()}")
-    notes.append("C and M^-1 C hold the equivalent linear damping of the record (what replays it); the damping "
-                 "ratios are the structure's at small amplitude")
     if selection.extra:
         notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more "
                      f"than the {d} storeys: the extra ones are fitted with the storey modes and reported apart")
@@ -410,6 +375,71 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         damping_interval=np.array([m.interval for m in damping]),
         damping_refusal=tuple(m.refusal for m in damping), damping=damping,
     )
+
+
+def _checked_runs(experiment: Experiment, runs: Sequence[str] | None, notes: list[str]) -> tuple[RunData, ...]:
+    """The runs to fit, each checked (its repairs appended to ``notes``); refused when there are none or
+    when they carry different added masses."""
+    from momentid.io.run_checks import check_run
+
+    selected = experiment.select(runs)
+    if not selected:
+        raise IdentificationError(f"{experiment.source}: no runs to identify from")
+    checked = []
+    for run in selected:
+        run, repairs = check_run(run, experiment.source)
+        notes.extend(repairs)
+        checked.append(run)
+    selected = tuple(checked)
+    added = selected[0].added_mass
+    if any(not np.array_equal(r.added_mass, added) for r in selected):
+        raise IdentificationError(
+            f"{experiment.source}: runs {[r.name for r in selected]} carry different added masses: one modal "
+            f"model fits runs of one structure; fit them one by one (--per-run)")
+    return selected
+
+
+def _run_masses(experiment: Experiment, added: np.ndarray, notes: list[str]) -> tuple[float, ...] | None:
+    """The floor masses (kg) the runs carry: the stated ones plus the runs' ``added`` mass (None unstated)."""
+    masses = _masses(experiment, notes)
+    if masses is not None and np.any(added):
+        masses = tuple(float(m) for m in np.asarray(masses) + added)
+        notes.append(f"masses include the run's added mass: {list(masses)} kg")
+    return masses
+
+
+def _sensor_estimates(model: ModalModel, theta: np.ndarray, cov: np.ndarray, n_runs: int) -> tuple[np.ndarray, ...]:
+    """Per run and floor sensor: gain, clock offset (s) and their standard errors, each ``(n_runs, d)``."""
+    d = model.d
+    sd_all = np.sqrt(np.clip(np.diag(cov), 0, None))
+    gain = np.array([model.sensors(theta, r)[0] for r in range(n_runs)])
+    offset = np.array([model.sensors(theta, r)[1] for r in range(n_runs)])
+    slices = [model.sensor_slice(r) for r in range(n_runs)]
+    gain_std = np.array([gain[r] * sd_all[s.start:s.start + d] for r, s in enumerate(slices)])
+    offset_std = np.array([sd_all[s.start + d:s.stop] for s in slices])
+    return gain, offset, gain_std, offset_std
+
+
+def _small_amplitude_damping(selected: tuple[RunData, ...], selection: ModeSelection, stated: dict | None,
+                             frequency: np.ndarray, warnings: list[str], notes: list[str]) -> tuple[ModeDamping, ...]:
+    """Each storey mode's damping at small amplitude, in ascending frequency order; what each says (or why
+    it is no answer) appended to ``notes`` (``warnings``)."""
+    fit, model = selection.fit, selection.model
+    sigma = [estimate_noise(r, f_max=fit.f_max, stated=stated).sigma for r in selected]
+    with threadpool_limits(limits=1, user_api="blas"):
+        damping = resolve_damping(selected, selection, sigma=sigma)
+    order = np.argsort([model.omega(fit.theta)[i] for i in selection.storey])     # storey order -> ascending
+    damping = tuple(damping[k] for k in order)
+    for i, m in enumerate(damping):
+        if not m.is_answer:
+            warnings.append(f"mode {i + 1} at {frequency[i]:.4g} Hz: damping at small amplitude NOT AN "
+                            f"ANSWER: {m.refusal}; the equivalent linear damping over the record is "
+                            f"{100 * m.equivalent:.3g} %")
+        else:
+            notes.append(f"mode {i + 1} at {frequency[i]:.4g} Hz: {m.words()}")
+    notes.append("C and M^-1 C hold the equivalent linear damping of the record (what replays it); the damping "
+                 "ratios are the structure's at small amplitude")
+    return damping
 
 
 def _notes(fit, runs, offset, values, n_runs) -> list[str]:

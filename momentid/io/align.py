@@ -145,6 +145,7 @@ class SensorReport:
     notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
+        """The report as a JSON-ready dict (``alignment`` by its value); :meth:`from_dict` reads it back."""
         out = asdict(self)
         out["alignment"] = self.alignment.value
         out["notes"] = list(self.notes)
@@ -152,6 +153,7 @@ class SensorReport:
 
     @classmethod
     def from_dict(cls, data: dict) -> SensorReport:
+        """The report of a :meth:`to_dict` dict (a ``clock_error`` of None is nan)."""
         fields = dict(data, alignment=Alignment(data["alignment"]), notes=tuple(data.get("notes", ())))
         fields["clock_error"] = float("nan") if fields["clock_error"] is None else fields["clock_error"]
         return cls(**fields)

@@ -6,7 +6,7 @@ import enum
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -202,8 +202,8 @@ def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def repair_missing(values: np.ndarray, rows, names, where: str, what: str = "samples"
-                   ) -> tuple[np.ndarray, slice, list[str]]:
+def repair_missing(values: np.ndarray, rows: Callable[[int, int], str], names: Sequence[str], where: str,
+                   what: str = "samples") -> tuple[np.ndarray, slice, list[str]]:
     """Interpolate short runs of missing (``nan``) samples; refuse long ones.
 
     Parameters

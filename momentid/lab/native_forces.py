@@ -26,12 +26,13 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sequence
 
 import mujoco
 import numpy as np
 
 from momentid import mechanisms as registry
+from momentid.core.structure import Mechanism, Structure
 
 __all__ = ["PROGRAM", "HEADER", "ENABLED", "program_size", "add_program", "available", "load_program", "installed",
            "state_actuator", "applies", "threadable", "plain"]
@@ -50,7 +51,7 @@ def state_actuator(k: int) -> str:
     return f"state{k + 1}"
 
 
-def program_size(mechanisms) -> int:
+def program_size(mechanisms: Iterable[Mechanism]) -> int:
     """Entries of the program of ``mechanisms`` (0 without a callback force): a count, then per force
     :data:`HEADER` entries and its parameters."""
     sizes = [HEADER + len(registry.get(m.type).params) + registry.get(m.type).needs_stiffness
@@ -58,7 +59,7 @@ def program_size(mechanisms) -> int:
     return 1 + sum(sizes) if sizes else 0
 
 
-def add_program(spec: mujoco.MjSpec, mechanisms) -> None:
+def add_program(spec: mujoco.MjSpec, mechanisms: Iterable[Mechanism]) -> None:
     """Add the (empty) program of ``mechanisms``' callback forces to ``spec``: the first custom numeric."""
     size = program_size(mechanisms)
     if size:
@@ -290,7 +291,7 @@ def available() -> bool:
     return ENABLED and _callbacks() is not None
 
 
-def load_program(model: mujoco.MjModel, mechanisms, structure=None) -> bool:
+def load_program(model: mujoco.MjModel, mechanisms: Iterable[Mechanism], structure: Structure | None = None) -> bool:
     """Fill ``model``'s program with the callback forces of ``mechanisms`` (``structure``: the storey
     stiffnesses a ``needs_stiffness`` kind takes its fraction of).  False, the model untouched, when the
     native callbacks cannot apply them (not :func:`available`, a kind without a native law, a model
@@ -327,14 +328,14 @@ def load_program(model: mujoco.MjModel, mechanisms, structure=None) -> bool:
     return True
 
 
-def applies(mechanisms) -> bool:
+def applies(mechanisms: Iterable[Mechanism]) -> bool:
     """True when the native callbacks apply every callback force of ``mechanisms`` (so their rollouts
     need no Python: they may run on threads side by side)."""
     forces = [m for m in mechanisms if registry.get(m.type).callback]
     return available() and all(registry.get(m.type).native_law() is not None for m in forces)
 
 
-def threadable(mechanisms) -> bool:
+def threadable(mechanisms: Sequence[Mechanism]) -> bool:
     """True when rollouts of models with ``mechanisms`` run no Python in MuJoCo's step: no callback force,
     or every one native (:func:`applies`); such rollouts may run on threads side by side, with each other
     and with those of models with no callback force (the native control callback leaves a model without a

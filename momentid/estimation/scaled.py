@@ -22,7 +22,7 @@ Standard errors of every derived quantity: delta method from the fit's covarianc
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -150,6 +150,7 @@ class ModalIdentification:
 
     @property
     def storeys(self) -> int:
+        """Number of storey modes ``d``."""
         return self.frequency.shape[0]
 
     @property
@@ -310,7 +311,7 @@ def _delta(model: ModalModel, theta, cov, masses) -> dict:
         np.shape(base[k])) for k, g in grads.items()}
 
 
-def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
+def identify_modal(experiment: Experiment, runs: Sequence[str] | None = None) -> ModalIdentification:
     """Identify modes (and K, C with stated masses) from runs without added mass.
 
     Parameters
@@ -479,6 +480,7 @@ class AmplitudeTrend:
     damping_slope_std: float
 
     def table(self) -> str:
+        """A text table: each run's response amplitude and mode 1, then the trend and its verdict."""
         lines = ["run                 RMS response (m/s^2)  mode-1 frequency (Hz)  mode-1 damping at small "
                  "amplitude (%)   equiv. linear (%)"]
         for r in self.results:
@@ -510,13 +512,14 @@ class AmplitudeTrend:
         return "no trend beyond two standard errors"
 
     def to_dict(self) -> dict:
+        """The per-run results and the slopes (per m/s^2 of RMS response) with their standard errors."""
         return {"runs": [r.to_dict() for r in self.results],
                 "frequency_slope_hz_per_m_s2": self.frequency_slope,
                 "frequency_slope_std": self.frequency_slope_std,
                 "damping_slope_per_m_s2": self.damping_slope, "damping_slope_std": self.damping_slope_std}
 
 
-def identify_per_run(experiment: Experiment, runs=None) -> tuple:
+def identify_per_run(experiment: Experiment, runs: Sequence[str] | None = None) -> tuple[ModalIdentification, ...]:
     """:func:`identify_modal` on every run on its own, on the machine's cores (forked workers, see
     :func:`momentid.core.processes.run_forked`); tuple of results in run order."""
     from momentid.core.processes import run_forked
@@ -533,7 +536,7 @@ MODAL_UNITS = {"frequency_hz": "Hz", "damping_ratio": "1 (fraction of critical)"
                "residual_rms": "m/s^2", "f_max_hz": "Hz"}
 
 
-def weighted_line(x, y, s):
+def weighted_line(x: np.ndarray, y: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, float]:
     """Weighted least-squares line ``y = c0 + c1 x`` (weights ``1/s^2``).
 
     Parameters
@@ -562,7 +565,7 @@ def _slope(x, y, s):
     return float(coef[1]), std
 
 
-def amplitude_trend(results) -> AmplitudeTrend:
+def amplitude_trend(results: Iterable[ModalIdentification]) -> AmplitudeTrend:
     """Mode 1's frequency and damping ratio against response amplitude over per-run results.
 
     Raises

@@ -18,7 +18,7 @@ __all__ = ["Identification", "identification_result", "rayleigh_kappa", "MAX_NOI
 
 @dataclass(frozen=True)
 class Identification:
-    """Result of :func:`identify`.
+    """Result of :func:`~momentid.estimation.identification.identify` on runs with added mass.
 
     Attributes
     ----------

@@ -308,7 +308,7 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...],
         Their channel names (``("zdd", "a1", ..., "ad")``).
     delays : dict, optional
         Per floor channel, ``(samples, note)``: the delay of its data behind its stamps that the
-        other runs of the experiment agree on (:func:`common_delays`), applied to its stamps before
+        other runs of the experiment agree on (:func:`~momentid.io.delays.common_delays`), applied to its stamps before
         the data confirm them, with the note.
 
     Returns

@@ -60,7 +60,7 @@ class _Scan:
 
 
 def read_recording(path: str | os.PathLike) -> Experiment:
-    """Read a recording written by :class:`RecordingWriter` (or any writer
+    """Read a recording written by :class:`~momentid.io.recording.RecordingWriter` (or any writer
     following ``docs/recording-format.md``).
 
     One streaming pass checks every chunk CRC and decodes every block, so a

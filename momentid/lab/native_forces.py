@@ -11,9 +11,9 @@ actuator-dynamics callbacks (``mujoco.set_mjcb_control`` takes a C function poin
   (:mod:`momentid.mechanisms.native`), the dofs of its link's upper and lower floors, its state's
   activation address and actuator, and the law's parameter vector.  So one installed callback serves
   every model at once, each reading its own forces: many models on ``mujoco.rollout``'s threads;
-- :func:`control` writes, at every call, each force across its link into ``qfrc_applied`` (on the upper
+- the ``control`` callback writes, at every call, each force across its link into ``qfrc_applied`` (on the upper
   floor's dof against the stretch, on the lower one's with it), as the Python callback does;
-  :func:`act_dyn` returns a force's state rate for its state actuator.
+  the ``act_dyn`` callback returns a force's state rate for its state actuator.
 
 The callbacks read ``mjModel`` and ``mjData`` through their C layout, taken from MuJoCo's own
 description of its structs (``mujoco.introspect``) and checked against a live model and data before

@@ -1,4 +1,5 @@
-"""How a kind sizes a screened candidate: each kind brings its own (:meth:`MechanismKind.size`).
+"""How a kind sizes a screened candidate: each kind brings its own
+(:meth:`~momentid.mechanisms.base.MechanismKind.size`).
 
 The diagnosis hands a kind a :class:`Sizer` (its re-simulation of the training runs:
 :class:`momentid.diagnosis.added_mass.resimulation.Refitter`) and the screened parameters; the kind returns the model it

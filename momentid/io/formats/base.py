@@ -36,7 +36,7 @@ GZIP_CHUNK = 4 * 2 ** 20
 #: Peak memory of reading a text file, per byte of text: the text, its lines and the parsed table.
 TEXT_MEMORY_FACTOR = 4.0
 #: Longest run of consecutive missing samples a reader interpolates over (the same limit as
-#: identification's repair, :data:`momentid.lab.sensors.MAX_REPAIR_GAP`): 5 samples are 42 ms at
+#: identification's repair, :data:`momentid.io.run_checks.MAX_REPAIR_GAP`): 5 samples are 42 ms at
 #: 120 Hz, a tenth of the shortest period of a bench-top model's modes; across a longer gap a straight
 #: line would invent the response.
 MAX_REPAIR_GAP = 5

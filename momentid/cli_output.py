@@ -6,13 +6,22 @@ Used by :mod:`momentid.cli`; every refusal is an :class:`OutputError` (a
 
 from __future__ import annotations
 
+import argparse
+from collections.abc import Callable, Iterator
 import contextlib
 import io
 import os
 import sys
 from pathlib import Path
+from typing import Any, TYPE_CHECKING
 
 from momentid.errors import MomentidError
+
+if TYPE_CHECKING:
+    from momentid.core.series import Experiment
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
+    from momentid.report.page import Provenance
 
 __all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json_on_stdout", "report_page",
            "identification_output", "write_identification_folder", "refuse_empty_paths"]
@@ -22,7 +31,7 @@ __all__ = ["OutputError", "output_path", "output_folder", "replaced", "only_json
 PATH_OPTIONS = (("output", "-o"), ("save", "--save"))
 
 
-def refuse_empty_paths(args) -> None:
+def refuse_empty_paths(args: argparse.Namespace) -> None:
     """Refuse an empty output path (``-o ""``, ``--save ""``: an unset shell variable, say), which would
     mean the current folder, the default one, or no output at all depending on the command."""
     for key, option in PATH_OPTIONS:
@@ -59,7 +68,7 @@ class OutputError(MomentidError):
         super().__init__(f"{option} {out}: {expected}")
 
 
-def output_folder(out) -> Path:
+def output_folder(out: str | os.PathLike) -> Path:
     """``-o`` as a folder to write into: refused when a file stands there."""
     p = Path(out)
     if p.exists() and not p.is_dir():
@@ -68,7 +77,7 @@ def output_folder(out) -> Path:
 
 
 @contextlib.contextmanager
-def only_json_on_stdout(active: bool):
+def only_json_on_stdout(active: bool) -> Iterator[None]:
     """Context manager: with ``active`` (``--json``), stdout carries exactly one JSON object: anything
     native code writes to file descriptor 1 (LAPACK's ``** On entry to ...`` lines, say) goes to
     stderr instead; Python's ``print`` still reaches stdout.  Inactive, or when stdout is not file
@@ -95,7 +104,7 @@ def only_json_on_stdout(active: bool):
         os.close(saved)
 
 
-def identification_output(args) -> Path | None:
+def identification_output(args: argparse.Namespace) -> Path | None:
     """``identify -o DIR``: the folder, checked under the one output rule before the work
     (:func:`momentid.report.files.identification_folder`); None without ``-o``."""
     from momentid.report.files import IDENTIFICATION_FILES, identification_folder
@@ -107,8 +116,11 @@ def identification_output(args) -> Path | None:
     return out
 
 
-def write_identification_folder(out: Path, result, experiment, payload: dict, args, **extra) -> None:
-    """``identify -o DIR``: the folder, and one line naming what it holds (stderr with ``--json``)."""
+def write_identification_folder(out: Path,
+                                result: Identification | ModalIdentification | tuple[ModalIdentification, ...],
+                                experiment: Experiment, payload: dict, args: argparse.Namespace, **extra: Any) -> None:
+    """``identify -o DIR``: the folder, and one line naming what it holds (stderr with ``--json``); ``extra``:
+    :func:`momentid.report.files.write_identification`'s ``comparison`` or ``trend``."""
     from momentid.report.files import write_identification
     from momentid.report.page import provenance
 
@@ -117,7 +129,7 @@ def write_identification_folder(out: Path, result, experiment, payload: dict, ar
     print(f"\nreport written to {out}/ ({', '.join(names)})", file=sys.stderr if args.json else sys.stdout)
 
 
-def report_page(out: Path, page, args) -> str:
+def report_page(out: Path, page: Callable[[Provenance], str], args: argparse.Namespace) -> str:
     """Write ``out/report.html``, ``page(provenance)``'s HTML; returns its name."""
     from momentid.report.files import REPORT_HTML
     from momentid.report.page import provenance, write_text_atomic

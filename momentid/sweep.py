@@ -69,7 +69,7 @@ class Sweep:
     cases: tuple[Case, ...]
 
 
-def load_sweep(path) -> Sweep:
+def load_sweep(path: str | os.PathLike) -> Sweep:
     """Read and validate a sweep file (see the module docstring)."""
     path = Path(path)
     return parse_sweep(load_toml(path), source=path)
@@ -104,7 +104,7 @@ def _variant(base: dict, values: dict, base_path: Path, text: str) -> Scenario:
     return parse_scenario(data, source=base_path, text=text)
 
 
-def parse_sweep(data: dict, *, source="<string>") -> Sweep:
+def parse_sweep(data: dict, *, source: str | os.PathLike = "<string>") -> Sweep:
     """Validate an already-parsed sweep file and build every case's scenario."""
     from momentid.estimation.identification import ESTIMATORS
 
@@ -302,7 +302,7 @@ def _flat(row: dict) -> dict:
     return out
 
 
-def table_path(path) -> Path:
+def table_path(path: str | os.PathLike) -> Path:
     """``path`` as a result table's name (``.csv`` or ``.json``), checked before a sweep starts."""
     path = Path(path)
     if path.suffix not in (".csv", ".json"):
@@ -310,7 +310,7 @@ def table_path(path) -> Path:
     return path
 
 
-def table_text(rows: list[dict], path) -> str:
+def table_text(rows: list[dict], path: str | os.PathLike) -> str:
     """The rows as CSV (``.csv``, one flat row per case) or JSON (``.json``), by ``path``'s suffix."""
     if table_path(path).suffix == ".json":
         return json.dumps(rows, indent=2, allow_nan=False) + "\n"
@@ -322,7 +322,7 @@ def table_text(rows: list[dict], path) -> str:
     return out.getvalue()
 
 
-def write_table(rows: list[dict], path) -> Path:
+def write_table(rows: list[dict], path: str | os.PathLike) -> Path:
     """Write the rows as CSV (``.csv``, one flat row per case) or JSON (``.json``), whole or not at
     all and locked against a second writer (:func:`momentid.io.exclusive.write_whole`)."""
     return write_whole(table_path(path), table_text(rows, path).encode("utf-8"))

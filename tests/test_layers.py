@@ -22,7 +22,8 @@ PACKAGE = "momentid"
 #: The layer of each top-level part of the package.
 LAYER_OF = {"core": "core", "errors": "core", "io": "io", "mechanisms": "mechanisms", "lab": "lab",
             "estimation": "estimation", "twin": "twin", "diagnosis": "diagnosis", "report": "report",
-            "cli": "cli", "cli_output": "cli", "cli_values": "cli", "sweep": "cli", "__main__": "cli", "": "cli"}
+            "cli": "cli", "cli_commands": "cli", "cli_output": "cli", "cli_values": "cli", "sweep": "cli",
+            "__main__": "cli", "": "cli"}
 #: Rank of each layer, lowest first; layers of one rank are independent of each other.
 RANK = {"core": 0, "io": 1, "mechanisms": 1, "lab": 2, "estimation": 3, "twin": 4, "diagnosis": 5, "report": 6,
         "cli": 7}

@@ -7,9 +7,11 @@ Vocabulary (used across momentid): ``d`` storeys, floor 1 = lowest; ``M``,
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.linalg
 
 from momentid.errors import ScenarioError
@@ -22,7 +24,7 @@ __all__ = [
 ]
 
 
-def shear_stiffness(storey_stiffness) -> np.ndarray:
+def shear_stiffness(storey_stiffness: ArrayLike) -> np.ndarray:
     """Stiffness matrix of a shear building.
 
     Parameters
@@ -70,7 +72,7 @@ class Modes:
     shapes: np.ndarray
 
 
-def modal_properties(M, C, K) -> Modes:
+def modal_properties(M: ArrayLike, C: ArrayLike, K: ArrayLike) -> Modes:
     """Natural frequencies and damping ratios of a (possibly identified) model.
 
     Parameters
@@ -117,8 +119,9 @@ def modal_properties(M, C, K) -> Modes:
     )
 
 
-def rayleigh_coefficients(M, K, damping_ratios, modes=(1, 2), *, file="<scenario>",
-                          key="structure.damping") -> tuple[float, float]:
+def rayleigh_coefficients(M: ArrayLike, K: ArrayLike, damping_ratios: Sequence[float],
+                          modes: tuple[int, int] = (1, 2), *, file: str = "<scenario>",
+                          key: str = "structure.damping") -> tuple[float, float]:
     """Rayleigh ``mu`` (1/s) and ``kappa`` (s) giving two modes chosen ratios.
 
     Solves ``zeta_r = mu / (2 w_r) + kappa w_r / 2`` for the two modes

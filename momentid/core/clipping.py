@@ -21,8 +21,8 @@ CLIP_STEP_QUANTA = 2.5
 PEAK_TOLERANCE = 1e-12
 
 
-def runs_of(mask: np.ndarray):
-    """(start, stop) of every run of True in a boolean vector."""
+def runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of every run of True in a boolean vector, shape (n,): ``mask[start:stop]`` is the run."""
     padded = np.concatenate([[False], mask, [False]])
     edges = np.flatnonzero(np.diff(padded.astype(np.int8)))
     return list(zip(edges[::2], edges[1::2]))

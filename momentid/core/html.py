@@ -11,6 +11,10 @@ from __future__ import annotations
 import html
 import math
 from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = ["Raw", "escape", "count", "channel_words", "table", "matrix_table", "word_lines", "warnings_list", "summary",
            "pm", "percent_pm", "SUMMARY_CSS", "REFUSED"]
@@ -45,7 +49,7 @@ class Raw(str):
     """A string that is already HTML (made by this module): :func:`escape` leaves it as it is."""
 
 
-def escape(value) -> str:
+def escape(value: object) -> str:
     """``value`` as HTML text: ``<``, ``>``, ``&`` and quotes escaped; :class:`Raw` unchanged."""
     if isinstance(value, Raw):
         return str(value)
@@ -133,7 +137,8 @@ def summary(headline: str, body: str) -> str:
             f'<p class="headline">{_marked(headline)}</p>\n{body}</div>\n')
 
 
-def matrix_table(X, S=None, *, caption: str, digits: int = 4) -> str:
+def matrix_table(X: Sequence[Sequence[float]] | np.ndarray, S: Sequence[Sequence[float]] | np.ndarray | None = None,
+                 *, caption: str, digits: int = 4) -> str:
     """A matrix (rows: floor 1 first) as a table, each entry ``x ± s`` (4 significant digits; the standard
     error's 2) when ``S`` (same shape) is given."""
     rows = []

@@ -10,8 +10,10 @@ floor velocities relative to the base (m/s); floor 1 is the lowest.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +26,7 @@ __all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe", "run_n
 UNITS = {"zdd": "m/s^2", "z": "m", "zd": "m/s", "a": "m/s^2", "q": "m", "v": "m/s"}
 
 
-def json_safe(obj):
+def json_safe(obj: Any) -> Any:
     """``obj`` with non-finite floats as None (strict JSON), through dicts, lists and tuples."""
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
@@ -35,7 +37,7 @@ def json_safe(obj):
     return obj
 
 
-def run_name_problem(name) -> str | None:
+def run_name_problem(name: object) -> str | None:
     """Why ``name`` cannot name a run, or None when it can.
 
     A run name is printed in one-line reports and becomes part of file names: it must be a non-empty
@@ -107,6 +109,7 @@ class RunData:
 
     @property
     def n_samples(self) -> int:
+        """Number of samples of the run."""
         return self.time.shape[0]
 
     @property
@@ -117,6 +120,7 @@ class RunData:
         return (self.n_samples - 1) / (self.time[-1] - self.time[0])
 
     def has(self, channel: str) -> bool:
+        """Whether the run holds channel ``channel`` (``"zdd"``, ``"a1"``, ...)."""
         return channel in self.channels
 
     def __getitem__(self, channel: str) -> np.ndarray:
@@ -169,13 +173,16 @@ class Experiment:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys ``d`` (the length of the first run's added-mass vector)."""
         return self.runs[0].added_mass.shape[0]
 
     @property
     def name(self) -> str:
+        """The scenario's name, ``"experiment"`` when it has none."""
         return self.scenario.get("name", "experiment")
 
     def run(self, name: str) -> RunData:
+        """The run named ``name``; a :class:`~momentid.errors.SensorDataError` when there is none."""
         for r in self.runs:
             if r.name == name:
                 return r
@@ -183,7 +190,7 @@ class Experiment:
             f"{self.source}: no run named {name!r}; runs are {', '.join(r.name for r in self.runs)}"
         )
 
-    def select(self, names=None) -> tuple[RunData, ...]:
+    def select(self, names: Iterable[str] | None = None) -> tuple[RunData, ...]:
         """The runs named ``names``, in that order (every run when None).
 
         A run named twice is refused: its samples would count twice, and every standard error

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.core import analytic
 
@@ -47,6 +48,7 @@ class Structure:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys (and floors) ``d``."""
         return len(self.masses)
 
     def mass_matrix(self) -> np.ndarray:
@@ -57,7 +59,7 @@ class Structure:
         """``K``, shape (d, d), N/m."""
         return analytic.shear_stiffness(self.storey_stiffness)
 
-    def damping_matrix(self, added_mass=None) -> np.ndarray:
+    def damping_matrix(self, added_mass: ArrayLike | None = None) -> np.ndarray:
         """``C = mu (M + dM) + kappa K``, shape (d, d), N*s/m."""
         M = self.mass_matrix()
         if added_mass is not None:
@@ -65,10 +67,12 @@ class Structure:
         return self.rayleigh_mu * M + self.rayleigh_kappa * self.stiffness_matrix()
 
     def to_dict(self) -> dict:
+        """The fields as a JSON-ready dict (tuples as lists); :meth:`from_dict` reads it back."""
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(self).items()}
 
     @classmethod
     def from_dict(cls, data: dict) -> Structure:
+        """The structure of a :meth:`to_dict` dict (``base_mass`` defaults when absent)."""
         return cls(
             masses=tuple(float(x) for x in data["masses"]),
             storey_stiffness=tuple(float(x) for x in data["storey_stiffness"]),
@@ -90,6 +94,7 @@ class Mechanism:
     parameters: tuple[tuple[str, float], ...]
 
     def get(self, name: str) -> float:
+        """The value of parameter ``name`` (a ``KeyError`` when the mechanism has none)."""
         return dict(self.parameters)[name]
 
 

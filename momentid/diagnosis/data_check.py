@@ -42,6 +42,7 @@ class Finding:
     runs: tuple[str, ...]
 
     def to_dict(self) -> dict:
+        """The finding as ``report.json`` lists it."""
         return {"mechanism": self.kind.name, "location": self.place.location, "parameters": self.parameters,
                 "share": self.share, "runs": list(self.runs)}
 
@@ -54,6 +55,9 @@ class DataEvidence(Evidence):
     run: str
 
     def words(self, diag: Diagnosis) -> str:
+        """Per finding: the fault the channel shows, its size and share of the samples; then why the model-based
+        stages did not run, and the nominal model's replay with the fault.
+        """
         lines = []
         for f in self.findings:
             unit = f.kind.fitted.unit if f.kind.fitted.unit != "channel unit" else channel_unit(f.place.index)
@@ -69,9 +73,11 @@ class DataEvidence(Evidence):
         return "\n".join(lines)
 
     def plot_replay(self, diag: Diagnosis, path: Path) -> None:
+        """``replay.png``: :func:`momentid.diagnosis.figures.plot_replay`."""
         figures.plot_replay(diag, path)
 
     def to_dict(self) -> dict:
+        """The findings, as ``report.json`` lists them."""
         return {"findings": [f.to_dict() for f in self.findings], "path": "data check"}
 
 

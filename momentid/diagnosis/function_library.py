@@ -18,6 +18,7 @@ each lowers the held-out residual by a clear share of the excess over the noise.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,7 +61,8 @@ class Column:
     signal: np.ndarray
 
 
-def hysteretic_columns(velocities: list[np.ndarray], peaks: list[float], segments, dt: float) -> list[list[Column]]:
+def hysteretic_columns(velocities: list[np.ndarray], peaks: list[float], segments: Sequence[tuple[int, int]],
+                       dt: float) -> list[list[Column]]:
     """Bouc-Wen states over the grid (:data:`YIELD_FRACTIONS` x :data:`EXPONENTS`) at several places at
     once, integrated run by run from each place's measured velocity (n,) (m/s); ``peaks``: each
     place's peak ``|x|`` (m).  Returns each place's columns."""
@@ -74,7 +76,8 @@ def hysteretic_columns(velocities: list[np.ndarray], peaks: list[float], segment
                     z[:, p * k + i]) for i, (_, n) in enumerate(grid)] for p in range(len(peaks))]
 
 
-def columns(x: np.ndarray, v: np.ndarray, time: np.ndarray, segments, hysteretic: list[Column]) -> list[Column]:
+def columns(x: np.ndarray, v: np.ndarray, time: np.ndarray, segments: Sequence[tuple[int, int]],
+            hysteretic: list[Column]) -> list[Column]:
     """Every candidate term at one place: :data:`ALWAYS` first, then the library on its grids.
 
     Parameters
@@ -194,7 +197,8 @@ def _sharpened(trials, cols: list[Column], chosen: list[int], gram: _Gram, signa
 
 
 def select(cols: list[Column], y: np.ndarray, weight: float, other_test: float, noise_test: float,
-           train: np.ndarray, test: np.ndarray, signals=None) -> Selected:
+           train: np.ndarray, test: np.ndarray, signals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+           ) -> Selected:
     """Forward selection of terms for the force ``y`` (n,) at one place.
 
     Parameters

@@ -4,7 +4,9 @@ open search's law.  What each holds is its evidence's (:class:`~momentid.diagnos
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -21,12 +23,13 @@ REPORT_FILES = ("report.json", "summary.txt", "twin.xml", "model_augmented.xml",
                 "locate.png", "discovered.png", "report.html")
 
 
-def report_folder(folder, *, force: bool = False) -> OwnedFolder:
+def report_folder(folder: str | os.PathLike, *, force: bool = False) -> OwnedFolder:
     """The report folder under the one output rule (:mod:`momentid.io.outputs`)."""
     return OwnedFolder(folder, "diagnose", force=force)
 
 
-def write_report(diag: Diagnosis, folder, *, force: bool = False, extra=None) -> tuple[str, ...]:
+def write_report(diag: Diagnosis, folder: str | os.PathLike, *, force: bool = False,
+                 extra: Callable[[Path], list[str]] | None = None) -> tuple[str, ...]:
     """Write the report folder; returns the names of the files written, in this order:
     ``report.json``, ``summary.txt``, ``twin.xml`` (the linear twin, on the twin path),
     ``model_augmented.xml`` (when there is an augmented model), ``replay.png`` (recorded vs. linear vs.

@@ -124,6 +124,7 @@ class Diagnosis:
         return diagnosis_html(self)
 
     def to_dict(self) -> dict:
+        """``report.json``: the verdict, the held-out check's numbers, each path's evidence (module docstring)."""
         return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
                 "std": self.std, "summary": self.summary, "held_out": self.held_out, "holdout": self.held_out,
                 "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after, "noise_nrmse": self.noise_nrmse,

@@ -6,6 +6,7 @@ marked."""
 from __future__ import annotations
 
 import math
+from typing import Any
 
 from momentid.core import html
 from momentid.diagnosis.verdict import Verdict
@@ -31,8 +32,9 @@ def _places(named) -> str:
     return "; ".join(out)
 
 
-def diagnosis_headline(diag) -> str:
-    """One sentence: the verdict, the physics and where, and the held-out check's numbers."""
+def diagnosis_headline(diag: Any) -> str:
+    """One sentence of a :class:`~momentid.diagnosis.result.Diagnosis` (which imports this module: typed
+    ``Any``): the verdict, the physics and where, and the held-out check's numbers."""
     if diag.verdict is Verdict.NONE:
         head = "No missing physics: the linear model explains the recordings to the noise level"
     elif diag.verdict is Verdict.MECHANISM and diag.mechanisms:
@@ -50,6 +52,6 @@ def diagnosis_headline(diag) -> str:
     return head + "."
 
 
-def diagnosis_html(diag) -> str:
+def diagnosis_html(diag: Any) -> str:
     """The answer of a :class:`~momentid.diagnosis.result.Diagnosis` (module docstring)."""
     return html.summary(diagnosis_headline(diag), html.word_lines(diag.summary.splitlines()))

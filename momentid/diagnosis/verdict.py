@@ -34,5 +34,6 @@ class Named:
     std: dict
 
     def to_dict(self) -> dict:
+        """The named mechanism, its place, parameters and standard errors."""
         return {"mechanism": self.mechanism, "location": self.location, "parameters": self.parameters,
                 "std": self.std}

@@ -73,9 +73,11 @@ class Comparison:
 
     @property
     def max_rel_error(self) -> float:
+        """The largest relative error of the compared parameters."""
         return max(e.rel_error for e in self.entries)
 
     def entry(self, name: str) -> Entry:
+        """The compared parameter ``name`` (``'K[1,2]'``, ``'mu'``, ...); a ``KeyError`` if none."""
         for e in self.entries:
             if e.name == name:
                 return e

@@ -29,7 +29,9 @@ carry it (:data:`MIN_DOF`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.stats
@@ -39,6 +41,9 @@ from momentid.errors import MomentidError
 from momentid.estimation import ringdown
 from momentid.estimation.eiv import spectra
 from momentid.estimation.modal import refine
+
+if TYPE_CHECKING:
+    from momentid.estimation.modal_select import ModeSelection
 
 __all__ = ["Source", "ModeDamping", "resolve_damping", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES"]
 
@@ -135,9 +140,11 @@ class ModeDamping:
 
     @property
     def is_answer(self) -> bool:
+        """Whether the damping ratio is an answer (no refusal)."""
         return not self.refusal
 
     def to_dict(self) -> dict:
+        """The estimate as a JSON-ready dict (frequencies in Hz, amplitudes in m/s^2; no refusal: None)."""
         return {"damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
                 "interval_95": list(self.interval), "dof": self.dof, "source": self.source,
                 "amplitude_dependent": self.amplitude_dependent, "slope_per_m_s2_power": self.slope,
@@ -241,7 +248,8 @@ def _band_noise(sigma: dict, j: int, band, sample_rate: float) -> float:
     return float(np.hypot(sigma["zdd"], sigma[f"a{j + 1}"]) * np.sqrt(2 * (band[1] - band[0]) / sample_rate))
 
 
-def resolve_damping(runs, selection, *, sigma) -> tuple:
+def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma: Sequence[dict]
+                    ) -> tuple[ModeDamping, ...]:
     """Each storey mode's damping at small amplitude, with an honest error, or its refusal.
 
     Per mode, in this order: the free decays when they show a damping that changes with amplitude;
@@ -323,7 +331,7 @@ def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
 MIN_SIGNAL_TO_NOISE = 3.0
 
 
-def weak_refusal(runs, selection, sigma, i: int) -> str:
+def weak_refusal(runs: Sequence[RunData], selection: ModeSelection, sigma: Sequence[dict], i: int) -> str:
     """Why mode ``i``'s damping cannot be read at all ('' when it can).
 
     In no run does its relative acceleration on its strongest floor, band-passed around it, stand
@@ -519,7 +527,7 @@ LINE_BINS = 2
 MIN_FUNDAMENTAL = 0.3
 
 
-def periodic_fundamental(table: np.ndarray, sample_rate: float):
+def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
     """The fundamental (Hz) of a periodic table motion (a sine test and its harmonics), or None.
 
     The table's power (Hann window) is periodic when lines at the multiples of one frequency hold

@@ -18,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import time
 from dataclasses import dataclass, replace
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
@@ -86,15 +86,19 @@ class Bound:
 
     @property
     def worst(self) -> tuple[str, float]:
+        """The parameter with the largest relative bound, and that bound."""
         i = int(np.argmax(self.relative))
         return self.names[i], float(self.relative[i])
 
     def as_dict(self) -> dict:
+        """Per parameter name: its value, CRLB standard deviation and relative bound."""
         return {n: {"value": float(v), "crlb_std": float(s), "relative": float(r)}
                 for n, v, s, r in zip(self.names, self.values, self.std, self.relative)}
 
 
 def parameter_names(layout: Layout) -> tuple[str, ...]:
+    """The names of ``layout``'s parameters in theta's order: ``M[i,j]``, ``C[i,j]``, ``K[i,j]`` (1-based),
+    ``mu``."""
     names = [""] * layout.p
     d = layout.d
     for i in range(d):
@@ -156,7 +160,8 @@ def _information_setup(scenario: Scenario, mass: str = "diagonal") -> tuple[Layo
     return layout, theta, INFORMATION_BAND_FACTOR * f_top
 
 
-def cramer_rao(scenario: Scenario, runs=None, *, mass: str = "diagonal", _cache: dict | None = None) -> Bound:
+def cramer_rao(scenario: Scenario, runs: Sequence[Run] | None = None, *, mass: str = "diagonal",
+               _cache: dict | None = None) -> Bound:
     """The CRLB of ``scenario``'s experiment (or of ``runs`` under its excitation).
 
     The sensor noise comes from the scenario's ``[sensors]``
@@ -221,6 +226,7 @@ class Design:
 
     @property
     def added_mass_total(self) -> float:
+        """The mass added over all the design's runs (kg)."""
         return float(sum(np.sum(r.added_mass) for r in self.runs))
 
 

@@ -36,14 +36,17 @@ The MuJoCo rig stays the "lab"; the estimator needs only its linear equations.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.optimize
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.columns import Cached, forward_jacobian, point_map
+from momentid.estimation.layout import Layout
 from momentid.estimation.noise import estimate_noise
 from momentid.estimation.linear import discretize, force_response, frequency_response, output_matrix
 
@@ -96,7 +99,7 @@ class Spectra:
 
 
 def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, float] | None = None,
-            sigma: dict | None = None, stated=None, groups=None) -> Spectra:
+            sigma: dict | None = None, stated: dict | None = None, groups: Iterable[str] | None = None) -> Spectra:
     """DFTs of a run restricted to ``(0, f_max]`` Hz, with noise levels.
 
     Noise levels come from ``sigma`` (``{'zdd': s_u, 'a1': ..}``, known
@@ -135,7 +138,7 @@ def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, flo
                    noise_source=source)
 
 
-def whitened_residual(layout, theta, sp: Spectra, *, noise=True):
+def whitened_residual(layout: Layout, theta: np.ndarray, sp: Spectra, *, noise: bool = True) -> tuple[np.ndarray, int]:
     """Noise-whitened DFT residual of one run, the transient term projected out.
 
     Parameters
@@ -144,6 +147,8 @@ def whitened_residual(layout, theta, sp: Spectra, *, noise=True):
     theta : ndarray, shape (p,) or (p + m,)
         Parameters (plus force coefficients when ``sp`` carries forces).
     sp : Spectra
+    noise : bool
+        Unused: the residual is always whitened by the run's noise levels.
 
     Returns
     -------
@@ -164,7 +169,7 @@ def whitened_residual(layout, theta, sp: Spectra, *, noise=True):
     return whiten_and_project(sp, G, T, e)
 
 
-def whiten_and_project(sp: Spectra, G: np.ndarray, T: np.ndarray, e: np.ndarray):
+def whiten_and_project(sp: Spectra, G: np.ndarray, T: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, int]:
     """Whiten the DFT residual ``e`` of any linear model and project its transient term out.
 
     Parameters
@@ -321,8 +326,9 @@ def _require_memory(spectra_list, n_theta: int, runs) -> None:
                    f"runs ({', '.join(r.name for r in runs)}) or a shorter record")
 
 
-def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
-            max_nfev: int = 60, forces=None, stated=None) -> EivFit:
+def fit_eiv(layout: Layout, runs: Sequence[RunData], theta0: np.ndarray, *, f_max: float, sigma: dict | None = None,
+            max_nfev: int = 60, forces: Sequence[tuple[np.ndarray, np.ndarray]] | None = None,
+            stated: dict | None = None) -> EivFit:
     """Refine ``theta0`` by the errors-in-variables ML over ``runs``.
 
     Parameters
@@ -375,7 +381,8 @@ def fit_eiv(layout, runs, theta0, *, f_max: float, sigma: dict | None = None,
                   capped=result.status == 0, noise_sources=tuple(f"{sp.run}: {sp.noise_source}" for sp in spectra_list))
 
 
-def fisher_information(layout, runs, theta, sigma: dict, f_max: float) -> np.ndarray:
+def fisher_information(layout: Layout, runs: Iterable[RunData], theta: ArrayLike, sigma: dict, f_max: float
+                       ) -> np.ndarray:
     """Fisher information of theta for noise-free ``runs`` measured with noise ``sigma``.
 
     ``runs`` carry the outputs the designed experiment would produce without

@@ -8,12 +8,15 @@ floor's equation touches only its own row of unknowns), so memory stays flat for
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 import json
+import os
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from momentid.core.series import Experiment, RunData
+from momentid.core.structure import Structure
 from momentid.errors import IdentificationError, SensorDataError
 from momentid.estimation.identified import Identification, identification_result
 from momentid.estimation.layout import Layout, require_equation_memory
@@ -47,7 +50,7 @@ def _signals(run: RunData, d: int) -> dict[str, np.ndarray]:
     return out
 
 
-def check_times(selected, times) -> None:
+def check_times(selected: Sequence[RunData], times: Sequence[float] | None) -> None:
     """Refuse chosen instants ``times`` (s) that are not finite or lie outside a run of ``selected``.
 
     Raises
@@ -110,8 +113,10 @@ class Accumulator:
         self.R = [np.zeros((0, len(c) + 1)) for c in self.cols]
         self.rows = 0
 
-    def add(self, acc, vel, disp, vel_mu, rhs) -> None:
-        """Add ``n`` samples: regressor signals (n, d) and dM-terms (n, d)."""
+    def add(self, acc: np.ndarray, vel: np.ndarray, disp: np.ndarray, vel_mu: np.ndarray, rhs: np.ndarray) -> None:
+        """Fold ``n`` samples into the factors: the regressors (n, d) of M (``acc``, m/s^2), C (``vel``, m/s) and
+        K (``disp``, m), the added-mass term of mu (``vel_mu``, (n, d), kg m/s) and the right-hand side
+        (``rhs``, (n, d), N)."""
         full = self.layout.mass == "full"
         for start in range(0, acc.shape[0], _BLOCK):
             sl = slice(start, start + _BLOCK)
@@ -121,7 +126,9 @@ class Accumulator:
                 self.R[j] = np.linalg.qr(np.vstack([self.R[j], block]), mode="r")
             self.rows += acc[sl].shape[0] * self.layout.d
 
-    def solve(self):
+    def solve(self) -> tuple[np.ndarray, np.ndarray, float]:
+        """The stacked triangular system ``A theta = b`` (``A`` (p, p), ``b`` (p,)) and its residual sum of
+        squares (N^2)."""
         p = self.layout.p
         stacked = []
         rss = 0.0
@@ -141,7 +148,8 @@ class Accumulator:
         return A, b, rss
 
 
-def solve_equations(acc: Accumulator, estimator: str, runs):
+def solve_equations(acc: Accumulator, estimator: str, runs: Sequence[str]
+                    ) -> tuple[np.ndarray, int, float, float, np.ndarray | None]:
     """Least-squares solution of the equations folded into ``acc``, refused when ill-posed.
 
     Returns
@@ -212,13 +220,15 @@ def _force_scale(result: Identification, runs) -> float:
     return float(np.sqrt(total / max(count, 1)))
 
 
-def exact_fit(result: Identification, runs) -> bool:
+def exact_fit(result: Identification, runs: Iterable[RunData]) -> bool:
     """Whether ``result`` (an equation form) satisfies its equations on ``runs`` to round-off: an
     RMS residual at most :data:`ROUNDOFF` times the runs' RMS inertia force (noise-free data)."""
     return result.residual_rms <= ROUNDOFF * _force_scale(result, runs)
 
 
-def equation_form(experiment, selected, layout, eq_name, times, band, names, notes) -> Identification:
+def equation_form(experiment: Experiment, selected: Sequence[RunData], layout: Layout, eq_name: str,
+                  times: Sequence[float] | None, band: Prefilter, names: tuple[str, ...], notes: list[str]
+                  ) -> Identification:
     """Solve one equation form over the checked runs ``selected``.
 
     Parameters
@@ -323,7 +333,8 @@ def _difference_rows(experiment: Experiment, selected, d: int, times, acc: Accum
                 (si["v"] * dm)[idx], (-si["a"] * dm)[idx])
 
 
-def identify_stream(path, *, mass: str = "diagonal", return_structure: bool = False):
+def identify_stream(path: str | os.PathLike, *, mass: str = "diagonal", return_structure: bool = False
+                    ) -> Identification | tuple[Identification, Structure | None]:
     """Equation-form identification straight from a recording, block by block.
 
     Every sensor block is folded into per-run QR factors as it is read, so

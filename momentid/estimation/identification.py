@@ -38,8 +38,10 @@ so memory stays flat for long records.  ``kappa`` follows from
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import contextlib
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -56,6 +58,9 @@ from momentid.estimation.layout import Layout, equation_form_bytes, require_equa
 from momentid.estimation.reconstruct import Prefilter, suggest_band
 from momentid.io.run_checks import check_run
 
+if TYPE_CHECKING:
+    from momentid.estimation.scaled import ModalIdentification
+
 __all__ = ["Identification", "identify", "equation_residual", "damping_models", "DampingFit", "ESTIMATORS",
            "MAX_CONDITION", "MAX_NOISE_EXCESS", "Layout", "equation_form_bytes", "require_equation_memory",
            "identify_stream"]
@@ -68,8 +73,9 @@ def _ideal(experiment: Experiment) -> bool:
     return bool(sensors and sensors.get("ideal"))
 
 
-def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "diagonal", runs=None,
-             times=None, prefilter: Prefilter | str | None = "auto"):
+def identify(experiment: Experiment, *, estimator: str = "auto", mass: str = "diagonal",
+             runs: Sequence[str] | None = None, times: Sequence[float] | None = None,
+             prefilter: Prefilter | str | None = "auto") -> Identification | ModalIdentification:
     """Identify a shear building's dynamics from shake-table runs.
 
     What comes out depends on what the runs hold:

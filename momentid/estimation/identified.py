@@ -4,6 +4,7 @@ when the data contradict a passive structure, and the tests of damping models ag
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -17,7 +18,7 @@ __all__ = ["Identification", "identification_result", "rayleigh_kappa", "MAX_NOI
 
 @dataclass(frozen=True)
 class Identification:
-    """Result of :func:`identify`.
+    """Result of :func:`~momentid.estimation.identification.identify` on runs with added mass.
 
     Attributes
     ----------
@@ -72,14 +73,17 @@ class Identification:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys ``d``."""
         return self.M.shape[0]
 
     @property
     def layout(self) -> Layout:
+        """The unknowns' layout of this result (its storeys and mass form)."""
         return Layout(self.storeys, self.mass)
 
     @property
     def theta(self) -> np.ndarray:
+        """The identified unknowns as one vector (p,) of :attr:`layout`."""
         return self.layout.pack(self.M, self.C, self.K, self.mu)
 
     def modes(self) -> Modes:
@@ -146,8 +150,9 @@ def rayleigh_kappa(layout: Layout, theta: np.ndarray) -> float:
 MAX_NOISE_EXCESS = 5.0
 
 
-def identification_result(layout, theta, estimator, rows, rank, condition, residual_rms, names, cov, notes,
-                          capped=False) -> Identification:
+def identification_result(layout: Layout, theta: np.ndarray, estimator: str, rows: int, rank: int, condition: float,
+                          residual_rms: float, names: tuple[str, ...], cov: np.ndarray | None, notes: Sequence[str],
+                          capped: bool = False) -> Identification:
     """The :class:`Identification` of the unknowns ``theta`` (shape (p,), see :class:`Layout`), with
     ``kappa``, the damping misfit and the warnings (non-positive masses, unstable modes, a fit
     stopped at its cap, an errors-in-variables residual above :data:`MAX_NOISE_EXCESS`) derived from

@@ -51,7 +51,7 @@ class Layout:
         m = [self.m[j, j]] if self.mass == "diagonal" else list(self.m[j])
         return np.concatenate([m, self.c[j], self.k[j], [self.mu]])
 
-    def unpack(self, theta: np.ndarray):
+    def unpack(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
         """``(M, C, K, mu)`` from ``theta``."""
         if self.mass == "diagonal":
             M = np.diag(theta[np.diag(self.m)])
@@ -59,7 +59,8 @@ class Layout:
             M = theta[self.m]
         return M, theta[self.c], theta[self.k], float(theta[self.mu])
 
-    def pack(self, M, C, K, mu) -> np.ndarray:
+    def pack(self, M: np.ndarray, C: np.ndarray, K: np.ndarray, mu: float) -> np.ndarray:
+        """``theta`` (p,) from ``M``, ``C``, ``K`` (d, d) and ``mu``: the inverse of :meth:`unpack`."""
         theta = np.zeros(self.p)
         for (idx, X) in ((self.m, M), (self.c, C), (self.k, K)):
             if X is M and self.mass == "diagonal":
@@ -88,8 +89,9 @@ def equation_form_bytes(layout: Layout) -> float:
     return 8.0 * (2.0 * rows * (p + 1) + _SQUARE_ARRAYS * p * p)
 
 
-def require_equation_memory(layout: Layout, source) -> None:
-    """Refuse, before any work, an identification whose equation form cannot fit in memory.
+def require_equation_memory(layout: Layout, source: object) -> None:
+    """Refuse, before any work, an identification whose equation form cannot fit in memory (``source``: the
+    recording, named in the message).
 
     Raises
     ------

@@ -14,9 +14,11 @@ Outputs: ``q`` (relative displacement), ``v`` (relative velocity) and
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.linalg
 import scipy.signal
 
@@ -85,7 +87,7 @@ def _expm(Zh: np.ndarray) -> np.ndarray:
     return E
 
 
-def discretize(M, C, K, h: float) -> LinearModel:
+def discretize(M: ArrayLike, C: ArrayLike, K: ArrayLike, h: float) -> LinearModel:
     """Discretise ``M q'' + C q' + K q = -M 1 u`` with step ``h`` (s)."""
     M, C, K = (np.asarray(X, float) for X in (M, C, K))
     d = M.shape[0]
@@ -105,10 +107,14 @@ def discretize(M, C, K, h: float) -> LinearModel:
                        Phi=Phi, G1=G1, G2=G2)
 
 
-def force_response(M, C, K, h: float, forces: np.ndarray, H_rows, z: np.ndarray, lam, V, groups):
+def force_response(M: ArrayLike, C: ArrayLike, K: ArrayLike, h: float, forces: np.ndarray, H_rows: np.ndarray,
+                   z: np.ndarray, lam: np.ndarray, V: np.ndarray, groups: Sequence[str]) -> np.ndarray:
     """DFT-domain response to generalised floor forces ``forces`` (d, m), FOH between samples.
 
-    Returns ``Gf`` of shape (bins, n_out, m): outputs per unit force signal
+    ``M, C, K`` (d, d) in kg, N s/m, N/m; ``h`` the sample interval (s); ``H_rows`` (n_out, 2d) the output
+    rows (:func:`output_matrix` of ``groups``); ``z`` (bins,) the DFT points; ``lam``, ``V`` the
+    eigenvalues (2d,) and eigenvectors (2d, 2d) of the discretised model's transition matrix
+    (:func:`discretize`).  Returns ``Gf`` of shape (bins, n_out, m): outputs per unit force signal
     (absolute accelerations include the direct term ``M^-1 f``).
     """
     M, C, K = (np.asarray(X, float) for X in (M, C, K))
@@ -134,7 +140,7 @@ def force_response(M, C, K, h: float, forces: np.ndarray, H_rows, z: np.ndarray,
     return G
 
 
-def frequency_response(model: LinearModel, H: np.ndarray, z: np.ndarray):
+def frequency_response(model: LinearModel, H: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Exact DFT-domain response of the discretised model.
 
     With ``s_k = x_k - G2 u_k / h`` the model is the discrete state space
@@ -166,7 +172,7 @@ def frequency_response(model: LinearModel, H: np.ndarray, z: np.ndarray):
     return G, T
 
 
-def simulate_linear(model: LinearModel, u: np.ndarray, x0=None) -> np.ndarray:
+def simulate_linear(model: LinearModel, u: np.ndarray, x0: ArrayLike | None = None) -> np.ndarray:
     """States ``x_k = [q_k, v_k]`` for input samples ``u`` (m/s^2).
 
     Parameters
@@ -194,7 +200,7 @@ def simulate_linear(model: LinearModel, u: np.ndarray, x0=None) -> np.ndarray:
     return np.real(xi @ model.V.T)
 
 
-def output_matrix(model: LinearModel, groups) -> np.ndarray:
+def output_matrix(model: LinearModel, groups: Iterable[str]) -> np.ndarray:
     """Rows mapping the state to the output groups (``'q'``, ``'v'``, ``'a'``), stacked."""
     d = model.d
     rows = {"q": np.eye(2 * d)[:d], "v": np.eye(2 * d)[d:], "a": model.out_a}

@@ -34,15 +34,18 @@ factor when the model explains the data less well than the noise allows.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.linalg
 import scipy.optimize
 
 from momentid.core.analytic import shear_stiffness
+from momentid.core.series import RunData
 from momentid.errors import IdentificationError
-from momentid.estimation.eiv import spectra
+from momentid.estimation.eiv import Spectra, spectra
 from momentid.estimation.modal_model import Hold, Likelihood, ModalModel, mode_response
 
 __all__ = ["ModalModel", "ModalFit", "fit_modal", "fit_band", "modal_spectra", "linear_start", "refine",
@@ -125,12 +128,12 @@ class ModalFit:
         return max(self.n_residuals - free - self.n_nuisance, 1)
 
 
-def fit_band(frequency_hz, sample_rate: float) -> float:
+def fit_band(frequency_hz: ArrayLike, sample_rate: float) -> float:
     """Top of the fitted band (Hz) for resonances ``frequency_hz``."""
     return float(min(FIT_BAND_FACTOR * float(np.max(frequency_hz)), NYQUIST_FRACTION * sample_rate))
 
 
-def modal_spectra(runs, d: int, f_max: float, stated=None) -> list:
+def modal_spectra(runs: Iterable[RunData], d: int, f_max: float, stated: dict | None = None) -> list[Spectra]:
     """The DFT bins of every run up to ``f_max`` with their noise levels (floor accelerations only)."""
     return [spectra(r, d, f_max, stated=stated, groups=["a"]) for r in runs]
 
@@ -143,8 +146,10 @@ def _basis(w_bins, zinv, omega, zeta, h, hold: Hold):
     return H, np.stack([A + Ab, 1j * (A - Ab)], axis=2)
 
 
-def linear_start(model: ModalModel, spectra_list, omega, zeta, hold: Hold = Hold.BAND_LIMITED) -> np.ndarray:
-    """theta with the given poles and the residues, gains and clock offsets that fit best at them.
+def linear_start(model: ModalModel, spectra_list: Sequence[Spectra], omega: ArrayLike, zeta: ArrayLike,
+                 hold: Hold = Hold.BAND_LIMITED) -> np.ndarray:
+    """theta with the given poles (``omega`` rad/s and ``zeta``, each (n,)) and the residues, gains and clock
+    offsets that fit best at them.
 
     At fixed poles and clock offsets the response ``g_j (1 - sum_i R_ij H_i)`` is linear in
     ``c_j = g_j`` and ``b_ij = g_j R_ij``, and so is the transient: one least-squares problem per floor
@@ -180,7 +185,7 @@ def linear_start(model: ModalModel, spectra_list, omega, zeta, hold: Hold = Hold
     return model.pack(omega, zeta, np.mean(residues, axis=0), gains=gains, offsets=offsets)
 
 
-def shear_start(model: ModalModel, frequency_hz, masses=None) -> np.ndarray:
+def shear_start(model: ModalModel, frequency_hz: ArrayLike, masses: ArrayLike | None = None) -> np.ndarray:
     """theta of a shear building with the given ``d`` frequencies, :data:`START_DAMPING`, ideal sensors."""
     f = np.sort(np.asarray(frequency_hz, float))
     m = np.ones(model.d) if masses is None else np.asarray(masses, float)
@@ -220,8 +225,10 @@ def _solve(lik: Likelihood, theta0, lo, hi, max_nfev: int) -> _Outcome:
     return _Outcome(lik.full(result.x), float(2 * result.cost), int(result.nfev), result.status == 0)
 
 
-def refine(model: ModalModel, spectra_list, starts, *, sample_rates, f_max: float, free=None,
-           fix_nuisance: bool = True, hold: Hold = Hold.BAND_LIMITED, frequency_bounds=None) -> ModalFit:
+def refine(model: ModalModel, spectra_list: Sequence[Spectra], starts: Iterable[tuple[str, np.ndarray]], *,
+           sample_rates: Sequence[float], f_max: float, free: np.ndarray | None = None, fix_nuisance: bool = True,
+           hold: Hold = Hold.BAND_LIMITED, frequency_bounds: dict[int, tuple[float, float]] | None = None
+           ) -> ModalFit:
     """Fit ``model`` from the best of ``starts``, restarting from the others when capped.
 
     Parameters
@@ -337,8 +344,8 @@ def _unidentified(model: ModalModel, fit: ModalFit, sample_rates, names):
     return fixed, notes
 
 
-def fit_modal(model: ModalModel, runs, frequency_hz, *, masses=None, stated=None,
-              hold: Hold = Hold.FIRST_ORDER) -> ModalFit:
+def fit_modal(model: ModalModel, runs: Sequence[RunData], frequency_hz: ArrayLike, *, masses: ArrayLike | None = None,
+              stated: dict | None = None, hold: Hold = Hold.FIRST_ORDER) -> ModalFit:
     """Fit ``model`` (``d`` modes) to ``runs`` from resonances near ``frequency_hz`` (Hz).
 
     Starts: the picked resonances (:data:`START_DAMPING`), and the subspace estimate's poles nearest

@@ -16,12 +16,18 @@ notes of :class:`~momentid.estimation.scaled.ModalIdentification`:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.modal_model import GAIN_RANGE, OFFSET_BOUND
+
+if TYPE_CHECKING:
+    from momentid.estimation.modal_select import ModeSelection
 
 __all__ = ["ExtraMode", "extra_modes", "check", "low_frequency_ratio", "DAMPING_DISAGREEMENT", "SUSPECT_GAIN",
            "POOR_FREQUENCY", "POOR_DAMPING", "ORTHOGONALITY_WARNING", "GAIN_BOUNDS"]
@@ -82,6 +88,7 @@ class ExtraMode:
     residues_quadrature: np.ndarray | None = None
 
     def to_dict(self) -> dict:
+        """The extra mode as a JSON-ready dict (frequency in Hz; a missing subspace estimate as None)."""
         return {"frequency_hz": self.frequency, "frequency_std": self.frequency_std,
                 "damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
                 "residues": np.asarray(self.residues).tolist(), "residues_std": np.asarray(self.residues_std).tolist(),
@@ -91,7 +98,7 @@ class ExtraMode:
                 "damping_ratio_subspace": None if np.isnan(self.damping_independent) else self.damping_independent}
 
 
-def extra_modes(selection) -> tuple:
+def extra_modes(selection: ModeSelection) -> tuple[ExtraMode, ...]:
     """The :class:`ExtraMode` of every extra mode of a selection, ascending in frequency."""
     from momentid.estimation.modal_select import SEEN_SIGMAS
 
@@ -111,7 +118,7 @@ def extra_modes(selection) -> tuple:
     return tuple(out)
 
 
-def low_frequency_ratio(run, d: int, f1: float) -> np.ndarray:
+def low_frequency_ratio(run: RunData, d: int, f1: float) -> np.ndarray:
     """Each floor sensor's reading per unit table acceleration below :data:`LOW_FREQUENCY_FRACTION` x
     mode 1 (``f1``, Hz), shape (d,); NaN when the table hardly moves there."""
     n = run.n_samples
@@ -155,8 +162,13 @@ def _sensor_refusal(runs, gain, offset, storey_f1: float) -> None:
                 f"separately clocked sensors from the data) or check which file is which floor")
 
 
-def check(selection, values: dict, std: dict, runs, gain, offset, masses) -> tuple[list, list, np.ndarray]:
+def check(selection: ModeSelection, values: dict, std: dict, runs: Sequence[RunData], gain: np.ndarray,
+          offset: np.ndarray, masses: Sequence[float] | None) -> tuple[list, list, np.ndarray]:
     """Warnings, notes and, per storey mode, whether its damping ratio is an answer.
+
+    ``values`` and ``std``: the derived quantities and their standard errors (``frequency`` in Hz,
+    ``damping_ratio``, ...); ``gain`` and ``offset`` (s): per run and floor sensor, each (runs, d);
+    ``masses``: the stated floor masses (kg), or None.
 
     Raises
     ------
@@ -187,7 +199,7 @@ def check(selection, values: dict, std: dict, runs, gain, offset, masses) -> tup
         elif np.isnan(independent[i]):
             notes.append(f"mode {i + 1} at {f[i]:.4g} Hz: no subspace pole is stable over model orders there, so "
                          f"its damping ratio has no second opinion from these data")
-    for e, mode in enumerate(extra_modes(selection)):
+    for mode in extra_modes(selection):
         disagreement = _disagreement(mode.damping_ratio, mode.damping_independent)
         if disagreement:
             out.append(f"extra mode at {mode.frequency:.4g} Hz: damping ratio {100 * mode.damping_ratio:.3g} % "

@@ -27,9 +27,11 @@ residual, not one per parameter.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from enum import Enum
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.estimation.eiv import Spectra
 
@@ -81,11 +83,11 @@ class ModalModel:
         self.n_modal = 2 * self.n + (self.n + len(self.quadrature)) * d
         self.p = self.n_modal + 2 * d * n_runs
 
-    def omega(self, theta) -> np.ndarray:
+    def omega(self, theta: np.ndarray) -> np.ndarray:
         """Undamped angular frequencies (rad/s), shape (n,)."""
         return np.exp(theta[:self.n])
 
-    def zeta(self, theta) -> np.ndarray:
+    def zeta(self, theta: np.ndarray) -> np.ndarray:
         """Damping ratios, shape (n,)."""
         return np.asarray(theta[self.n:2 * self.n], float)
 
@@ -94,11 +96,11 @@ class ModalModel:
         """Where ``R`` (n x d, row-major) sits in theta."""
         return slice(2 * self.n, 2 * self.n + self.n * self.d)
 
-    def residues(self, theta) -> np.ndarray:
+    def residues(self, theta: np.ndarray) -> np.ndarray:
         """``R``, shape (n modes, d floors)."""
         return np.asarray(theta[self.residue_slice], float).reshape(self.n, self.d)
 
-    def quadrature_residues(self, theta) -> np.ndarray:
+    def quadrature_residues(self, theta: np.ndarray) -> np.ndarray:
         """``Q``, shape (n modes, d floors): zero rows for the classical modes."""
         Q = np.zeros((self.n, self.d))
         Q[list(self.quadrature)] = np.asarray(theta[2 * self.n + self.n * self.d:self.n_modal]).reshape(-1, self.d)
@@ -109,12 +111,13 @@ class ModalModel:
         start = self.n_modal + 2 * self.d * run
         return slice(start, start + 2 * self.d)
 
-    def sensors(self, theta, run: int):
+    def sensors(self, theta: np.ndarray, run: int) -> tuple[np.ndarray, np.ndarray]:
         """Gains (1) and clock offsets (s) of the floor sensors in run ``run``, each shape (d,)."""
         x = theta[self.sensor_slice(run)]
         return np.exp(x[:self.d]), np.asarray(x[self.d:])
 
-    def pack(self, omega, zeta, residues, gains=None, offsets=None, quadrature=None) -> np.ndarray:
+    def pack(self, omega: ArrayLike, zeta: ArrayLike, residues: ArrayLike, gains: ArrayLike | None = None,
+             offsets: ArrayLike | None = None, quadrature: ArrayLike | None = None) -> np.ndarray:
         """theta from its parts (gains 1, offsets 0 and quadrature residues 0 by default; gains and
         offsets per run (n_runs, d), quadrature residues (n, d) of which the quadrature modes' rows count)."""
         gains = np.ones((self.n_runs, self.d)) if gains is None else np.asarray(gains, float)
@@ -124,7 +127,7 @@ class ModalModel:
         return np.concatenate([np.log(omega), zeta, np.asarray(residues, float).ravel(),
                                Q[list(self.quadrature)].ravel(), sensors])
 
-    def select_indices(self, modes) -> np.ndarray:
+    def select_indices(self, modes: Iterable[int]) -> np.ndarray:
         """Indices into theta of the model restricted to ``modes`` (in that order), sensors kept, the
         quadrature residues left out: ``theta[select_indices(modes)]`` is a theta of
         ``ModalModel(d, n_runs, len(modes) - d)``."""
@@ -132,7 +135,7 @@ class ModalModel:
         residues = (2 * self.n + modes[:, None] * self.d + np.arange(self.d)[None, :]).ravel()
         return np.concatenate([modes, self.n + modes, residues, np.arange(self.n_modal, self.p)])
 
-    def bounds(self, sample_rates) -> tuple[np.ndarray, np.ndarray]:
+    def bounds(self, sample_rates: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds of theta: frequencies in (0, Nyquist), damping within
         :data:`MAX_ABS_DAMPING`, gains 0.5-2, clock offsets within 1.5 samples of the run's rate."""
         lo, hi = np.full(self.p, -np.inf), np.full(self.p, np.inf)
@@ -155,7 +158,8 @@ class Hold(Enum):
     FIRST_ORDER = "first-order hold"
 
 
-def mode_response(hold: Hold, w_bins: np.ndarray, h: float, omega: np.ndarray, zeta: np.ndarray):
+def mode_response(hold: Hold, w_bins: np.ndarray, h: float, omega: np.ndarray, zeta: np.ndarray
+                  ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]:
     """``H_i`` at the bins and its derivatives with respect to ``log w_i`` and ``zeta_i``.
 
     ``H(s) = s^2 / (s^2 + 2 zeta w s + w^2)``; with :attr:`Hold.FIRST_ORDER`, its first-order-hold
@@ -239,17 +243,18 @@ class Likelihood:
         self.n_residuals = sum(r.size for r in self.runs)
         self._key, self._states, self._r = None, None, None
 
-    def full(self, x) -> np.ndarray:
+    def full(self, x: np.ndarray) -> np.ndarray:
+        """The full parameter vector (p,): ``base`` with the free parameters set to ``x``."""
         theta = self.base.copy()
         theta[self.free] = x
         return theta
 
-    def residual(self, x) -> np.ndarray:
+    def residual(self, x: np.ndarray) -> np.ndarray:
         """Whitened residual with the transient projected out, shape (n_residuals,)."""
         self._update(x)
         return self._r
 
-    def jacobian(self, x) -> np.ndarray:
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
         """Its Jacobian over the free parameters, shape (n_residuals, free)."""
         self._update(x)
         cols = np.flatnonzero(self.free)

@@ -43,12 +43,15 @@ too large (one mode fitted to two 1 % apart).  :func:`select_modes`:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import itertools
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.stats
 
+from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.eiv import spectra
 from momentid.estimation.modal import (NYQUIST_FRACTION, START_DAMPING, ModalFit, ModalModel, fit_band, linear_start,
@@ -156,7 +159,8 @@ def _is_mode(model: ModalModel, fit: ModalFit, i: int) -> str:
     return ""
 
 
-def storey_modes(residues: np.ndarray, frequency: np.ndarray, d: int, masses=None) -> tuple:
+def storey_modes(residues: np.ndarray, frequency: np.ndarray, d: int, masses: ArrayLike | None = None
+                 ) -> tuple[int, ...]:
     """Indices of the ``d`` storey modes among ``n`` (see the module docstring, step 4), ascending in frequency.
 
     Parameters
@@ -229,7 +233,8 @@ def _independent(freq: np.ndarray, subspace) -> np.ndarray:
     return np.array([np.median(z) if z else np.nan for z in found])
 
 
-def select_modes(runs, d: int, *, masses=None, stated=None) -> ModeSelection:
+def select_modes(runs: Sequence[RunData], d: int, *, masses: ArrayLike | None = None, stated: dict | None = None
+                 ) -> ModeSelection:
     """Fit the storey modes and every extra mode the data hold (see the module docstring).
 
     Parameters

@@ -38,6 +38,7 @@ which is also the RMS of one DFT bin normalised by ``sqrt(N)``.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import Enum
 
@@ -108,7 +109,7 @@ class NoiseEstimate:
     detail: str
 
 
-def band_level(X: np.ndarray, band) -> np.ndarray:
+def band_level(X: np.ndarray, band: slice | np.ndarray) -> np.ndarray:
     """Noise RMS per column from DFT bins holding noise only.
 
     Robust to a few spectral lines: the median of ``|X|^2`` over the bins is
@@ -212,7 +213,8 @@ def local_polynomial_noise(run: RunData) -> dict | None:
     return out
 
 
-def estimate_noise(run: RunData, *, f_max: float | None = None, stated=None,
+def estimate_noise(run: RunData, *, f_max: float | None = None,
+                   stated: Iterable[tuple[str, float]] | dict | None = None,
                    noise_floor: tuple[float, float] | None = None) -> NoiseEstimate:
     """Noise standard deviation of every channel of ``run``, and where it came from.
 

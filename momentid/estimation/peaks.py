@@ -15,6 +15,8 @@ the table's own harmonics) scores high.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+
 import numpy as np
 import scipy.signal
 
@@ -52,7 +54,7 @@ def _score(run: RunData, d: int, sigma_u: float):
     return f, np.sum(Prel, axis=1) / (Puu + floor)
 
 
-def peak_candidates(runs, d: int, sigma_u: float) -> tuple[np.ndarray, np.ndarray]:
+def peak_candidates(runs: Sequence[RunData], d: int, sigma_u: float) -> tuple[np.ndarray, np.ndarray]:
     """Every peak of the score, most prominent first: frequencies (Hz, refined on the full record) and
     prominences (of the score's logarithm averaged over runs).
 
@@ -86,7 +88,7 @@ def peak_candidates(runs, d: int, sigma_u: float) -> tuple[np.ndarray, np.ndarra
     return freqs, props["prominences"][order]
 
 
-def pick_resonances(runs, d: int, sigma_u: float) -> np.ndarray:
+def pick_resonances(runs: Sequence[RunData], d: int, sigma_u: float) -> np.ndarray:
     """The ``d`` most prominent resonances of the runs (Hz), ascending.
 
     Parameters
@@ -108,7 +110,7 @@ def pick_resonances(runs, d: int, sigma_u: float) -> np.ndarray:
     return np.sort(freqs[:d])
 
 
-def require_resonances(runs, d: int, found: int) -> None:
+def require_resonances(runs: Iterable[RunData], d: int, found: int) -> None:
     """:class:`IdentificationError` unless ``found`` resonances are at least the ``d`` storeys'."""
     if found < d:
         raise IdentificationError(

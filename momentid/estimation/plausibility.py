@@ -14,10 +14,16 @@ need no model catch these before the CLI prints a result:
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import scipy.signal
 
 from momentid.core.series import Experiment, RunData
+
+if TYPE_CHECKING:
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["implausible", "GAIN_RANGE", "MIN_CORRELATION", "MASS_FACTOR", "ADDED_MASS_FACTOR"]
 
@@ -71,7 +77,7 @@ def _stated_masses(experiment: Experiment):
     return None
 
 
-def implausible(experiment: Experiment, result) -> tuple[str, ...]:
+def implausible(experiment: Experiment, result: Identification | ModalIdentification) -> tuple[str, ...]:
     """Why ``result`` must not be printed as an answer for ``experiment`` (empty: plausible).
 
     Parameters

@@ -48,6 +48,7 @@ class Prefilter:
 
     @property
     def active(self) -> bool:
+        """Whether the band filters anything (a corner is set)."""
         return bool(self.low or self.high)
 
 

@@ -18,11 +18,12 @@ belong with the others.  The check never reads a trial's name or date.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from momentid.estimation.scaled import weighted_line
+from momentid.estimation.scaled import ModalIdentification, weighted_line
 
 __all__ = ["StateCheck", "check_state", "OFF_TREND_SIGMAS", "MIN_OTHERS"]
 
@@ -63,6 +64,7 @@ class StateCheck:
     tested: bool
 
     def belongs(self, run: str) -> bool:
+        """Whether trial ``run`` belongs with the others (it is no outlier)."""
         return run not in self.outliers
 
     def sentence(self, run: str) -> str:
@@ -80,11 +82,12 @@ class StateCheck:
         return max(inside) if inside else float("nan")
 
     def to_dict(self) -> dict:
+        """The check as a JSON-ready dict (distances in standard errors)."""
         return {"tested": self.tested, "threshold_sigmas": OFF_TREND_SIGMAS, "sigmas": dict(self.sigmas),
                 "worst": dict(self.worst), "outliers": list(self.outliers)}
 
 
-def check_state(results) -> StateCheck:
+def check_state(results: Sequence[ModalIdentification]) -> StateCheck:
     """Check which trials belong to one rig state (module docstring).
 
     Parameters

@@ -20,6 +20,7 @@ wobble (beats with a weaker neighbour, leakage of the band-pass): Newey-West ove
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,10 +96,12 @@ class RingDown:
 
     @property
     def seconds(self) -> tuple[float, float]:
+        """Start and stop of the stretch in the run (s)."""
         return self.start / self.sample_rate, self.stop / self.sample_rate
 
     @property
     def cycles(self) -> float:
+        """Number of cycles of the mode the stretch holds."""
         return float(self.phase[-1] / (2 * np.pi))
 
 
@@ -152,7 +155,7 @@ def advance(tau: float, x: np.ndarray, sample_rate: float) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(x, 2 * n) * np.exp(2j * np.pi * f * tau), 2 * n)[:n]
 
 
-def band_for(frequency: float, others, sample_rate: float) -> tuple[float, float]:
+def band_for(frequency: float, others: Iterable[float], sample_rate: float) -> tuple[float, float]:
     """The band-pass (Hz) around a mode at ``frequency``: +-:data:`BAND`, narrowed to half the gap to the
     nearest of ``others`` (Hz) and kept below 0.49 x the sample rate."""
     half = BAND
@@ -162,7 +165,7 @@ def band_for(frequency: float, others, sample_rate: float) -> tuple[float, float
     return frequency * (1 - half), min(frequency * (1 + half), 0.49 * sample_rate)
 
 
-def envelope(x: np.ndarray, band, sample_rate: float):
+def envelope(x: np.ndarray, band: tuple[float, float], sample_rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Envelope (same unit as ``x``), unwrapped phase (rad) and instantaneous frequency (Hz) of ``x``
     band-passed to ``band`` (zero phase, 4th-order Butterworth)."""
     sos = scipy.signal.butter(4, band, btype="band", fs=sample_rate, output="sos")
@@ -171,14 +174,15 @@ def envelope(x: np.ndarray, band, sample_rate: float):
     return np.abs(analytic), phase, np.gradient(phase) * sample_rate / (2 * np.pi)
 
 
-def correlation_time(band, frequency: float) -> float:
+def correlation_time(band: tuple[float, float], frequency: float) -> float:
     """Seconds over which a ring-down's log-envelope residual stays correlated: the band-pass's time
     constant, and at least a few cycles of the mode (beats with a neighbour inside the band)."""
     return max(EDGE_CONSTANTS / (np.pi * (band[1] - band[0])), 3.0 / frequency)
 
 
 def ring_downs(run_name: str, table: np.ndarray, relative: np.ndarray, sample_rate: float, frequency: float,
-               zeta: float, residue: float, band, sigma_table: float, sigma_relative: float) -> list:
+               zeta: float, residue: float, band: tuple[float, float], sigma_table: float, sigma_relative: float
+               ) -> list[RingDown]:
     """The free decays of one mode in one run.
 
     Parameters
@@ -286,7 +290,7 @@ def _newey_west(J: np.ndarray, r: np.ndarray, pieces, bandwidth: int) -> np.ndar
     return bread @ S @ bread
 
 
-def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMAS) -> DecayFit:
+def fit_decay(rings: Iterable[RingDown], correlation_samples: int, slope_sigmas: float = SLOPE_SIGMAS) -> DecayFit:
     """``zeta(E)`` of one mode from its ring-downs (see the module docstring).
 
     The constant law ``zeta0`` and the laws ``zeta0 + zeta1 E^p`` for each ``p`` of :data:`POWERS` (joint
@@ -305,6 +309,11 @@ def fit_decay(rings, correlation_samples: int, slope_sigmas: float = SLOPE_SIGMA
     correlation_samples : int
         The Newey-West bandwidth (samples): :func:`correlation_time` x the sample rate.
     slope_sigmas : float
+        How many standard errors a law's ``zeta1`` must clear to count as evidence.
+
+    Returns
+    -------
+    DecayFit
     """
     rings = list(rings)
     ln_e0 = [float(np.log(r.envelope[0])) for r in rings]

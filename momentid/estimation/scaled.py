@@ -22,22 +22,24 @@ Standard errors of every derived quantity: delta method from the fit's covarianc
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from momentid.core.analytic import Modes
-from momentid.core.series import Experiment
+from momentid.core.series import Experiment, RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.modal import ModalModel
 from momentid.estimation.modal_checks import ExtraMode, check, extra_modes
-from momentid.estimation.modal_select import select_modes
-from momentid.estimation.damping import resolve_damping
+from momentid.estimation.modal_select import ModeSelection, select_modes
+from momentid.estimation.damping import ModeDamping, resolve_damping
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import response_amplitude
 
-__all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run", "amplitude_trend", "weighted_line"]
+__all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run",
+           "amplitude_trend", "weighted_line"]
 
 #: A residual variance factor above this says the linear model does not explain
 #: the data to the noise level (standard errors are inflated by its square root).
@@ -148,6 +150,7 @@ class ModalIdentification:
 
     @property
     def storeys(self) -> int:
+        """Number of storey modes ``d``."""
         return self.frequency.shape[0]
 
     @property
@@ -224,7 +227,8 @@ class ModalIdentification:
             lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  {z}{flag:<16} "
                          f"{source:<16}{100 * equivalent[i]:8.3f}          {check} {shape}")
         if self.extra_modes:
-            lines.append(f"extra modes (beyond the {self.storeys} storey modes; fitted so that they do not distort them):")
+            lines.append(f"extra modes (beyond the {self.storeys} storey modes; "
+                         "fitted so that they do not distort them):")
             for m in self.extra_modes:
                 seen = ", ".join(m.seen_by) or "no sensor beyond 3 standard errors"
                 lines.append(f"   +  {m.frequency:8.4f} +- {m.frequency_std:.4f}  {100 * m.damping_ratio:7.3f} +- "
@@ -307,7 +311,7 @@ def _delta(model: ModalModel, theta, cov, masses) -> dict:
         np.shape(base[k])) for k, g in grads.items()}
 
 
-def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
+def identify_modal(experiment: Experiment, runs: Sequence[str] | None = None) -> ModalIdentification:
     """Identify modes (and K, C with stated masses) from runs without added mass.
 
     Parameters
@@ -328,28 +332,10 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         No noise source, fewer resonances than storeys, a singular fit, or a floor sensor whose gain
         the data put outside 0.5-2 of the table's.
     """
-    from momentid.io.run_checks import check_run
-
-    selected = experiment.select(runs)
-    if not selected:
-        raise IdentificationError(f"{experiment.source}: no runs to identify from")
-    d = experiment.storeys
     notes: list[str] = []
-    checked = []
-    for run in selected:
-        run, repairs = check_run(run, experiment.source)
-        notes.extend(repairs)
-        checked.append(run)
-    selected = tuple(checked)
-    added = selected[0].added_mass
-    if any(not np.array_equal(r.added_mass, added) for r in selected):
-        raise IdentificationError(
-            f"{experiment.source}: runs {[r.name for r in selected]} carry different added masses: one modal "
-            f"model fits runs of one structure; fit them one by one (--per-run)")
-    masses = _masses(experiment, notes)
-    if masses is not None and np.any(added):
-        masses = tuple(float(m) for m in np.asarray(masses) + added)
-        notes.append(f"masses include the run's added mass: {list(masses)} kg")
+    selected = _checked_runs(experiment, runs, notes)
+    d = experiment.storeys
+    masses = _run_masses(experiment, selected[0].added_mass, notes)
     stated = dict(experiment.statement.noise) if experiment.statement is not None else None
     with threadpool_limits(limits=1, user_api="blas"):     # small dense products: threads only add waiting
         selection = select_modes(selected, d, masses=masses, stated=stated)
@@ -360,35 +346,17 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
     m_arr = None if masses is None else np.asarray(masses, float)
     values = _derived(storey_model, theta, m_arr)
     std = _delta(storey_model, theta, cov, m_arr)
-    sd_all = np.sqrt(np.clip(np.diag(cov), 0, None))
-    gain = np.array([storey_model.sensors(theta, r)[0] for r in range(len(selected))])
-    offset = np.array([storey_model.sensors(theta, r)[1] for r in range(len(selected))])
-    slices = [storey_model.sensor_slice(r) for r in range(len(selected))]
-    gain_std = np.array([gain[r] * sd_all[s.start:s.start + d] for r, s in enumerate(slices)])
-    offset_std = np.array([sd_all[s.start + d:s.stop] for s in slices])
+    gain, offset, gain_std, offset_std = _sensor_estimates(storey_model, theta, cov, len(selected))
     amplitude = np.array([response_amplitude(r, d, quiet_lead_in(r)) for r in selected])
     warnings, check_notes, answer = check(selection, values, std, selected, gain, offset, masses)
     notes += _notes(fit, selected, offset, values, len(selected)) + list(selection.notes) + list(fit.notes)
     notes += check_notes
     equivalent, equivalent_std = values["damping_ratio"].copy(), std["damping_ratio"].copy()
-    sigma = [estimate_noise(r, f_max=fit.f_max, stated=stated).sigma for r in selected]
-    with threadpool_limits(limits=1, user_api="blas"):
-        damping = resolve_damping(selected, selection, sigma=sigma)
-    order = np.argsort([model.omega(fit.theta)[i] for i in selection.storey])     # storey order -> ascending
-    damping = tuple(damping[k] for k in order)
+    damping = _small_amplitude_damping(selected, selection, stated, values["frequency"], warnings, notes)
     answer = answer & np.array([m.is_answer for m in damping])
-    for i, m in enumerate(damping):
-        if not m.is_answer:
-            warnings.append(f"mode {i + 1} at {values['frequency'][i]:.4g} Hz: damping at small amplitude NOT AN "
-                            f"ANSWER: {m.refusal}; the equivalent linear damping over the record is "
-                            f"{100 * m.equivalent:.3g} %")
-        else:
-            notes.append(f"mode {i + 1} at {values['frequency'][i]:.4g} Hz: {m.words()}")
-    notes.append("C and M^-1 C hold the equivalent linear damping of the record (what replays it); the damping "
-                 "ratios are the structure's at small amplitude")
     if selection.extra:
-        notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more than the "
-                     f"{d} storeys: the extra ones are fitted with the storey modes and reported apart")
+        notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more "
+                     f"than the {d} storeys: the extra ones are fitted with the storey modes and reported apart")
     has_k = masses is not None
     return ModalIdentification(
         frequency=values["frequency"], frequency_std=std["frequency"],
@@ -404,9 +372,75 @@ def identify_modal(experiment: Experiment, runs=None) -> ModalIdentification:
         noise=fit.noise_sources, f_max=fit.f_max, nfev=fit.nfev, notes=tuple(notes), warnings=tuple(warnings),
         extra_modes=extra_modes(selection),
         damping_ratio_subspace=selection.independent[list(selection.storey)], damping_is_answer=answer,
-        damping_ratio_equivalent=equivalent, equivalent_std=equivalent_std, damping_interval=np.array([m.interval for m in damping]),
+        damping_ratio_equivalent=equivalent, equivalent_std=equivalent_std,
+        damping_interval=np.array([m.interval for m in damping]),
         damping_refusal=tuple(m.refusal for m in damping), damping=damping,
     )
+
+
+def _checked_runs(experiment: Experiment, runs: Sequence[str] | None, notes: list[str]) -> tuple[RunData, ...]:
+    """The runs to fit, each checked (its repairs appended to ``notes``); refused when there are none or
+    when they carry different added masses."""
+    from momentid.io.run_checks import check_run
+
+    selected = experiment.select(runs)
+    if not selected:
+        raise IdentificationError(f"{experiment.source}: no runs to identify from")
+    checked = []
+    for run in selected:
+        run, repairs = check_run(run, experiment.source)
+        notes.extend(repairs)
+        checked.append(run)
+    selected = tuple(checked)
+    added = selected[0].added_mass
+    if any(not np.array_equal(r.added_mass, added) for r in selected):
+        raise IdentificationError(
+            f"{experiment.source}: runs {[r.name for r in selected]} carry different added masses: one modal "
+            f"model fits runs of one structure; fit them one by one (--per-run)")
+    return selected
+
+
+def _run_masses(experiment: Experiment, added: np.ndarray, notes: list[str]) -> tuple[float, ...] | None:
+    """The floor masses (kg) the runs carry: the stated ones plus the runs' ``added`` mass (None unstated)."""
+    masses = _masses(experiment, notes)
+    if masses is not None and np.any(added):
+        masses = tuple(float(m) for m in np.asarray(masses) + added)
+        notes.append(f"masses include the run's added mass: {list(masses)} kg")
+    return masses
+
+
+def _sensor_estimates(model: ModalModel, theta: np.ndarray, cov: np.ndarray, n_runs: int) -> tuple[np.ndarray, ...]:
+    """Per run and floor sensor: gain, clock offset (s) and their standard errors, each ``(n_runs, d)``."""
+    d = model.d
+    sd_all = np.sqrt(np.clip(np.diag(cov), 0, None))
+    gain = np.array([model.sensors(theta, r)[0] for r in range(n_runs)])
+    offset = np.array([model.sensors(theta, r)[1] for r in range(n_runs)])
+    slices = [model.sensor_slice(r) for r in range(n_runs)]
+    gain_std = np.array([gain[r] * sd_all[s.start:s.start + d] for r, s in enumerate(slices)])
+    offset_std = np.array([sd_all[s.start + d:s.stop] for s in slices])
+    return gain, offset, gain_std, offset_std
+
+
+def _small_amplitude_damping(selected: tuple[RunData, ...], selection: ModeSelection, stated: dict | None,
+                             frequency: np.ndarray, warnings: list[str], notes: list[str]) -> tuple[ModeDamping, ...]:
+    """Each storey mode's damping at small amplitude, in ascending frequency order; what each says (or why
+    it is no answer) appended to ``notes`` (``warnings``)."""
+    fit, model = selection.fit, selection.model
+    sigma = [estimate_noise(r, f_max=fit.f_max, stated=stated).sigma for r in selected]
+    with threadpool_limits(limits=1, user_api="blas"):
+        damping = resolve_damping(selected, selection, sigma=sigma)
+    order = np.argsort([model.omega(fit.theta)[i] for i in selection.storey])     # storey order -> ascending
+    damping = tuple(damping[k] for k in order)
+    for i, m in enumerate(damping):
+        if not m.is_answer:
+            warnings.append(f"mode {i + 1} at {frequency[i]:.4g} Hz: damping at small amplitude NOT AN "
+                            f"ANSWER: {m.refusal}; the equivalent linear damping over the record is "
+                            f"{100 * m.equivalent:.3g} %")
+        else:
+            notes.append(f"mode {i + 1} at {frequency[i]:.4g} Hz: {m.words()}")
+    notes.append("C and M^-1 C hold the equivalent linear damping of the record (what replays it); the damping "
+                 "ratios are the structure's at small amplitude")
+    return damping
 
 
 def _notes(fit, runs, offset, values, n_runs) -> list[str]:
@@ -446,6 +480,7 @@ class AmplitudeTrend:
     damping_slope_std: float
 
     def table(self) -> str:
+        """A text table: each run's response amplitude and mode 1, then the trend and its verdict."""
         lines = ["run                 RMS response (m/s^2)  mode-1 frequency (Hz)  mode-1 damping at small "
                  "amplitude (%)   equiv. linear (%)"]
         for r in self.results:
@@ -455,8 +490,8 @@ class AmplitudeTrend:
             lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {r.frequency[0]:8.4f} +- "
                          f"{r.frequency_std[0]:.4f}   {z:<30}{100 * r.linear_damping_ratio[0]:8.3f}")
         lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
-                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} +- {100 * self.damping_slope_std:.2g} "
-                     f"% per m/s^2"
+                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} "
+                     f"+- {100 * self.damping_slope_std:.2g} % per m/s^2"
                      f" ({self.verdict()})")
         return "\n".join(lines)
 
@@ -477,13 +512,14 @@ class AmplitudeTrend:
         return "no trend beyond two standard errors"
 
     def to_dict(self) -> dict:
+        """The per-run results and the slopes (per m/s^2 of RMS response) with their standard errors."""
         return {"runs": [r.to_dict() for r in self.results],
                 "frequency_slope_hz_per_m_s2": self.frequency_slope,
                 "frequency_slope_std": self.frequency_slope_std,
                 "damping_slope_per_m_s2": self.damping_slope, "damping_slope_std": self.damping_slope_std}
 
 
-def identify_per_run(experiment: Experiment, runs=None) -> tuple:
+def identify_per_run(experiment: Experiment, runs: Sequence[str] | None = None) -> tuple[ModalIdentification, ...]:
     """:func:`identify_modal` on every run on its own, on the machine's cores (forked workers, see
     :func:`momentid.core.processes.run_forked`); tuple of results in run order."""
     from momentid.core.processes import run_forked
@@ -500,7 +536,7 @@ MODAL_UNITS = {"frequency_hz": "Hz", "damping_ratio": "1 (fraction of critical)"
                "residual_rms": "m/s^2", "f_max_hz": "Hz"}
 
 
-def weighted_line(x, y, s):
+def weighted_line(x: np.ndarray, y: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, float]:
     """Weighted least-squares line ``y = c0 + c1 x`` (weights ``1/s^2``).
 
     Parameters
@@ -529,7 +565,7 @@ def _slope(x, y, s):
     return float(coef[1]), std
 
 
-def amplitude_trend(results) -> AmplitudeTrend:
+def amplitude_trend(results: Iterable[ModalIdentification]) -> AmplitudeTrend:
     """Mode 1's frequency and damping ratio against response amplitude over per-run results.
 
     Raises

@@ -22,6 +22,7 @@ why it only starts and checks the errors-in-variables fit.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,7 +91,8 @@ def _hankel(x: np.ndarray, start: int, rows: int, cols: int) -> np.ndarray:
     return out
 
 
-def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, orders, horizon: int | None = None) -> list:
+def poles_by_order(u: np.ndarray, y: np.ndarray, dt: float, orders: Iterable[int], horizon: int | None = None
+                   ) -> list[np.ndarray]:
     """Continuous-time poles of the MOESP model at each state order.
 
     Parameters

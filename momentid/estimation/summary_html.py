@@ -10,6 +10,8 @@ section (:mod:`momentid.report`), the same words in both.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from momentid.core import html
@@ -18,8 +20,8 @@ from momentid.core.html import REFUSED, pm, percent_pm
 __all__ = ["modal_html", "identification_html", "trend_html", "modal_headline", "modes_table", "refused_modes"]
 
 
-def refused_modes(result) -> list[int]:
-    """The (1-based) modes whose damping ratio is not an answer."""
+def refused_modes(result: Any) -> list[int]:
+    """The (1-based) modes whose damping ratio is not an answer (none for a result that does not say)."""
     answer = getattr(result, "damping_is_answer", None)
     return [] if answer is None else [i + 1 for i, a in enumerate(answer) if not a]
 
@@ -28,8 +30,9 @@ def _runs(runs) -> str:
     return f"{html.count(len(runs), 'run')} ({', '.join(runs)})"
 
 
-def modal_headline(result) -> str:
-    """One sentence: how many modes, from which runs, which damping ratios are not answers."""
+def modal_headline(result: Any) -> str:
+    """One sentence of a :class:`~momentid.estimation.scaled.ModalIdentification`: how many modes, from which
+    runs, which damping ratios are not answers."""
     d = result.storeys
     scale = ("K and C from the stated floor masses" if result.K is not None
              else "mass-normalised (no floor masses stated)")
@@ -41,9 +44,10 @@ def modal_headline(result) -> str:
     return words + "."
 
 
-def modes_table(result) -> str:
-    """The modes: frequency and damping ratio with standard errors, the subspace estimate, whether
-    the damping ratio is an answer, the shape."""
+def modes_table(result: Any) -> str:
+    """The modes of a :class:`~momentid.estimation.scaled.ModalIdentification` as an HTML table: frequency and
+    damping ratio with standard errors, the subspace estimate, whether the damping ratio is an answer, the
+    shape."""
     d = result.storeys
     independent = (np.full(d, np.nan) if result.damping_ratio_subspace is None
                    else np.asarray(result.damping_ratio_subspace, float))
@@ -64,7 +68,7 @@ def modes_table(result) -> str:
                        "shape (floor 1 … top)"], rows, caption="Modes (± one standard error)", words=[3])
 
 
-def modal_html(result) -> str:
+def modal_html(result: Any) -> str:
     """The answer of a :class:`~momentid.estimation.scaled.ModalIdentification` (module docstring)."""
     body = modes_table(result)
     if result.extra_modes:
@@ -78,7 +82,7 @@ def modal_html(result) -> str:
     return html.summary(modal_headline(result), body + html.warnings_list(result.warnings))
 
 
-def identification_html(result) -> str:
+def identification_html(result: Any) -> str:
     """The answer of an :class:`~momentid.estimation.identified.Identification` (module docstring)."""
     modes = result.modes()
     std = result.std()
@@ -97,7 +101,7 @@ def identification_html(result) -> str:
     return html.summary(headline, body + html.warnings_list(result.warnings))
 
 
-def trend_html(trend) -> str:
+def trend_html(trend: Any) -> str:
     """The answer of an :class:`~momentid.estimation.scaled.AmplitudeTrend`: each run's mode 1 against its
     response amplitude, and the trend's verdict."""
     rows = [[r.runs[0], f"{r.amplitude[0]:.3g}", pm(r.frequency[0], r.frequency_std[0]),

@@ -145,6 +145,7 @@ class SensorReport:
     notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
+        """The report as a JSON-ready dict (``alignment`` by its value); :meth:`from_dict` reads it back."""
         out = asdict(self)
         out["alignment"] = self.alignment.value
         out["notes"] = list(self.notes)
@@ -152,6 +153,7 @@ class SensorReport:
 
     @classmethod
     def from_dict(cls, data: dict) -> SensorReport:
+        """The report of a :meth:`to_dict` dict (a ``clock_error`` of None is nan)."""
         fields = dict(data, alignment=Alignment(data["alignment"]), notes=tuple(data.get("notes", ())))
         fields["clock_error"] = float("nan") if fields["clock_error"] is None else fields["clock_error"]
         return cls(**fields)
@@ -306,7 +308,7 @@ def align_sensors(records: list[SensorRecord], channels: tuple[str, ...],
         Their channel names (``("zdd", "a1", ..., "ad")``).
     delays : dict, optional
         Per floor channel, ``(samples, note)``: the delay of its data behind its stamps that the
-        other runs of the experiment agree on (:func:`common_delays`), applied to its stamps before
+        other runs of the experiment agree on (:func:`~momentid.io.delays.common_delays`), applied to its stamps before
         the data confirm them, with the note.
 
     Returns

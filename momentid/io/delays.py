@@ -35,7 +35,7 @@ def common_delays(runs: list[AlignedRun], names: list[str]) -> dict:
     Returns
     -------
     dict
-        Channel -> ``(samples, note)``, for :func:`align_sensors`'s ``delays``.
+        Channel -> ``(samples, note)``, for :func:`~momentid.io.align.align_sensors`'s ``delays``.
     """
     out = {}
     channels = sorted({ch for run in runs for ch in run.stamp_delays})

@@ -80,7 +80,7 @@ def _locked_fd(path: Path, flags: int) -> int:
     raise busy_error(path)
 
 
-def open_locked(path) -> BinaryIO:
+def open_locked(path: str | os.PathLike) -> BinaryIO:
     """Open ``path`` for writing in place, locked for this process, truncated only once locked.
 
     Returns a binary file object; closing it releases the lock.
@@ -104,7 +104,7 @@ def open_locked(path) -> BinaryIO:
 
 
 @contextlib.contextmanager
-def exclusive(path) -> Iterator[Path]:
+def exclusive(path: str | os.PathLike) -> Iterator[Path]:
     """Hold ``path`` (a folder, created if missing and removed again if the block fails while it is
     still empty; or an existing file) for the ``with`` block.
 
@@ -139,7 +139,7 @@ def exclusive(path) -> Iterator[Path]:
         os.close(fd)
 
 
-def partial_path(path) -> Path:
+def partial_path(path: str | os.PathLike) -> Path:
     """The temporary file ``path`` is written to before it is renamed into place."""
     path = Path(path)
     return path.with_name(path.name + ".partial")
@@ -161,7 +161,7 @@ class _Slot:
 
 
 @contextlib.contextmanager
-def reserve(path) -> Iterator[_Slot]:
+def reserve(path: str | os.PathLike) -> Iterator[_Slot]:
     """Lock the output ``path`` now (its temporary file) and write it whole later with ``commit``.
 
     For a command that computes for minutes before it writes: a second writer is refused at once,
@@ -187,7 +187,7 @@ def reserve(path) -> Iterator[_Slot]:
         file.close()
 
 
-def write_whole(path, data: bytes) -> Path:
+def write_whole(path: str | os.PathLike, data: bytes) -> Path:
     """Write ``data`` to ``path`` whole or not at all, locked (see :func:`reserve`)."""
     with reserve(path) as slot:
         return slot.commit(data)

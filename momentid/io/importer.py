@@ -33,6 +33,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 from dataclasses import dataclass
+import os
 from pathlib import Path
 
 import numpy as np
@@ -253,7 +254,7 @@ def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) ->
                    values=aligned.values, meta=meta)
 
 
-def import_folder(path, *, relabel: bool = True) -> Experiment:
+def import_folder(path: str | os.PathLike, *, relabel: bool = True) -> Experiment:
     """Read a lab folder (``experiment.toml`` + the runs' data files) into an experiment.
 
     Parameters
@@ -395,7 +396,7 @@ def _agree(first: RunData, run: RunData, first_file: Path, file: Path) -> None:
         raise csv_error(file, 3, "'t'", message)
 
 
-def write_import(experiment: Experiment, out_path) -> Path:
+def write_import(experiment: Experiment, out_path: str | os.PathLike) -> Path:
     """Write an imported experiment to the MCAP recording ``out_path`` (folders created)."""
     from momentid.io.recording import write_experiment
 
@@ -404,7 +405,7 @@ def write_import(experiment: Experiment, out_path) -> Path:
     return write_experiment(out, experiment)
 
 
-def import_recording(folder, out_path, *, relabel: bool = True) -> Path:
+def import_recording(folder: str | os.PathLike, out_path: str | os.PathLike, *, relabel: bool = True) -> Path:
     """Import a lab folder (see :func:`import_folder`) and write it to ``out_path``.
 
     Parameters
@@ -441,7 +442,7 @@ def report(experiment: Experiment) -> list[str]:
     return lines
 
 
-def summary(experiment: Experiment, out_path) -> str:
+def summary(experiment: Experiment, out_path: str | os.PathLike) -> str:
     """One line: runs, samples, channels, rate and where the recording went."""
     runs = experiment.runs
     samples = sum(r.n_samples for r in runs)

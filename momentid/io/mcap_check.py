@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import struct
+from typing import BinaryIO
 import zlib
 
 from mcap.exceptions import McapError
@@ -33,14 +34,16 @@ class Bounded:
     and fails as damage instead of making the stock reader allocate that many bytes.  (Not an
     ``io.RawIOBase``: the stock reader would wrap that in a BufferedReader, which reads around it.)"""
 
-    def __init__(self, f, size: int):
+    def __init__(self, f: BinaryIO, size: int):
         self._f, self._size = f, size
 
-    def read(self, n: int = -1) -> bytes:
+    def read(self, n: int | None = -1) -> bytes:
+        """At most ``n`` bytes (all when ``n`` is None or negative), never past the file's ``size``."""
         left = max(self._size - self._f.tell(), 0)
         return self._f.read(left if n is None or n < 0 else min(n, left))
 
     def tell(self) -> int:
+        """The position in the file (bytes)."""
         return self._f.tell()
 
 
@@ -50,7 +53,7 @@ _FOOTER = struct.Struct("<BQQQI")
 _OPCODE_FOOTER, _OPCODE_CHUNK, _OPCODE_METADATA, _OPCODE_ATTACHMENT = 0x02, 0x06, 0x0C, 0x09
 
 
-def summary_damage(f, size: int) -> str | None:
+def summary_damage(f: BinaryIO, size: int) -> str | None:
     """What is wrong with the summary section and footer of the open file ``f`` (or None).
 
     The streaming read never needs them, but other MCAP tools jump through their indexes, so

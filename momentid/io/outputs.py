@@ -83,7 +83,7 @@ def _writable(folder: Path, option: str, shown) -> None:
     os.unlink(probe)
 
 
-def check_file(path, kind: str, *, option: str = "-o", force: bool = False) -> Path:
+def check_file(path: str | os.PathLike, kind: str, *, option: str = "-o", force: bool = False) -> Path:
     """Check, before the work, that the single-file output ``path`` may be written.
 
     Parameters
@@ -156,7 +156,7 @@ def _check_beside(p: Path, kind: str, option: str, force: bool) -> None:
                              + ("" if folder else " (--force removes it)"))
 
 
-def drop_link(path) -> None:
+def drop_link(path: str | os.PathLike) -> None:
     """Remove a symbolic link at ``path`` (a ``--force``\\ d output), never the file it points to."""
     p = Path(path)
     if p.is_symlink():

@@ -30,6 +30,7 @@ one to a run; :func:`placement_warnings` is the check identification runs on any
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 import enum
 import itertools
 from dataclasses import dataclass, replace
@@ -116,6 +117,7 @@ class Finding:
 
     @property
     def fixable(self) -> bool:
+        """Whether the finding carries its fix: a floor order (``permutation``) or sensors to negate."""
         return self.permutation is not None or bool(self.flips)
 
 
@@ -420,7 +422,8 @@ def _cross_run(runs: list[_Run], perms: dict[str, tuple[int, ...]], d: int) -> l
     return findings
 
 
-def check_placement(runs, masses=None, files=None) -> tuple[Finding, ...]:
+def check_placement(runs: Sequence[RunData], masses: Sequence[float] | None = None,
+                    files: Mapping[str, Sequence[str]] | None = None) -> tuple[Finding, ...]:
     """Check every run's sensor labels against physics and against the other runs.
 
     Parameters

@@ -8,7 +8,9 @@ overflow bait, never a real rig; the message names the file, the key, the value 
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import math
+from typing import Any
 
 from momentid.core.structure import Structure
 from momentid.errors import ScenarioError
@@ -87,9 +89,10 @@ def check_structure(tab: Table, structure: Structure) -> None:
             _each(damping, "damping_ratios", values, what, span, unit)
 
 
-def check_excitation(tab: Table, excitation, tracking) -> None:
+def check_excitation(tab: Table, excitation: Any, tracking: Any) -> None:
     """Refuse an ``[excitation]`` whose amplitude, frequencies or scale lie outside the ranges
-    (``excitation``: Harmonics, BandLimitedNoise, RecordedMotion or Chirp of :mod:`momentid.lab.scenario`)."""
+    (``excitation``: Harmonics, BandLimitedNoise, RecordedMotion or Chirp of :mod:`momentid.lab.motions`;
+    ``tracking``: its Tracking, or None)."""
     band = (0.0, FREQUENCY_RANGE[1])
     if hasattr(excitation, "amplitudes"):   # harmonics, given in rad/s or in Hz
         name = "amplitude" if tab.has("amplitude") else "amplitudes"
@@ -116,6 +119,6 @@ def check_excitation(tab: Table, excitation, tracking) -> None:
         _each(tab, "tracking_band", tracking.band, "a band edge", band, "Hz")
 
 
-def check_added_mass(tab: Table, added) -> None:
+def check_added_mass(tab: Table, added: Sequence[float]) -> None:
     """Refuse a run's added mass above the heaviest floor mass of :data:`MASS_RANGE`."""
     _each(tab, "added_mass", added, "an added mass", (0.0, MASS_RANGE[1]), "kg")

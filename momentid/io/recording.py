@@ -331,7 +331,8 @@ class RecordingWriter:
         self._file.close()
 
 
-def write_experiment(path, experiment: Experiment, *, model_xml: dict[str, str] | None = None) -> Path:
+def write_experiment(path: str | os.PathLike, experiment: Experiment, *,
+                     model_xml: dict[str, str] | None = None) -> Path:
     """Write all runs of ``experiment`` to a new recording.
 
     Parameters

@@ -5,6 +5,7 @@ times that the writer (:mod:`momentid.io.recording`) and the reader
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import re
 
 import numpy as np
@@ -93,7 +94,7 @@ def _varint(x: int) -> bytes:
     return bytes(out)
 
 
-def encode_block(run: str, first: int, channels, time: np.ndarray, values: np.ndarray) -> bytes:
+def encode_block(run: str, first: int, channels: Sequence[str], time: np.ndarray, values: np.ndarray) -> bytes:
     """Serialize a SensorBlock; byte-identical to ``SensorBlock(...).SerializeToString()``.
 
     ``time`` shape (n,) and ``values`` shape (n, c) must be C-contiguous

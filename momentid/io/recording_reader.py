@@ -4,6 +4,7 @@ runs that completed and says in notes what a truncated, corrupted or aborted fil
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import json
 import os
 import re
@@ -58,8 +59,8 @@ class _Scan:
     on_block: object = None  # streaming: called with each decoded block instead of keeping it
 
 
-def read_recording(path) -> Experiment:
-    """Read a recording written by :class:`RecordingWriter` (or any writer
+def read_recording(path: str | os.PathLike) -> Experiment:
+    """Read a recording written by :class:`~momentid.io.recording.RecordingWriter` (or any writer
     following ``docs/recording-format.md``).
 
     One streaming pass checks every chunk CRC and decodes every block, so a
@@ -90,14 +91,19 @@ def read_recording(path) -> Experiment:
     return _assemble(path, _scan(path))
 
 
-def stream_recording(path, on_block) -> tuple[dict, list[str], list[str]]:
+def stream_recording(path: str | os.PathLike,
+                     on_block: Callable[[str, np.ndarray | None, tuple[str, ...], int, np.ndarray, np.ndarray],
+                                        object]) -> tuple[dict, list[str], list[str]]:
     """Read a recording block by block without keeping its samples (flat memory).
 
     Parameters
     ----------
+    path : str or Path
+        The ``.mcap`` file.
     on_block : callable
         ``on_block(run_name, added_mass, channels, first_sample, time, values)`` for every sensor
-        block as it is read: ``time`` (n,) s, ``values`` (n, c) SI, in file order.
+        block as it is read: ``added_mass`` (d,) kg or None, ``time`` (n,) s, ``values`` (n, c) SI,
+        in file order.
 
     Returns
     -------

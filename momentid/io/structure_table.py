@@ -11,6 +11,8 @@ An import may state less, as a real lab usually does: ``storeys`` and/or
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from momentid.core import analytic
@@ -35,7 +37,7 @@ MODEL_KEYS = ("storey_stiffness", "rayleigh_mu", "rayleigh_kappa", "damping", "b
 MODEL_BYTES_PER_STOREY2 = 64.0
 
 
-def implausible_mass(masses) -> int | None:
+def implausible_mass(masses: Iterable[float]) -> int | None:
     """Index of the first mass (kg) outside :data:`MASS_RANGE` (or not finite), None when all are plausible."""
     for i, m in enumerate(masses):
         if not MASS_RANGE[0] <= m <= MASS_RANGE[1]:  # nan fails too

@@ -64,6 +64,7 @@ class Table:
 
     # -- messages -----------------------------------------------------------
     def key(self, name: str) -> str:
+        """The dotted key path of ``name`` in this table, as error messages name it."""
         return f"{self.prefix}.{name}" if self.prefix else name
 
     def _fail(self, key: str, value: Any, expected: str) -> None:
@@ -79,6 +80,7 @@ class Table:
         )
 
     def has(self, name: str) -> bool:
+        """Whether the table holds key ``name`` (it is not marked as read)."""
         return name in self.data
 
     # -- typed getters ------------------------------------------------------
@@ -92,6 +94,11 @@ class Table:
 
     def number(self, name: str, default: Any = _MISSING, *, positive: bool = False,
                nonnegative: bool = False) -> float:
+        """Key ``name`` as a finite float (``positive``: > 0, ``nonnegative``: >= 0); ``default`` when absent.
+
+        Without ``default`` a missing key is refused; every refusal is a
+        :class:`~momentid.errors.ScenarioError` naming the file, the key and what was expected.
+        """
         value = self._get(name, default)
         if value is default and default is not _MISSING:
             return value
@@ -110,6 +117,7 @@ class Table:
         return value
 
     def integer(self, name: str, default: Any = _MISSING, *, minimum: int | None = None) -> int:
+        """Key ``name`` as an integer (not a boolean), at least ``minimum``; ``default`` when absent."""
         value = self._get(name, default)
         if value is default and default is not _MISSING:
             return value
@@ -120,6 +128,7 @@ class Table:
         return value
 
     def string(self, name: str, default: Any = _MISSING, *, choices: tuple[str, ...] | None = None) -> str:
+        """Key ``name`` as a string, one of ``choices`` when given; ``default`` when absent."""
         value = self._get(name, default)
         if value is default and default is not _MISSING:
             return value
@@ -130,6 +139,7 @@ class Table:
         return value
 
     def boolean(self, name: str, default: Any = _MISSING) -> bool:
+        """Key ``name`` as ``true`` or ``false``; ``default`` (which must be a bool) when absent."""
         value = self._get(name, default)
         if not isinstance(value, bool):
             self._fail(self.key(name), value, "true or false")
@@ -180,6 +190,7 @@ class Table:
         return tuple(value)
 
     def strings(self, name: str, default: Any = _MISSING) -> tuple[str, ...]:
+        """Key ``name`` as an array of strings; ``default`` when absent."""
         value = self._get(name, default)
         if value is default and default is not _MISSING:
             return value
@@ -188,6 +199,7 @@ class Table:
         return tuple(value)
 
     def table(self, name: str, default: Any = _MISSING) -> Table | None:
+        """Sub-table ``name`` as a :class:`Table` to validate; None when absent and ``default`` is None."""
         value = self._get(name, default)
         if value is None:
             return None
@@ -196,6 +208,7 @@ class Table:
         return Table(value, self.file, self.key(name))
 
     def tables(self, name: str) -> list[Table]:
+        """Array of tables ``name`` (``[[name]]``, at least one), each as a :class:`Table`."""
         value = self._get(name, _MISSING)
         if not isinstance(value, list) or not value or not all(isinstance(v, dict) for v in value):
             self._fail(self.key(name), value, f"one or more [[{self.key(name)}]] tables")

@@ -19,6 +19,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.errors import RecordingError
 
@@ -62,7 +63,7 @@ def units() -> str:
     return _delimited(body, 164)
 
 
-def nodes(numbers: Sequence[int], coordinates) -> str:
+def nodes(numbers: Sequence[int], coordinates: ArrayLike) -> str:
     """Dataset 15: nodes ``numbers`` at ``coordinates`` (n, 3) in m (global coordinate system 0)."""
     xyz = _finite(coordinates, "node coordinates").reshape(len(numbers), 3)
     body = "".join(f"{n:>10}{0:>10}{0:>10}{0:>10}" + "".join(_e13(c) for c in row) + "\n"
@@ -70,7 +71,7 @@ def nodes(numbers: Sequence[int], coordinates) -> str:
     return _delimited(body, 15)
 
 
-def mode(number: int, frequency: float, damping_ratio: float, node_numbers: Sequence[int], shape,
+def mode(number: int, frequency: float, damping_ratio: float, node_numbers: Sequence[int], shape: ArrayLike,
          ids: Sequence[str], modal_mass: float = 0.0, load_case: int = 1) -> str:
     """Dataset 55 of a normal mode: its shape along +X at ``node_numbers`` (3 values per node: X, Y, Z).
 
@@ -109,7 +110,7 @@ def mode(number: int, frequency: float, damping_ratio: float, node_numbers: Sequ
     return _delimited(body, 55)
 
 
-def function(kind: int, number: int, frequency_step: float, values, *, response_node: int,
+def function(kind: int, number: int, frequency_step: float, values: ArrayLike, *, response_node: int,
              reference_node: int, ids: Sequence[str], ordinate: str) -> str:
     """Dataset 58 of a function of frequency from 0 in steps of ``frequency_step`` (Hz): ``values``
     (real or complex, double precision) at ``response_node`` (+X) over ``reference_node`` (+X).

@@ -8,6 +8,7 @@ then the values in g (any number per line).  Every malformed file is a
 from __future__ import annotations
 
 import math
+import os
 import re
 from pathlib import Path
 
@@ -32,7 +33,7 @@ _OLD_RE = re.compile(r"^\s*(\S+?),?\s+(\S+?),?\s+NPTS\s*,\s*DT\b", re.IGNORECASE
 _UNITS_RE = re.compile(r"\bUNITS\s+OF\s+([^\s,;]+)", re.IGNORECASE)
 
 
-def read_at2(path) -> tuple[float, np.ndarray]:
+def read_at2(path: str | os.PathLike) -> tuple[float, np.ndarray]:
     """Read a PEER-style AT2 accelerogram.
 
     The layout is free-text header lines, then a line giving the number of

@@ -39,6 +39,7 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.interpolate import CubicSpline, PPoly
 from scipy.signal import butter, sosfiltfilt
 
@@ -129,7 +130,7 @@ class GroundMotion:
             raise ValueError("a piecewise GroundMotion needs a finite end time")
 
     # -- evaluation ---------------------------------------------------------
-    def displacement(self, t) -> np.ndarray:
+    def displacement(self, t: ArrayLike) -> np.ndarray:
         """Table displacement ``z(t)``.
 
         Parameters
@@ -144,11 +145,11 @@ class GroundMotion:
         """
         return self._derivative(0, t)
 
-    def velocity(self, t) -> np.ndarray:
+    def velocity(self, t: ArrayLike) -> np.ndarray:
         """Table velocity ``z'(t)`` (m/s), same shape as ``t`` (s)."""
         return self._derivative(1, t)
 
-    def acceleration(self, t) -> np.ndarray:
+    def acceleration(self, t: ArrayLike) -> np.ndarray:
         """Table acceleration ``z''(t)`` (m/s^2), same shape as ``t`` (s)."""
         return self._derivative(2, t)
 

@@ -11,9 +11,9 @@ actuator-dynamics callbacks (``mujoco.set_mjcb_control`` takes a C function poin
   (:mod:`momentid.mechanisms.native`), the dofs of its link's upper and lower floors, its state's
   activation address and actuator, and the law's parameter vector.  So one installed callback serves
   every model at once, each reading its own forces: many models on ``mujoco.rollout``'s threads;
-- :func:`control` writes, at every call, each force across its link into ``qfrc_applied`` (on the upper
+- the ``control`` callback writes, at every call, each force across its link into ``qfrc_applied`` (on the upper
   floor's dof against the stretch, on the lower one's with it), as the Python callback does;
-  :func:`act_dyn` returns a force's state rate for its state actuator.
+  the ``act_dyn`` callback returns a force's state rate for its state actuator.
 
 The callbacks read ``mjModel`` and ``mjData`` through their C layout, taken from MuJoCo's own
 description of its structs (``mujoco.introspect``) and checked against a live model and data before
@@ -26,12 +26,13 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import threading
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator, Sequence
 
 import mujoco
 import numpy as np
 
 from momentid import mechanisms as registry
+from momentid.core.structure import Mechanism, Structure
 
 __all__ = ["PROGRAM", "HEADER", "ENABLED", "program_size", "add_program", "available", "load_program", "installed",
            "state_actuator", "applies", "threadable", "plain"]
@@ -50,7 +51,7 @@ def state_actuator(k: int) -> str:
     return f"state{k + 1}"
 
 
-def program_size(mechanisms) -> int:
+def program_size(mechanisms: Iterable[Mechanism]) -> int:
     """Entries of the program of ``mechanisms`` (0 without a callback force): a count, then per force
     :data:`HEADER` entries and its parameters."""
     sizes = [HEADER + len(registry.get(m.type).params) + registry.get(m.type).needs_stiffness
@@ -58,7 +59,7 @@ def program_size(mechanisms) -> int:
     return 1 + sum(sizes) if sizes else 0
 
 
-def add_program(spec: mujoco.MjSpec, mechanisms) -> None:
+def add_program(spec: mujoco.MjSpec, mechanisms: Iterable[Mechanism]) -> None:
     """Add the (empty) program of ``mechanisms``' callback forces to ``spec``: the first custom numeric."""
     size = program_size(mechanisms)
     if size:
@@ -125,19 +126,23 @@ _CALLBACKS: list = []   # [(control, act_dyn)] once compiled, [None] when unavai
 def _compile():
     """The control and act_dyn callbacks (numba ``cfunc``), or None when they cannot be built here."""
     try:
-        import numba
-        from llvmlite import ir
-        from numba import carray, types
-        from numba.core import cgutils
-        from numba.extending import intrinsic
+        pointer, call_force, call_rate = _intrinsics()   # numba's and llvmlite's parts imported
     except ImportError:
         return None
     offsets = _offsets()
     if offsets is None:
         return None
-    d_time, d_qpos, d_qvel, d_act, d_qfrc = (offsets[f"d_{f}"] for f in ("time", "qpos", "qvel", "act",
-                                                                          "qfrc_applied"))
-    m_nnumeric, m_numadr, m_numdata = offsets["m_nnumeric"], offsets["m_numeric_adr"], offsets["m_numeric_data"]
+    word, program = _readers(offsets, pointer)
+    return (_control_callback(offsets, pointer, word, program, call_force),
+            _act_dyn_callback(offsets, pointer, word, program, call_rate))
+
+
+def _intrinsics():
+    """numba intrinsics: an address as a pointer, and calls of a compiled law's force and rate at an address."""
+    from llvmlite import ir
+    from numba import types
+    from numba.core import cgutils
+    from numba.extending import intrinsic
 
     @intrinsic
     def pointer(typingctx, address):
@@ -165,6 +170,16 @@ def _compile():
         f8 = types.float64
         return f8(types.int64, types.int64, f8, f8, f8), codegen
 
+    return pointer, call_force, call_rate
+
+
+def _readers(offsets: dict[str, int], pointer):
+    """Jitted readers: the 8-byte word at an address, and the address of a model's program."""
+    import numba
+    from numba import carray
+
+    m_numadr, m_numdata = offsets["m_numeric_adr"], offsets["m_numeric_data"]
+
     @numba.njit(inline="always")
     def word(address):
         return carray(pointer(address), 1, np.int64)[0]
@@ -173,6 +188,18 @@ def _compile():
     def program(m):
         """Address of the model's program (its first numeric)."""
         return word(m + m_numdata) + 8 * np.int64(carray(pointer(word(m + m_numadr)), 1, np.int32)[0])
+
+    return word, program
+
+
+def _control_callback(offsets: dict[str, int], pointer, word, program, call_force):
+    """The control callback: every force of the model's program into ``qfrc_applied``."""
+    import numba
+    from numba import carray, types
+
+    d_time, d_qpos, d_qvel, d_act, d_qfrc = (offsets[f"d_{f}"] for f in ("time", "qpos", "qvel", "act",
+                                                                          "qfrc_applied"))
+    m_nnumeric = offsets["m_nnumeric"]
 
     @numba.njit(inline="always")
     def stretch(prog, k, qpos, qvel):
@@ -219,6 +246,16 @@ def _compile():
                 out[np.int64(prog[k + 3])] += f      # ... and on its lower one
             k += HEADER + np.int64(prog[k + 6])
 
+    return control
+
+
+def _act_dyn_callback(offsets: dict[str, int], pointer, word, program, call_rate):
+    """The actuator-dynamics callback: the state rate of the force whose state ``actuator`` holds."""
+    import numba
+    from numba import carray, types
+
+    d_qpos, d_qvel, d_act = offsets["d_qpos"], offsets["d_qvel"], offsets["d_act"]
+
     @numba.cfunc(types.float64(types.int64, types.int64, types.int32))
     def act_dyn(m, d, actuator):
         base = program(m)
@@ -240,7 +277,7 @@ def _compile():
             k += HEADER + np.int64(head[6])
         return 0.0
 
-    return control, act_dyn
+    return act_dyn
 
 
 def _callbacks():
@@ -254,7 +291,7 @@ def available() -> bool:
     return ENABLED and _callbacks() is not None
 
 
-def load_program(model: mujoco.MjModel, mechanisms, structure=None) -> bool:
+def load_program(model: mujoco.MjModel, mechanisms: Iterable[Mechanism], structure: Structure | None = None) -> bool:
     """Fill ``model``'s program with the callback forces of ``mechanisms`` (``structure``: the storey
     stiffnesses a ``needs_stiffness`` kind takes its fraction of).  False, the model untouched, when the
     native callbacks cannot apply them (not :func:`available`, a kind without a native law, a model
@@ -291,14 +328,14 @@ def load_program(model: mujoco.MjModel, mechanisms, structure=None) -> bool:
     return True
 
 
-def applies(mechanisms) -> bool:
+def applies(mechanisms: Iterable[Mechanism]) -> bool:
     """True when the native callbacks apply every callback force of ``mechanisms`` (so their rollouts
     need no Python: they may run on threads side by side)."""
     forces = [m for m in mechanisms if registry.get(m.type).callback]
     return available() and all(registry.get(m.type).native_law() is not None for m in forces)
 
 
-def threadable(mechanisms) -> bool:
+def threadable(mechanisms: Sequence[Mechanism]) -> bool:
     """True when rollouts of models with ``mechanisms`` run no Python in MuJoCo's step: no callback force,
     or every one native (:func:`applies`); such rollouts may run on threads side by side, with each other
     and with those of models with no callback force (the native control callback leaves a model without a

@@ -17,12 +17,14 @@ samples, as ideal sensors read them (the sensors' gains and clock offsets are ap
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 import math
 import os
 
 import mujoco
 import numpy as np
 from mujoco import rollout as _rollout
+from numpy.typing import ArrayLike
 
 from momentid.core import counters
 from momentid.errors import ModelError, SimulationError
@@ -47,7 +49,7 @@ STOREY_HEIGHT = 0.15
 BASE_MASS = 1.0
 
 
-def modal_damping(masses, K, zeta) -> np.ndarray:
+def modal_damping(masses: ArrayLike, K: np.ndarray, zeta: ArrayLike) -> np.ndarray:
     """``C = M Phi diag(2 zeta w) Phi^T M`` (N s/m): the classical damping whose modes are those of
     (M, K) with damping ratios ``zeta`` (ascending frequency order), shape (d, d)."""
     m_half = np.sqrt(np.asarray(masses, float))
@@ -68,7 +70,7 @@ def build_spec(rig: RigModel, timestep: float, name: str = "rig_twin") -> mujoco
     return spec
 
 
-def compile_models(rigs, timestep: float) -> list:
+def compile_models(rigs: Iterable[RigModel], timestep: float) -> list[mujoco.MjModel]:
     """Compiled ``mujoco.MjModel`` of each :class:`~momentid.lab.rig_model.RigModel` (all of one layout: the
     same tendons and mechanisms' places), by :func:`build_spec`."""
     return [lab_rig.compile_model(build_spec(r, timestep)) for r in rigs]
@@ -83,7 +85,7 @@ def substeps_for(dt: float) -> int:
     return max(1, math.ceil(dt / MAX_TIMESTEP - 1e-9))
 
 
-def simulate(models, zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SAMPLE,
+def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SAMPLE,
              threads: int | None = None) -> np.ndarray:
     """Floor absolute accelerations of compiled twins driven by a recorded table acceleration.
 

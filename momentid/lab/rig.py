@@ -23,15 +23,17 @@ TABLE_INERTIA_RATIO`` (a stiff servo table).
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Sequence
 import contextlib
 from dataclasses import replace
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid import mechanisms as registry
 from momentid.errors import ModelError
-from momentid.core.structure import Structure
+from momentid.core.structure import Mechanism, Structure
 from momentid.mechanisms.base import drifts, storey_to_floor
 from momentid.mechanisms.coulomb_friction import FRICTION_SMOOTHING
 from momentid.mechanisms.place import Place, Target
@@ -65,7 +67,7 @@ TABLE_INERTIA_RATIO = 1e10
 CALLBACK_MECHANISMS = tuple(kind.name for kind in registry.REGISTRY.values() if kind.callback)
 
 
-def needs_callback(mechanisms) -> bool:
+def needs_callback(mechanisms: Iterable[Mechanism]) -> bool:
     """True when ``mechanisms`` include forces the MJCF cannot express."""
     return any(registry.get(m.type).callback for m in mechanisms)
 
@@ -74,7 +76,7 @@ def needs_callback(mechanisms) -> bool:
 _GAIN_PARAMETERS = 10
 
 
-def stateful(mechanisms) -> tuple:
+def stateful(mechanisms: Iterable[Mechanism]) -> tuple[Mechanism, ...]:
     """The ``mechanisms`` whose force has an internal state (in order): each gets a state actuator."""
     return tuple(m for m in mechanisms if registry.get(m.type).has_state(dict(m.parameters)))
 
@@ -84,8 +86,9 @@ def stateful(mechanisms) -> tuple:
 SENSOR_GROUPS = ("zdd", "z", "zd", "a", "q", "v")
 
 
-def build_spec(rig: RigModel | Structure, added_mass=None, *, timestep: float = 1e-3,
-               name: str = "shear_building", mechanisms=(), integrator=mujoco.mjtIntegrator.mjINT_RK4,
+def build_spec(rig: RigModel | Structure, added_mass: ArrayLike | None = None, *, timestep: float = 1e-3,
+               name: str = "shear_building", mechanisms: Sequence[Mechanism] = (),
+               integrator: mujoco.mjtIntegrator = mujoco.mjtIntegrator.mjINT_RK4,
                sensors: tuple[str, ...] = SENSOR_GROUPS) -> mujoco.MjSpec:
     """Build the MJCF specification of a rig for one run: the one builder of every rig momentid simulates.
 
@@ -251,7 +254,7 @@ def _sensors(spec: mujoco.MjSpec, d: int, groups: tuple[str, ...]) -> None:
             spec.add_sensor(name=f"{group}{i + 1}", type=kind, objname=target.format(i + 1), objtype=objtype)
 
 
-def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
+def empty_spec(name: str, timestep: float, integrator: mujoco.mjtIntegrator) -> mujoco.MjSpec:
     """A spec with no bodies yet: stated inertias, ``timestep`` (s), ``integrator``, no contacts."""
     spec = mujoco.MjSpec()
     spec.modelname = name
@@ -262,7 +265,8 @@ def empty_spec(name: str, timestep: float, integrator) -> mujoco.MjSpec:
     return spec
 
 
-def add_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> None:
+def add_elements(spec: mujoco.MjSpec, mechanisms: Iterable[Mechanism], bodies: Sequence[mujoco.MjsBody],
+                 timestep: float) -> None:
     """Add the MJCF elements the ``mjcf_elements`` kinds among ``mechanisms`` build at their places
     (:meth:`~momentid.mechanisms.base.MechanismKind.elements`: ``joint_friction``'s sliders across a
     storey, ``tuned_mass_damper``'s body hung on a floor) to ``spec``.
@@ -286,7 +290,7 @@ def add_elements(spec: mujoco.MjSpec, mechanisms, bodies, timestep: float) -> No
             body.mass = body.mass - taken
 
 
-def callback_forces(mechanisms, q: np.ndarray, v: np.ndarray, time: float = 0.0,
+def callback_forces(mechanisms: Iterable[Mechanism], q: np.ndarray, v: np.ndarray, time: float = 0.0,
                     structure: Structure | None = None) -> np.ndarray:
     """Floor forces (N) the MJCF cannot express: those of the ``callback`` kinds
     (:data:`CALLBACK_MECHANISMS`) without memory, each by its registered law across its place.
@@ -357,7 +361,7 @@ def sensor_layout(model: mujoco.MjModel) -> dict[str, int]:
 
 
 @contextlib.contextmanager
-def mujoco_warnings_counted_not_printed():
+def mujoco_warnings_counted_not_printed() -> Iterator[None]:
     """MuJoCo prints each warning (``Nan, Inf or huge value in QPOS ...``) and appends it to
     ``MUJOCO_LOG.TXT`` in the working folder.  momentid reads the warning counters of ``MjData``
     instead and refuses the run in one line (or, replaying a trial model that goes unstable, takes

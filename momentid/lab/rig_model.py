@@ -15,11 +15,13 @@ exactly as the lab always built it), :meth:`RigModel.from_matrices` from any sym
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from momentid.core.structure import DEFAULT_BASE_MASS, Structure
+from momentid.core.structure import DEFAULT_BASE_MASS, Mechanism, Structure
 from momentid.errors import ModelError
 from momentid.lab.tendons import Tendon, tendon_layout
 
@@ -63,10 +65,12 @@ class RigModel:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys (and floors) ``d``."""
         return len(self.masses)
 
     @classmethod
-    def shear(cls, structure: Structure, added_mass=None, mechanisms=()) -> RigModel:
+    def shear(cls, structure: Structure, added_mass: ArrayLike | None = None,
+              mechanisms: Sequence[Mechanism] = ()) -> RigModel:
         """The shear building ``structure`` with ``added_mass`` (kg, shape (d,); none by default) and
         ``mechanisms``: storey tendons ``k_i`` and ``kappa k_i``, floor joints damped by ``mu (m_i + dm_i)``.
 
@@ -88,8 +92,9 @@ class RigModel:
                    added_mass=dm, mechanisms=tuple(mechanisms))
 
     @classmethod
-    def from_matrices(cls, masses, K, C, storey_heights, *, base_mass: float = DEFAULT_BASE_MASS,
-                      joint_damping=None, added_mass=None, mechanisms=()) -> RigModel:
+    def from_matrices(cls, masses: ArrayLike, K: ArrayLike, C: ArrayLike, storey_heights: ArrayLike, *,
+                      base_mass: float = DEFAULT_BASE_MASS, joint_damping: ArrayLike | None = None,
+                      added_mass: ArrayLike | None = None, mechanisms: Sequence[Mechanism] = ()) -> RigModel:
         """A rig carrying the symmetric ``K`` (N/m) and ``C`` (N s/m), each (d, d), exactly as tendons
         (:func:`~momentid.lab.tendons.tendon_layout`), with floor ``masses`` (kg, (d,)) drawn at
         ``storey_heights`` (m, (d,)); ``joint_damping`` (N s/m, (d,)) none by default.

@@ -13,7 +13,9 @@ import math
 import re
 from dataclasses import asdict, dataclass, field
 from importlib import resources
+import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +26,7 @@ from momentid.io.plausible import check_added_mass, check_excitation, check_stru
 from momentid.io.toml_reader import Table, load_toml
 from momentid.errors import ScenarioError
 from momentid.lab.motions import BandLimitedNoise, Chirp, Excitation, Harmonics, RecordedMotion, Tracking
+from momentid.mechanisms.base import SensorStage
 
 __all__ = [
     "Harmonics",
@@ -94,6 +97,7 @@ class Instrument:
 
     @property
     def ideal(self) -> bool:
+        """Whether the instrument adds nothing to the signal: no noise, resolution, range or bias."""
         return not any((self.noise, self.noise_density, self.relative_noise, self.resolution,
                         self.range, self.bias))
 
@@ -106,7 +110,7 @@ class ChannelFault:
 
     records: tuple[Mechanism, ...] = ()
 
-    def apply(self, stage, time: np.ndarray, x: np.ndarray) -> np.ndarray:
+    def apply(self, stage: SensorStage, time: np.ndarray, x: np.ndarray) -> np.ndarray:
         """``x`` (n,) at ``time`` (n,) (s) with this channel's faults of ``stage`` applied, in their order."""
         for record in self.records:
             kind = mechanisms.get(record.type)
@@ -169,10 +173,12 @@ class Sensors:
                 and not self.faults and not self.antialias and self.sample_rate is None)
 
     def instrument(self, channel: str) -> Instrument:
+        """The instrument of ``channel``'s group (``"a2"``: the accelerometer)."""
         group = channel.rstrip("0123456789") or channel
         return getattr(self, INSTRUMENT_OF[group])
 
     def fault(self, channel: str) -> ChannelFault:
+        """The faults stated for ``channel`` (none when it has no ``[sensors.channel.X]``)."""
         return dict(self.faults).get(channel, ChannelFault())
 
     def channels(self, storeys: int) -> tuple[str, ...]:
@@ -186,6 +192,7 @@ class Sensors:
         return tuple(out)
 
     def to_dict(self) -> dict:
+        """The settings as a JSON-ready dict, with each channel's faults, the groups and :attr:`ideal`."""
         out = asdict(self)
         out["faults"] = {name: f.to_dict() for name, f in self.faults}
         out["groups"] = list(self.groups)
@@ -256,7 +263,7 @@ def default_scenario_path() -> Path:
     return Path(str(resources.files("momentid.lab") / "default_scenario.toml"))
 
 
-def load_scenario(path, *, overrides: dict | None = None) -> Scenario:
+def load_scenario(path: str | os.PathLike, *, overrides: dict | None = None) -> Scenario:
     """Read and validate a scenario file, optionally with some keys replaced.
 
     Parameters
@@ -299,7 +306,7 @@ def _file_safe(tab: Table, key: str, default: str) -> str:
     return value
 
 
-def set_key(data: dict, key: str, value) -> None:
+def set_key(data: dict, key: str, value: Any) -> None:
     """Set the dotted ``key`` of parsed scenario TOML ``data`` in place.
 
     The one way momentid varies a scenario (sweeps, benchmarks, tests).
@@ -338,7 +345,7 @@ def set_key(data: dict, key: str, value) -> None:
             node = node[part]
 
 
-def parse_scenario(data: dict, *, source="<string>", text: str = "") -> Scenario:
+def parse_scenario(data: dict, *, source: str | os.PathLike = "<string>", text: str = "") -> Scenario:
     """Validate already-parsed TOML ``data`` (see :func:`load_scenario`)."""
     source = Path(source) if not isinstance(source, Path) else source
     top = Table(data, source)

@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.signal
 
 from momentid.core.series import RunData
@@ -119,7 +120,8 @@ def measure(run: RunData, sensors: Sensors, *, seed: int, run_index: int) -> Run
     return replace(run, time=run.time[::step].copy(), channels=names, values=out)
 
 
-def gain_and_delay(a: np.ndarray, gain, offset, dt: float, *, undo: bool = False) -> np.ndarray:
+def gain_and_delay(a: np.ndarray, gain: ArrayLike, offset: ArrayLike, dt: float, *, undo: bool = False
+                   ) -> np.ndarray:
     """Floor accelerations ``a`` (n, d) as the floor sensors read them: each channel times its gain and
     delayed by its clock offset (fractional, in the frequency domain, zero-padded so that the delay does
     not wrap around); ``undo=True`` is the inverse (a recording with its sensors' gains and offsets undone).
@@ -132,6 +134,13 @@ def gain_and_delay(a: np.ndarray, gain, offset, dt: float, *, undo: bool = False
         Gain (1) and clock offset (s, positive: lags) of each channel.
     dt : float
         Sample interval (s).
+    undo : bool
+        Undo the gains and offsets instead.
+
+    Returns
+    -------
+    ndarray, shape (n, d)
+        The readings (m/s^2).
     """
     n = a.shape[0]
     spectrum = np.fft.rfft(a, 2 * n, axis=0)

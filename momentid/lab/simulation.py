@@ -18,7 +18,8 @@ from __future__ import annotations
 import contextlib
 import math
 from pathlib import Path
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
+import os
 
 import mujoco
 import numpy as np
@@ -29,6 +30,7 @@ from momentid.lab import native_forces, rig
 from momentid.io.plausible import implausible
 from momentid.core import counters
 from momentid.core.series import Experiment, RunData
+from momentid.core.structure import Mechanism, Structure
 from momentid.errors import SimulationError
 from momentid.lab.excitation import GroundMotion, ground_motion
 from momentid.lab.scenario import BandLimitedNoise, Run, Scenario, Sensors, public_text
@@ -137,7 +139,7 @@ class CallbackForces:
         for i in self._pushed:
             out[i] = forces[i]
 
-    def state_rate(self, model, data, actuator: int) -> float:
+    def state_rate(self, model: mujoco.MjModel, data: mujoco.MjData, actuator: int) -> float:
         """``mjcb_act_dyn``: the rate of a state actuator's activation (a force's internal state)."""
         rate, top, below, p, adr = self.rates[actuator]
         _, qpos, qvel, _, act = self._bind(data)
@@ -482,7 +484,7 @@ def simulate(scenario: Scenario, *, progress: bool = False,
     )
 
 
-def run_experiment(scenario: Scenario, path, *, progress: bool = False,
+def run_experiment(scenario: Scenario, path: str | os.PathLike, *, progress: bool = False,
                    workers: int | None = 1) -> Experiment:
     """Simulate every run and record it to the MCAP file ``path``.
 
@@ -520,7 +522,8 @@ def run_experiment(scenario: Scenario, path, *, progress: bool = False,
     )
 
 
-def replay(structure, mechanisms, run: RunData, zdd: np.ndarray | None = None) -> dict[str, np.ndarray]:
+def replay(structure: Structure, mechanisms: Sequence[Mechanism], run: RunData, zdd: np.ndarray | None = None
+           ) -> dict[str, np.ndarray]:
     """Replay a recorded run's table acceleration through a MuJoCo model.
 
     The table follows the samples of ``zdd``, linear between them (one step

@@ -75,7 +75,7 @@ def tendon_layout(K: np.ndarray, C: np.ndarray) -> tuple:
     return tuple(out)
 
 
-def put_tendon(spec: mujoco.MjSpec, t) -> None:
+def put_tendon(spec: mujoco.MjSpec, t: Tendon) -> None:
     """Write one tendon of :func:`tendon_layout` into ``spec``.
 
     A spring-damper on ``q_upper - q_lower`` (``q_upper`` alone when ``lower`` is the table) of

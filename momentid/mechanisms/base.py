@@ -38,8 +38,8 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass, replace
-from typing import ClassVar
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
@@ -50,10 +50,21 @@ from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Place, Target
 from momentid.mechanisms.sizing import Sized, Sizer, size_correction
 
+if TYPE_CHECKING:
+    import mujoco
+
 __all__ = ["GRAVITY", "Target", "Place", "Refit", "Param", "MechanismKind", "SensorFault", "Screened",
-           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance", "SensorStage"]
+           "EquationSignals", "one_coefficient", "storey_to_floor", "drifts", "registered_instance", "SensorStage",
+           "Signal", "ToParams"]
 
 GRAVITY = 9.81   # m/s^2, as in MuJoCo's default option
+
+#: What a force law takes and returns: a float (the simulator's callback, at one instant) or an array
+#: (n,) (the diagnosis's screening and refits, over a record).
+Signal = float | np.ndarray
+#: ``to_params(coef, std) -> (parameters, std)``: a signature's fitted coefficients and their standard
+#: errors (arrays, one per column) named as the kind's parameters.
+ToParams = Callable[[np.ndarray, np.ndarray], tuple[dict, dict]]
 
 
 class Refit(enum.Enum):
@@ -98,6 +109,7 @@ class Param:
 
     @property
     def bounded(self) -> bool:
+        """Whether the parameter has a finite lower or upper bound."""
         return self.low > -math.inf or self.high < math.inf
 
     def within(self, value: float) -> bool:
@@ -168,6 +180,7 @@ class EquationSignals:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys ``d``."""
         return self.a.shape[1]
 
     def stretch(self, place: Place) -> np.ndarray:
@@ -217,7 +230,7 @@ def drifts(q: np.ndarray) -> np.ndarray:
     return out
 
 
-def one_coefficient(name: str) -> Callable[[np.ndarray, np.ndarray], tuple[dict, dict]]:
+def one_coefficient(name: str) -> ToParams:
     """Parameters and standard errors of a signature whose coefficient is the parameter itself."""
     return lambda c, e: ({name: float(c[0])}, {name: float(e[0])})
 
@@ -285,8 +298,8 @@ class MechanismKind:
 
     # ---------------------------------------------------------------- where
 
-    def place(self, index) -> Place:
-        """The place of this kind at ``index`` (a record's location)."""
+    def place(self, index: int | tuple[int, int] | list[int] | str) -> Place:
+        """The place of this kind at ``index`` (a record's location; a list of two floors as a pair)."""
         return Place(self.target, tuple(index) if isinstance(index, list) else index)
 
     def places(self, storeys: int) -> tuple[Place, ...]:
@@ -324,7 +337,8 @@ class MechanismKind:
         """
         return stiffness, damping
 
-    def elements(self, spec, mech: Mechanism, place: Place, bodies, timestep: float) -> dict[int, float]:
+    def elements(self, spec: mujoco.MjSpec, mech: Mechanism, place: Place, bodies: Sequence[mujoco.MjsBody],
+                 timestep: float) -> dict[int, float]:
         """For ``mjcf_elements`` kinds: add the bodies, joints and tendons of ``mech`` at ``place`` to
         ``spec`` (``mujoco.MjSpec``): across a storey (riding on the body below it), hung on a floor, ...
 
@@ -334,10 +348,11 @@ class MechanismKind:
         its stated mass."""
         return {}
 
-    def added_mass_body(self, mech: Mechanism, body, mass: float) -> None:
+    def added_mass_body(self, mech: Mechanism, body: mujoco.MjsBody, mass: float) -> None:
         """Change the MJCF body (``mujoco.MjsBody``) of the added mass ``mass`` (kg) on ``mech``'s floor."""
 
-    def storey_force(self, params: dict, drift, drift_velocity, time: float, stiffness: float | None):
+    def storey_force(self, params: dict, drift: Signal, drift_velocity: Signal, time: float,
+                     stiffness: float | None) -> Signal:
         """Force (N) the storey exerts against its drift (positive resists); floats or arrays.
 
         Only for ``callback`` kinds on ``Target.STOREY``.  ``params`` maps parameter names to values;
@@ -346,7 +361,8 @@ class MechanismKind:
         """
         raise NotImplementedError(f"{self.name} is not a callback storey force")
 
-    def floor_force(self, params: dict, displacement, velocity, time: float, stiffness: float | None):
+    def floor_force(self, params: dict, displacement: Signal, velocity: Signal, time: float,
+                    stiffness: float | None) -> Signal:
         """Force (N) a ``callback`` kind on ``Target.FLOOR_TABLE`` or ``Target.FLOORS`` exerts across
         its link (positive resists the link's stretch: its floor's displacement relative to the table,
         or its upper floor's relative to its lower one); floats or arrays.
@@ -422,7 +438,8 @@ class MechanismKind:
         """
         return []
 
-    def replay_column(self, sim: np.ndarray, sim_rate: np.ndarray, step: np.ndarray):
+    def replay_column(self, sim: np.ndarray, sim_rate: np.ndarray, step: np.ndarray
+                      ) -> tuple[np.ndarray, ToParams] | None:
         """Signature of a fault on the table channel in the replay residual, or None.
 
         ``sim``: band-limited replayed floor accelerations (n, d); ``sim_rate``: their time
@@ -431,12 +448,12 @@ class MechanismKind:
         """
         return None
 
-    def from_kinematic(self, fit) -> tuple[dict, dict, float] | None:
+    def from_kinematic(self, fit: Any) -> tuple[dict, dict, float] | None:
         """For ``kinematic`` kinds: (parameters, standard errors, share explained) of this fault from the
         kinematic check's fit on one channel (:class:`~momentid.diagnosis.added_mass.kinematic_check.SensorFit`)."""
         return None
 
-    def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above) -> np.ndarray:
+    def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above: float) -> np.ndarray:
         """For ``RESIMULATE`` kinds: the force (n,) at the place per unit of the fitted coefficient, from
         the place's stretch (m) and its rate (m/s), each (n,), and the added mass (kg) it carries
         (:meth:`~momentid.mechanisms.place.Place.above`)."""
@@ -454,9 +471,11 @@ class MechanismKind:
         w = place.direction(storeys)
         return np.outer(w, w)
 
-    def attachment_matrices(self, M, C, K, floor: int, mass: float, frequency: float, damping_ratio: float):
+    def attachment_matrices(self, M: np.ndarray, C: np.ndarray, K: np.ndarray, floor: int, mass: float,
+                            frequency: float, damping_ratio: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For ``ATTACHMENT`` kinds: M, C, K (d+1, d+1) of the model (d, d) with ``mass`` (kg) on floor
-        ``floor`` (0-based) on its attachment (the replay screening's extra degree of freedom)."""
+        ``floor`` (0-based) on its attachment of natural ``frequency`` (Hz) and ``damping_ratio`` (the
+        replay screening's extra degree of freedom)."""
         raise NotImplementedError(f"{self.name} is not an attachment")
 
     def physical(self, params: dict) -> bool:
@@ -533,15 +552,20 @@ class SensorFault(MechanismKind):
         the model-based checks see)."""
         return None
 
-    def size(self, sizer, place, params, std):
+    def size(self, sizer: Sizer, place: Place, params: dict, std: dict) -> Sized:
+        """Sized by undoing the fault on the training runs and identifying them again
+        (:func:`~momentid.mechanisms.sizing.size_correction`)."""
         return size_correction(self, sizer, place, params, std)
 
-    def channel_signature(self, signals: EquationSignals, group: str, floor: int):
+    def channel_signature(self, signals: EquationSignals, group: str, floor: int
+                          ) -> tuple[np.ndarray, list[np.ndarray], ToParams] | None:
         """The fault's term on channel ``group`` (``"a"`` or ``"q"``) of ``floor`` (0-based) in the
         floor-force residual: ``(column (n, d), confounds, to_params)``, or None where it has none."""
         return None
 
-    def screen_equation(self, signals, fit, place):
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
+        """The fit of :meth:`channel_signature` on the channel ``place`` (``"a<j>"`` or ``"q<j>"``; none on
+        another channel, or where the fault has no term)."""
         channel = str(place.index)
         if channel[0] not in "aq" or not channel[1:].isdigit():
             return []

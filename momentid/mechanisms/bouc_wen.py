@@ -20,22 +20,25 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.base import MechanismKind, Param, Signal, Target
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
 __all__ = ["BoucWen", "bouc_wen_rate", "bouc_wen_state"]
 
 
-def bouc_wen_rate(z, velocity, yield_drift: float, exponent: float, beta: float):
-    """``z'`` (m/s) of the normalised Bouc-Wen law at state ``z`` (m) and velocity (m/s); floats or arrays."""
+def bouc_wen_rate(z: Signal, velocity: Signal, yield_drift: Signal, exponent: Signal, beta: float) -> Signal:
+    """``z'`` (m/s) of the normalised Bouc-Wen law at state ``z`` (m) and velocity (m/s), with the yield
+    drift (m), exponent and ``beta`` of the law; floats or arrays."""
     u = abs(z / yield_drift) ** exponent
     sign = np.sign(velocity * z) if isinstance(z, np.ndarray) else (velocity * z > 0) - (velocity * z < 0)
     return velocity * (1.0 - u * (beta * sign + (1.0 - beta)))
 
 
-def bouc_wen_state(velocity: np.ndarray, dt: float, yield_drift, exponent, beta: float) -> np.ndarray:
+def bouc_wen_state(velocity: np.ndarray, dt: float, yield_drift: ArrayLike, exponent: ArrayLike, beta: float
+                   ) -> np.ndarray:
     """The hysteretic drift ``z`` (n, k) driven by a velocity record (m/s) sampled every ``dt`` (s),
     from ``z = 0``, for ``k`` laws at once (``yield_drift``, ``exponent``: arrays (k,); ``velocity``:
     (n,) shared by all, or (n, k), one record per law).
@@ -81,14 +84,19 @@ class BoucWen(MechanismKind):
     needs_stiffness = True
     summary = "alpha k x + (1 - alpha) k z across a storey, z: Bouc-Wen hysteretic drift (yield drift x_y)"
 
-    def has_state(self, params):
+    def has_state(self, params: dict) -> bool:
+        """Always: the hysteretic drift ``z`` (m) is the force's state."""
         return True
 
-    def state_rate(self, params, state, displacement, velocity):
+    def state_rate(self, params: dict, state: float, displacement: float, velocity: float) -> float:
+        """``z'`` (m/s) of the Bouc-Wen law at the state and the drift's rate (:func:`bouc_wen_rate`)."""
         return bouc_wen_rate(state, velocity, params["yield_drift"], params["exponent"], params["beta"])
 
-    def storey_force(self, params, drift, drift_velocity, time, stiffness, state=0.0):
+    def storey_force(self, params: dict, drift: Signal, drift_velocity: Signal, time: float,
+                     stiffness: float | None, state: Signal = 0.0) -> Signal:
+        """``(1 - alpha) k (z - x)`` (N): the hysteretic part, beside the storey tendon's ``k x``."""
         return (1.0 - params["alpha"]) * stiffness * (state - drift)
 
-    def native_law(self):
+    def native_law(self) -> NativeLaw:
+        """The compiled force and state rate."""
         return NativeLaw(_native_force, _native_rate)

@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from momentid.core.structure import Mechanism
 from momentid.errors import ModelError
-from momentid.mechanisms.base import MechanismKind, Param
+from momentid.mechanisms.base import MechanismKind, Param, Signal
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Target
 from momentid.mechanisms.registry import register
@@ -55,14 +56,18 @@ class ContactStop(MechanismKind):
     summary = ("stops on a floor beyond q = +gap_pos and q = -gap_neg (q: floor vs. table), each pushing back "
                "max(stiffness x penetration + damping x closing speed, 0)")
 
-    def validate(self, mech, storeys):
+    def validate(self, mech: Mechanism, storeys: int) -> None:
+        """The record's checks of every kind, and a stop on at least one side (a gap > 0)."""
         super().validate(mech, storeys)
         p = dict(mech.parameters)
         if p["gap_pos"] == 0.0 and p["gap_neg"] == 0.0:
             raise ModelError(f"mechanism {self.name!r}: gap_pos = gap_neg = 0, expected a stop on at least one "
                              f"side (a gap > 0 in m)")
 
-    def floor_force(self, params, displacement, velocity, time, stiffness):
+    def floor_force(self, params: dict, displacement: Signal, velocity: Signal, time: float,
+                    stiffness: float | None) -> Signal:
+        """The stops' force (N): each stop the floor has passed pushes back ``max(k penetration + c closing
+        speed, 0)``."""
         k, c = params["stiffness"], params["damping"]
         force = 0.0 * displacement
         if params["gap_pos"] > 0.0:
@@ -71,5 +76,6 @@ class ContactStop(MechanismKind):
             force = force - _push(-displacement - params["gap_neg"], -velocity, k, c)
         return force
 
-    def native_law(self):
+    def native_law(self) -> NativeLaw:
+        """The compiled force."""
         return NativeLaw(_native_force)

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 import math
 
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.mechanisms.base import (EquationSignals, Fitter, MechanismKind, Param, Refit, Screened, Signal, Target,
+                                      one_coefficient)
 from momentid.mechanisms.native import NativeLaw
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
 from momentid.mechanisms.sizing import ResimulatedForce
 
@@ -27,7 +30,7 @@ SCREENING_SMOOTHING = 0.05
 _STILL = 1e-9
 
 
-def smooth_sign(x):
+def smooth_sign(x: Signal) -> Signal:
     """``tanh(x)`` of a float (``math.tanh``, the simulator's callback) or of an array (``np.tanh``)."""
     return math.tanh(x) if isinstance(x, float) else np.tanh(x)
 
@@ -48,21 +51,28 @@ class CoulombFriction(ResimulatedForce, MechanismKind):
     dissipative = True
     summary = "F tanh(v / FRICTION_SMOOTHING) across a storey (v: drift velocity)"
 
-    def storey_force(self, params, drift, drift_velocity, time, stiffness):
+    def storey_force(self, params: dict, drift: Signal, drift_velocity: Signal, time: float,
+                     stiffness: float | None) -> Signal:
+        """``force tanh(drift velocity / FRICTION_SMOOTHING)`` (N)."""
         return params["force"] * smooth_sign(drift_velocity / FRICTION_SMOOTHING)
 
-    def link_law(self, params, place, stiffness):
+    def link_law(self, params: dict, place: Place, stiffness: float | None) -> Callable[..., float]:
+        """The storey force on floats, with the same arithmetic and no calls."""
         force, tanh = params["force"], math.tanh   # storey_force on floats, without its calls
         return lambda x, v, t: force * tanh(v / FRICTION_SMOOTHING)
 
-    def native_law(self):
+    def native_law(self) -> NativeLaw:
+        """The compiled force."""
         return NativeLaw(_native_force)
 
-    def screen_equation(self, signals, fit, place):
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
+        """``tanh`` of the stretch rate over a fraction of its RMS; a spring and a dashpot at ``place`` are the
+        confounds."""
         velocity = signals.stretch_rate(place)
         eps = SCREENING_SMOOTHING * float(np.sqrt(np.mean(velocity ** 2))) or _STILL
         return fit([signals.columns(np.tanh(velocity / eps), place)], signals.linear_confounds(place), place,
                    one_coefficient("force"))
 
-    def force_signal(self, params, stretch, rate, weight_above):
+    def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above: float) -> np.ndarray:
+        """``tanh(rate / FRICTION_SMOOTHING)``: the force (n,) per newton of friction."""
         return np.tanh(rate / FRICTION_SMOOTHING)

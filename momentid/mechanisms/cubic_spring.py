@@ -8,8 +8,16 @@ law as a simulator callback, for the lab's hidden scenarios.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+from momentid.core.structure import Mechanism
 from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
+
+if TYPE_CHECKING:
+    import mujoco
 
 __all__ = ["CubicSpring", "SOFTEST", "HARDEST"]
 
@@ -31,15 +39,21 @@ class CubicSpring(MechanismKind):
     mjcf_elements = True
     summary = "k3 x^3 across a storey (x: drift), MuJoCo's polynomial tendon spring"
 
-    def elements(self, spec, mech, place, bodies, timestep):
+    def elements(self, spec: mujoco.MjSpec, mech: Mechanism, place: Place, bodies: Sequence[mujoco.MjsBody],
+                 timestep: float) -> dict[int, float]:
+        """The cubic term ``k3`` in the storey tendon's polynomial stiffness; no element of its own."""
         tendon = spec.tendon(f"storey{place.index}")
         tendon.stiffness = [tendon.stiffness[0], 0.0, float(mech.get("k3"))]
         return {}
 
-    def twin_parameters(self, stiffness, damping, drift, velocity):
+    def twin_parameters(self, stiffness: float, damping: float, drift: float, velocity: float) -> dict:
+        """``k3`` in units of the cubic that changes the tangent stiffness by ``stiffness`` at the peak drift,
+        searched from 0 within ``SOFTEST`` to ``HARDEST`` of it.
+        """
         unit = stiffness / (3.0 * drift * drift)         # k3 that changes the tangent stiffness by k at the peak
         return {"k3": (unit, 0.0, SOFTEST * unit, HARDEST * unit)}
 
-    def describe(self, place, params, std):
+    def describe(self, place: Place, params: dict, std: dict) -> str:
+        """A hardening or softening cubic spring, with its ``k3`` (N/m^3)."""
         return (f"{'Hardening' if params['k3'] > 0 else 'Softening'} cubic spring at {place.words}: "
                 f"k3 = {params['k3']:.4g} N/m^3.")

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.base import MechanismKind, Param, Signal, Target
 from momentid.mechanisms.bouc_wen import bouc_wen_rate
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
@@ -121,7 +121,7 @@ _FLOAT_SIGNALS = dict(_SIGNALS, **{
 })
 
 
-def term_signal(name: str, params: dict, x, v, time, state=0.0):
+def term_signal(name: str, params: dict, x: Signal, v: Signal, time: Signal, state: Signal = 0.0) -> Signal:
     """The signal of term ``name`` (its force per unit coefficient) at ``x`` (m), ``v`` (m/s), ``time``
     (s) and hysteretic state ``state`` (m), with the record's shape parameters; floats or arrays."""
     if name not in _SIGNALS:
@@ -129,7 +129,7 @@ def term_signal(name: str, params: dict, x, v, time, state=0.0):
     return _SIGNALS[name](params, x, v, time, state)
 
 
-def law(params: dict, x, v, time, state=0.0):
+def law(params: dict, x: Signal, v: Signal, time: Signal, state: Signal = 0.0) -> Signal:
     """The discovered force (N, positive resists ``x``): the sum of the record's terms; floats or arrays."""
     return _summed(params, [(params[t.coefficient], _SIGNALS[t.name]) for t in TERMS], x, v, time, state)
 

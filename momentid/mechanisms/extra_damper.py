@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
-from momentid.mechanisms.base import MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.core.structure import Mechanism
+from momentid.mechanisms.base import (EquationSignals, Fitter, MechanismKind, Param, Refit, Screened, Target,
+                                      one_coefficient)
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
 from momentid.mechanisms.sizing import Dashpot
 
@@ -18,10 +21,13 @@ class ExtraDamper(Dashpot, MechanismKind):
     refit = Refit.DAMPING_PATTERN
     summary = "c v across a storey (v: drift velocity), in the storey tendon's damping"
 
-    def storey_tendon(self, mech, stiffness, damping, weight_above, height):
+    def storey_tendon(self, mech: Mechanism, stiffness: float, damping: float, weight_above: float,
+                      height: float) -> tuple[float, float]:
+        """The storey tendon's damping plus ``c`` (N s/m); its stiffness unchanged."""
         return stiffness, damping + mech.get("c")
 
-    def screen_equation(self, signals, fit, place):
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
+        """The stretch rate, the stretch the confound."""
         # A linear damper hides in an identified C: screened against the drift alone (the damping
         # pattern of the identified C is the diagnosis's other test of it).
         return fit([signals.columns(signals.stretch_rate(place), place)],

@@ -5,7 +5,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
+from momentid.core.structure import Mechanism
+from momentid.mechanisms.base import EquationSignals, Fitter, MechanismKind, Param, Refit, Screened, Target
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
 from momentid.mechanisms.sizing import Attachment
 
@@ -34,13 +36,15 @@ class FlexibleAddedMass(Attachment, MechanismKind):
     refit = Refit.ATTACHMENT
     summary = "the added mass on a floor on a spring and damper of its own"
 
-    def added_mass_body(self, mech, body, mass):
+    def added_mass_body(self, mech: Mechanism, body: mujoco.MjsBody, mass: float) -> None:
+        """The added mass on a slide joint of its own: a spring and a dashpot of its ``frequency`` and
+        ``damping_ratio``."""
         w = 2 * np.pi * mech.get("frequency")
         joint = body.add_joint(name=f"added{mech.location}_x", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0])
         joint.stiffness = [mass * w * w, 0.0, 0.0]
         joint.damping = [2 * mech.get("damping_ratio") * mass * w, 0.0, 0.0]
 
-    def screen_equation(self, signals, fit, place):
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
         """The attachment's force on floor ``place`` for the grid frequency that explains most.
 
         The attachment oscillator is driven by the measured (band-limited) floor acceleration; its
@@ -67,7 +71,8 @@ class FlexibleAddedMass(Attachment, MechanismKind):
                 best = found[0]
         return [best] if best else []
 
-    def attachment_matrices(self, M, C, K, floor: int, mass: float, frequency: float, damping_ratio: float):
+    def attachment_matrices(self, M: np.ndarray, C: np.ndarray, K: np.ndarray, floor: int, mass: float,
+                            frequency: float, damping_ratio: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """M, C, K (d+1, d+1) of a model with ``mass`` (kg) on floor ``floor`` (0-based) on its attachment."""
         d = M.shape[0]
         w = 2 * np.pi * frequency

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param
+from momentid.mechanisms.base import MechanismKind, Param, Signal
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.place import Target
 from momentid.mechanisms.registry import register
@@ -39,11 +39,14 @@ class GapBrace(MechanismKind):
     callback = True
     summary = "stiffness sign(x) max(|x| - gap, 0) across a storey (x: drift): a brace engaging beyond a gap"
 
-    def storey_force(self, params, drift, drift_velocity, time, stiffness):
+    def storey_force(self, params: dict, drift: Signal, drift_velocity: Signal, time: float,
+                     stiffness: float | None) -> Signal:
+        """``stiffness (|x| - gap)`` with the drift's sign beyond the gap, 0 within it (N)."""
         beyond = abs(drift) - params["gap"]
         if isinstance(drift, float):
             return params["stiffness"] * (beyond if drift > 0 else -beyond) if beyond > 0.0 else 0.0
         return params["stiffness"] * np.sign(drift) * np.maximum(beyond, 0.0)
 
-    def native_law(self):
+    def native_law(self) -> NativeLaw:
+        """The compiled force."""
         return NativeLaw(_native_force)

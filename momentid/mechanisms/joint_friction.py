@@ -27,12 +27,16 @@ its own step.  Use a step of at most :data:`MAX_TIMESTEP`.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import math
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
+from momentid.core.structure import Mechanism
 from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
 
 __all__ = ["JointFriction", "SLIDERS", "SPAN", "slider_elements", "add_sliders", "backbone", "lost_fraction",
@@ -85,7 +89,7 @@ def slider_elements(stiffness: float, slip_drift: float, exponent: float, slider
     return stiffness * weights, nodes
 
 
-def backbone(params: dict, drift) -> np.ndarray:
+def backbone(params: dict, drift: ArrayLike) -> np.ndarray:
     """The joint's force (N) on first loading to ``drift`` (m, >= 0): ``sum_j k_j min(x, delta_j)``."""
     k, delta = slider_elements(params["stiffness"], params["slip_drift"], params["exponent"])
     x = np.asarray(drift, float)[..., None]
@@ -98,8 +102,8 @@ def lost_fraction(drift: float, slip_drift: float, exponent: float) -> float:
     return 1.0 - float(backbone({"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}, drift)) / drift
 
 
-def add_sliders(spec, params: dict, storey: int, lower_body, upper_joint: str, lower_joint: str | None,
-                timestep: float) -> float:
+def add_sliders(spec: mujoco.MjSpec, params: dict, storey: int, lower_body: mujoco.MjsBody, upper_joint: str,
+                lower_joint: str | None, timestep: float) -> float:
     """Add one joint's sliders and their tendons to ``spec`` (a ``mujoco.MjSpec``).
 
     Parameters
@@ -167,10 +171,16 @@ class JointFriction(MechanismKind):
     summary = ("Iwan joint across a storey: Jenkins sliders (spring + MuJoCo frictionloss) with slip drifts of "
                "density delta^chi up to delta_max (micro-slip)")
 
-    def storey_tendon(self, mech, stiffness, damping, weight_above, height):
+    def storey_tendon(self, mech: Mechanism, stiffness: float, damping: float, weight_above: float,
+                      height: float) -> tuple[float, float]:
+        """The storey tendon less the stuck joint's stiffness, which its sliders carry; damping unchanged."""
         return stiffness - dict(mech.parameters)["stiffness"], damping
 
-    def elements(self, spec, mech, place, bodies, timestep):
+    def elements(self, spec: mujoco.MjSpec, mech: Mechanism, place: Place, bodies: Sequence[mujoco.MjsBody],
+                 timestep: float) -> dict[int, float]:
+        """The joint's sliders and tendons, riding on the body below the storey (and the PGS solver);
+        their mass is taken off that level.
+        """
         # PGS: the table's huge armature swamps the Newton solver's convergence test, which then stops
         # before the sliders' friction constraints hold; PGS solves them one by one.
         spec.option.solver = mujoco.mjtSolver.mjSOL_PGS
@@ -179,7 +189,8 @@ class JointFriction(MechanismKind):
                             f"q{below}" if below > 0 else None, timestep)
         return {below: taken}
 
-    def describe(self, place, params, std):
+    def describe(self, place: Place, params: dict, std: dict) -> str:
+        """The joint's stuck stiffness, slip drift, the force there and the slip-drift exponent."""
         slip = float(backbone(params, params["slip_drift"]))
         return (f"Joint friction (micro-slip) at {place.words}: the stuck joint's stiffness "
                 f"{params['stiffness']:.4g} N/m, fully slipping at {1e3 * params['slip_drift']:.3g} mm of drift "

@@ -23,7 +23,7 @@ numba is imported only when a law is first compiled: a rig with no callback forc
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 __all__ = ["NativeLaw", "FORCE_SIGNATURE", "RATE_SIGNATURE", "compiled", "call_force", "call_rate"]
@@ -69,13 +69,13 @@ def _pointer(p):
     return buffer, buffer.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
 
 
-def call_force(law: NativeLaw, p, x: float, v: float, t: float, s: float = 0.0) -> float:
+def call_force(law: NativeLaw, p: Sequence[float], x: float, v: float, t: float, s: float = 0.0) -> float:
     """The compiled force of ``law`` at one point, called through its C address (tests, checks)."""
     buffer, pointer = _pointer(p)
     return compiled(law)[0].ctypes(pointer, x, v, t, s)
 
 
-def call_rate(law: NativeLaw, p, s: float, x: float, v: float) -> float:
+def call_rate(law: NativeLaw, p: Sequence[float], s: float, x: float, v: float) -> float:
     """The compiled state rate of ``law`` at one point, called through its C address."""
     buffer, pointer = _pointer(p)
     return compiled(law)[1].ctypes(pointer, s, x, v)

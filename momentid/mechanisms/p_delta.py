@@ -12,8 +12,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from momentid.core.structure import Mechanism
-from momentid.mechanisms.base import GRAVITY, MechanismKind, Param, Refit, Target, one_coefficient
+from momentid.core.structure import Mechanism, Structure
+from momentid.mechanisms.base import (EquationSignals, Fitter, GRAVITY, MechanismKind, Param, Refit, Screened, Target,
+                                      one_coefficient)
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
 from momentid.mechanisms.sizing import ResimulatedForce
 
@@ -31,10 +33,15 @@ class PDelta(ResimulatedForce, MechanismKind):
     linear_spring = True
     summary = "-factor g (mass above) / h x drift across a storey"
 
-    def storey_tendon(self, mech, stiffness, damping, weight_above, height):
+    def storey_tendon(self, mech: Mechanism, stiffness: float, damping: float, weight_above: float,
+                      height: float) -> tuple[float, float]:
+        """The storey's stiffness less ``factor g m / h`` (``m``: the mass above, kg; ``h``: the height, m)."""
         return stiffness - mech.get("factor") * GRAVITY * weight_above / height, damping
 
-    def screen_equation(self, signals, fit, place):
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
+        """``-g m x`` with ``m`` each sample's added mass above the storey (none when no run adds mass
+        there: it is then the stiffness), a spring and a dashpot the confounds.
+        """
         above = place.above(signals.added_mass)
         if not np.any(above > 0):   # no run adds mass above: indistinguishable from the stiffness
             return []
@@ -42,14 +49,16 @@ class PDelta(ResimulatedForce, MechanismKind):
         return fit([signals.columns(-GRAVITY * above * drift, place)], signals.linear_confounds(place), place,
                    one_coefficient("weight_per_height"))
 
-    def force_signal(self, params, stretch, rate, weight_above):
+    def force_signal(self, params: dict, stretch: np.ndarray, rate: np.ndarray, weight_above: float) -> np.ndarray:
+        """``-g m x`` (n,): the force per unit ``weight_per_height`` (``m``: ``weight_above``, kg)."""
         return -GRAVITY * weight_above * stretch
 
-    def as_records(self, place, params):
+    def as_records(self, place: Place, params: dict) -> tuple[Mechanism, ...]:
+        """One record of factor 1: the size is the storey height of :meth:`replay_structure`."""
         # Built with factor 1 on a structure whose storey height is 1 / weight_per_height.
         return (Mechanism(self.name, place.index, (("factor", 1.0),)),)
 
-    def replay_structure(self, structure, place, params, static):
+    def replay_structure(self, structure: Structure, place: Place, params: dict, static: bool) -> Structure:
         """The structure whose MJCF ``p_delta`` (factor 1) loses ``weight_per_height x g x weight
         above``: the storey's height is set to 1 / weight_per_height; with ``static`` the loss of the
         floors' own weight, which an identified stiffness already holds, is added back."""
@@ -61,7 +70,8 @@ class PDelta(ResimulatedForce, MechanismKind):
         return replace(structure, storey_stiffness=tuple(k), storey_heights=tuple(
             h_eff if i == s else h for i, h in enumerate(structure.storey_heights)))
 
-    def in_lab_terms(self, params, std, place, nominal):
+    def in_lab_terms(self, params: dict, std: dict, place: Place, nominal: Structure | None) -> tuple[dict, dict]:
+        """With a stated storey height ``h``, also the lab's ``factor = weight_per_height h``."""
         if nominal is None:   # no stated storey height: weight_per_height it stays
             return params, std
         h = nominal.storey_heights[place.index - 1]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.base import MechanismKind, Param, Signal, Target
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
@@ -39,7 +39,9 @@ class Pounding(MechanismKind):
     callback = True
     summary = "max(stiffness (q - gap) + damping q', 0) on a floor beyond q = gap (q: floor vs. table)"
 
-    def floor_force(self, params, displacement, velocity, time, stiffness):
+    def floor_force(self, params: dict, displacement: Signal, velocity: Signal, time: float,
+                    stiffness: float | None) -> Signal:
+        """``max(k penetration + c v, 0)`` beyond the gap, 0 within it (N)."""
         penetration = displacement - params["gap"]
         if isinstance(penetration, float):
             if penetration <= 0.0:
@@ -48,5 +50,6 @@ class Pounding(MechanismKind):
         push = params["stiffness"] * penetration + params["damping"] * velocity
         return np.where(penetration > 0, np.maximum(push, 0.0), 0.0)
 
-    def native_law(self):
+    def native_law(self) -> NativeLaw:
+        """The compiled force."""
         return NativeLaw(_native_force)

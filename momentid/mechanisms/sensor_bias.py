@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from momentid.mechanisms.base import Param, SensorFault, one_coefficient
+from momentid.mechanisms.base import EquationSignals, Param, SensorFault, ToParams, one_coefficient
 from momentid.mechanisms.registry import register
 
 __all__ = ["SensorBias"]
@@ -17,13 +17,17 @@ class SensorBias(SensorFault):
     setting = fitted
     summary = "x(t) + bias recorded as x(t)"
 
-    def distort(self, time, x, params):
+    def distort(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """``x + bias``."""
         return x + params["bias"]
 
-    def correct(self, time, x, params):
+    def correct(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """``x - bias``."""
         return x - params["bias"]
 
-    def channel_signature(self, signals, group, floor):
+    def channel_signature(self, signals: EquationSignals, group: str, floor: int
+                          ) -> tuple[np.ndarray, list[np.ndarray], ToParams] | None:
+        """On ``a_j``: ``-(m_j + dm_j) bias`` on floor ``j``; on ``q_j``: ``-K[:, j] bias`` on every floor."""
         # An offset b on a_j leaves -(m_j + dm_j) b on floor j; on q_j, -K[:, j] b on every floor.
         j, ones = floor, np.ones(len(signals.a))
         if group == "a":
@@ -31,5 +35,6 @@ class SensorBias(SensorFault):
                 one_coefficient("bias")
         return np.outer(ones, signals.K[:, j]), [], one_coefficient("bias")
 
-    def replay_column(self, sim, sim_rate, step):
+    def replay_column(self, sim: np.ndarray, sim_rate: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, ToParams]:
+        """On the table channel: minus the replay of a unit table acceleration."""
         return -step, one_coefficient("bias")

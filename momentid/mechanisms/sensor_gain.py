@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
-from momentid.mechanisms.base import Param, SensorFault, SensorStage
+from momentid.mechanisms.base import EquationSignals, Param, SensorFault, SensorStage, ToParams
 from momentid.mechanisms.registry import register
 
 __all__ = ["SensorGain"]
@@ -29,13 +31,19 @@ class SensorGain(SensorFault):
     kinematic = True
     summary = "gain x(t) recorded as x(t)"
 
-    def distort(self, time, x, params):
+    def distort(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """``gain x``."""
         return params["gain"] * x
 
-    def correct(self, time, x, params):
+    def correct(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """``x / gain``."""
         return x / params["gain"]
 
-    def channel_signature(self, signals, group, floor):
+    def channel_signature(self, signals: EquationSignals, group: str, floor: int
+                          ) -> tuple[np.ndarray, list[np.ndarray], ToParams] | None:
+        """On ``a_j``: ``dm_j a_j`` with ``a_j`` the confound (None without added mass there); on ``q_j``:
+        its K and C columns.
+        """
         j = floor
         if group == "a":
             dm, a = signals.added_mass[:, j], signals.a[:, j]
@@ -45,8 +53,10 @@ class SensorGain(SensorFault):
         column = np.outer(signals.q[:, j], signals.K[:, j]) + np.outer(signals.v[:, j], signals.C[:, j])
         return column, [], _from_equation
 
-    def replay_column(self, sim, sim_rate, step):
+    def replay_column(self, sim: np.ndarray, sim_rate: np.ndarray, step: np.ndarray) -> tuple[np.ndarray, ToParams]:
+        """On the table channel: the replay itself."""
         return sim, _from_replay
 
-    def from_kinematic(self, fit):
+    def from_kinematic(self, fit: Any) -> tuple[dict, dict, float]:
+        """The kinematic fit's gain alone, its standard error and the share it explains."""
         return {"gain": fit.gain_only}, {"gain": fit.gain_std}, fit.explained["gain"]

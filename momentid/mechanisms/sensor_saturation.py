@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from momentid.core.clipping import find_clipping
+from momentid.core.series import RunData
 from momentid.errors import ModelError
 from momentid.mechanisms.base import Param, SensorFault, SensorStage
 from momentid.mechanisms.registry import register
@@ -29,13 +30,18 @@ class SensorSaturation(SensorFault):
     reversible = False
     summary = "x(t) held at +/- level beyond it, recorded as x(t) (a transducer's range)"
 
-    def distort(self, time, x, params):
+    def distort(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """``x`` clipped at ``-level`` and ``+level``."""
         return np.clip(x, -params["level"], params["level"])
 
-    def correct(self, time, x, params):
+    def correct(self, time: np.ndarray, x: np.ndarray, params: dict) -> np.ndarray:
+        """Refused (:class:`~momentid.errors.ModelError`): the clipped peaks are lost."""
         raise ModelError(f"{self.name}: the clipped peaks are lost: the fault cannot be undone")
 
-    def inspect(self, run, channel):
+    def inspect(self, run: RunData, channel: str) -> tuple[dict, float] | None:
+        """The clipping level the channel shows (:func:`~momentid.core.clipping.find_clipping`) and the share of
+        its samples clipped, or None.
+        """
         found = find_clipping(np.asarray(run[channel], float))
         if found is None:
             return None

@@ -6,7 +6,7 @@ outside its library.
 
 from __future__ import annotations
 
-from momentid.mechanisms.base import MechanismKind, Param, Target
+from momentid.mechanisms.base import MechanismKind, Param, Signal, Target
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
@@ -32,10 +32,13 @@ class StiffnessLoss(MechanismKind):
     needs_stiffness = True
     summary = "-fraction k x across a storey from t = time on (k: its stiffness, x: drift)"
 
-    def storey_force(self, params, drift, drift_velocity, time, stiffness):
+    def storey_force(self, params: dict, drift: Signal, drift_velocity: Signal, time: float,
+                     stiffness: float | None) -> Signal:
+        """``-fraction k x`` from ``time`` (s) on, 0 before (N)."""
         if time < params["time"]:
             return 0.0 * drift
         return -params["fraction"] * stiffness * drift
 
-    def native_law(self):
+    def native_law(self) -> NativeLaw:
+        """The compiled force."""
         return NativeLaw(_native_force)

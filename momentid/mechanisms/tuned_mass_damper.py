@@ -12,12 +12,16 @@ through it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import mujoco
 import numpy as np
 
-from momentid.mechanisms.base import MechanismKind, Param, Refit, Target
+from momentid.core.structure import Mechanism
+from momentid.mechanisms.base import EquationSignals, Fitter, MechanismKind, Param, Refit, Screened, Target
+from momentid.mechanisms.place import Place
 from momentid.mechanisms.registry import register
-from momentid.mechanisms.sizing import Sized
+from momentid.mechanisms.sizing import Sized, Sizer
 
 __all__ = ["TunedMassDamper", "GRID_LOW_OVER_TOP_MODE", "GRID_HIGH_OVER_TOP_MODE", "GRID_POINTS",
            "GRID_DAMPING_RATIOS"]
@@ -49,7 +53,11 @@ class TunedMassDamper(MechanismKind):
     refit = Refit.SEARCH
     summary = "a body hung on a floor by a spring and a dashpot (mass, tuning frequency, damping ratio)"
 
-    def elements(self, spec, mech, place, bodies, timestep):
+    def elements(self, spec: mujoco.MjSpec, mech: Mechanism, place: Place, bodies: Sequence[mujoco.MjsBody],
+                 timestep: float) -> dict[int, float]:
+        """A body of ``mass`` hung on floor ``place`` by a slide joint of its ``frequency`` and
+        ``damping_ratio``; the floor keeps its mass.
+        """
         p = dict(mech.parameters)
         m, w = p["mass"], 2 * np.pi * p["frequency"]
         body = bodies[place.index].add_body(name=f"tmd{place.index}", pos=[0.0, 0.0, 0.05])
@@ -62,7 +70,7 @@ class TunedMassDamper(MechanismKind):
                       contype=0, conaffinity=0)
         return {}                                      # a body of its own: the floor keeps its mass
 
-    def screen_equation(self, signals, fit, place):
+    def screen_equation(self, signals: EquationSignals, fit: Fitter, place: Place) -> list[Screened]:
         """The damper's force on floor ``place`` for the grid point (frequency, damping ratio) that
         explains most: its body's absolute acceleration, driven by the measured floor acceleration, per
         kilogram; the floor's own acceleration is the confound (an identified mass may hold part of it)."""
@@ -88,7 +96,7 @@ class TunedMassDamper(MechanismKind):
                     found += tried(f, zeta)
         return [max(found, key=lambda s: s.explained)] if found else []
 
-    def size(self, sizer, place, params, std):
+    def size(self, sizer: Sizer, place: Place, params: dict, std: dict) -> Sized:
         """Every parameter searched by re-simulation from the screening's grid point, on the lab's nominal
         model when it states one (the identified model has absorbed part of the damper), else on the
         identified one."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -26,6 +27,9 @@ from momentid.mechanisms.place import location_words
 from momentid.report import figures
 from momentid.report.page import Page, Provenance
 from momentid.report.twin_page import OVERLAY_BINS
+
+if TYPE_CHECKING:
+    from momentid.diagnosis.result import Diagnosis
 
 __all__ = ["diagnosis_page", "parameter_unit"]
 
@@ -187,7 +191,7 @@ def _trend_figure(page: Page, diag) -> None:
                         "frequency": trend.frequency_coef, "damping_ratio": trend.damping_coef}))
 
 
-def diagnosis_page(diag, made: Provenance, source: str = "") -> Page:
+def diagnosis_page(diag: Diagnosis, made: Provenance, source: str = "") -> Page:
     """The page of ``diag`` (a :class:`~momentid.diagnosis.result.Diagnosis` of the recording ``source``;
     module docstring)."""
     from momentid.twin.plots import overlay_figure

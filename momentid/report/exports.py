@@ -17,12 +17,20 @@ heights when the recording states them); every value is along +X, the shaking ax
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from momentid.core.html import REFUSED
 from momentid.estimation.noise import quiet_lead_in
-from momentid.estimation.frf import measured_transfer
+from momentid.estimation.frf import MeasuredTransfer, measured_transfer
 from momentid.io import uff
+
+if TYPE_CHECKING:
+    from momentid.core.series import Experiment
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["modes_uff", "frf_uff", "transfers"]
 
@@ -70,7 +78,8 @@ def _added_mass_sets(result, experiment) -> list[str]:
     return out
 
 
-def modes_uff(results, experiment) -> str:
+def modes_uff(results: Identification | ModalIdentification | Sequence[ModalIdentification], experiment: Experiment
+              ) -> str:
     """``modes.uff`` of an identification of ``experiment`` (module docstring).
 
     Parameters
@@ -93,7 +102,7 @@ def modes_uff(results, experiment) -> str:
     return "".join(sets)
 
 
-def transfers(experiment, runs) -> list:
+def transfers(experiment: Experiment, runs: Iterable[str]) -> list[MeasuredTransfer]:
     """The measured transfer functions of ``runs`` (names) of ``experiment``, each after its quiet
     lead-in (:class:`~momentid.estimation.frf.MeasuredTransfer`, in order)."""
     out = []
@@ -103,7 +112,7 @@ def transfers(experiment, runs) -> list:
     return out
 
 
-def frf_uff(experiment, runs) -> str:
+def frf_uff(experiment: Experiment, runs: Iterable[str]) -> str:
     """``frf.uff`` of ``runs`` (names) of ``experiment`` (module docstring)."""
     d = experiment.storeys
     sets = [uff.units(), _geometry(experiment, d)]

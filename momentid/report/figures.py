@@ -17,16 +17,24 @@ Overlays of records and models and transfer functions come from :mod:`momentid.t
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 import io
 import re
 import textwrap
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.signal
 
 from momentid.core.html import channel_words
 from momentid.twin.plots import pyplot
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+    from momentid.diagnosis.modal.check import RunsFit
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["svg", "TrendPoint", "trend_points", "amplitude_figure", "comparison_figure", "mismatch_figure",
            "shapes_figure"]
@@ -46,7 +54,7 @@ def _coarse_path(match: re.Match) -> str:
     return ' d="' + " ".join(x for x in out if x) + '"'
 
 
-def svg(fig, number: int) -> str:
+def svg(fig: Figure, number: int) -> str:
     """The ``<svg>`` element of matplotlib figure ``fig`` (closed afterwards), figure ``number`` of its page
     (module docstring)."""
     import matplotlib
@@ -92,7 +100,7 @@ class TrendPoint:
     damping_ratio_std: np.ndarray
 
 
-def trend_points(results) -> list:
+def trend_points(results: Iterable[ModalIdentification | RunsFit]) -> list[TrendPoint]:
     """:class:`TrendPoint` of per-run identifications (``ModalIdentification`` of one run each) or of the
     modal diagnosis' training fits (``RunsFit``)."""
     out = []
@@ -107,7 +115,8 @@ def trend_points(results) -> list:
     return out
 
 
-def amplitude_figure(points, *, held: str | None = None, set_apart=(), lines=None):
+def amplitude_figure(points: Sequence[TrendPoint], *, held: str | None = None, set_apart: Sequence[str] = (),
+                     lines: dict | None = None) -> Figure:
     """Each run's mode frequencies (top row) and damping ratios (bottom row) against its response
     amplitude, one column per mode, with standard errors.
 
@@ -157,9 +166,9 @@ def amplitude_figure(points, *, held: str | None = None, set_apart=(), lines=Non
     return fig
 
 
-def comparison_figure(rows, noise: float, trial: str):
-    """The held-out NRMSE of each model (``rows``: ``(label, nrmse)``, fractions) as bars, the noise
-    alone as a line."""
+def comparison_figure(rows: Sequence[tuple[str, float]], noise: float, trial: str) -> Figure:
+    """The held-out NRMSE of each model on ``trial`` (``rows``: ``(label, nrmse)``, fractions) as bars, the
+    ``noise`` alone (a fraction) as a line."""
     plt = pyplot()
     labels = [textwrap.fill(label, 34) for label, _ in rows]
     values = np.array([100 * v for _, v in rows])
@@ -179,7 +188,8 @@ def comparison_figure(rows, noise: float, trial: str):
     return fig
 
 
-def mismatch_figure(time, measured, models: dict, channel_nrmse: dict, band=None, unit: str = "m/s²"):
+def mismatch_figure(time: np.ndarray, measured: np.ndarray, models: dict, channel_nrmse: dict,
+                    band: Sequence[float] | None = None, unit: str = "m/s²") -> Figure:
     """Where the held-out misfit sits.
 
     Parameters
@@ -230,8 +240,9 @@ def mismatch_figure(time, measured, models: dict, channel_nrmse: dict, band=None
     return fig
 
 
-def shapes_figure(shapes, frequency, damping_ratio=None):
-    """Mode shapes (columns of ``shapes``, floor 1 first) against the floor, the table at 0."""
+def shapes_figure(shapes: ArrayLike, frequency: ArrayLike, damping_ratio: ArrayLike | None = None) -> Figure:
+    """Mode shapes (columns of ``shapes`` (d, modes), floor 1 first) against the floor, the table at 0; each
+    titled with its ``frequency`` (Hz) and, when given, ``damping_ratio``."""
     plt = pyplot()
     shapes = np.asarray(shapes, float)
     d = shapes.shape[0]

@@ -12,12 +12,22 @@ from __future__ import annotations
 import json
 import sys
 from collections.abc import Callable
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from momentid.core.series import json_safe
 from momentid.errors import MomentidError
 from momentid.io.outputs import OwnedFolder
 from momentid.report.page import Page, Provenance, missing_note, write_text_atomic
+
+if TYPE_CHECKING:
+    from momentid.core.series import Experiment
+    from momentid.diagnosis.result import Diagnosis
+    from momentid.estimation.comparison import Comparison
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import AmplitudeTrend, ModalIdentification
+    from momentid.twin.build import Twin
 
 __all__ = ["report_html", "identification_html_page", "twin_html_page", "diagnosis_html_page", "write_identification",
            "identification_folder", "REPORT_HTML", "MODES_UFF", "FRF_UFF", "IDENTIFICATION_JSON",
@@ -38,32 +48,37 @@ def report_html(build: Callable[[], Page], title: str, made: Provenance) -> str:
         return page.html()
 
 
-def identification_html_page(result, experiment, made: Provenance, *, comparison=None, trend=None) -> str:
+def identification_html_page(result: Identification | ModalIdentification | tuple[ModalIdentification, ...],
+                             experiment: Experiment, made: Provenance, *,
+                             comparison: Comparison | None = None, trend: AmplitudeTrend | None = None) -> str:
     """``report.html`` of an identification (:func:`momentid.report.identify_page.identification_page`)."""
     from momentid.report.identify_page import identification_page
     return report_html(lambda: identification_page(result, experiment, made, comparison=comparison, trend=trend),
                        f"Identification of {experiment.name}", made)
 
 
-def twin_html_page(twin, experiment, made: Provenance) -> str:
+def twin_html_page(twin: Twin, experiment: Experiment, made: Provenance) -> str:
     """``report.html`` of a twin (:func:`momentid.report.twin_page.twin_page`)."""
     from momentid.report.twin_page import twin_page
     return report_html(lambda: twin_page(twin, experiment, made), f"Twin of {experiment.name}", made)
 
 
-def diagnosis_html_page(diag, made: Provenance, source: str) -> str:
+def diagnosis_html_page(diag: Diagnosis, made: Provenance, source: str) -> str:
     """``report.html`` of a diagnosis (:func:`momentid.report.diagnosis_page.diagnosis_page`)."""
     from momentid.report.diagnosis_page import diagnosis_page
     return report_html(lambda: diagnosis_page(diag, made, source), f"Diagnosis of {source}", made)
 
 
-def identification_folder(folder, *, force: bool = False) -> OwnedFolder:
+def identification_folder(folder: str | os.PathLike, *, force: bool = False) -> OwnedFolder:
     """The folder of ``identify -o`` under the one output rule (:mod:`momentid.io.outputs`)."""
     return OwnedFolder(folder, "identify", force=force)
 
 
-def write_identification(folder, result, experiment, payload: dict, made: Provenance, *, comparison=None,
-                         trend=None, force: bool = False) -> list:
+def write_identification(folder: str | os.PathLike,
+                         result: Identification | ModalIdentification | tuple[ModalIdentification, ...],
+                         experiment: Experiment, payload: dict, made: Provenance, *,
+                         comparison: Comparison | None = None, trend: AmplitudeTrend | None = None,
+                         force: bool = False) -> list[str]:
     """Write an identification's folder: ``identification.json`` (``payload``, what ``--json`` prints),
     ``report.html``, ``modes.uff`` and ``frf.uff`` (:mod:`momentid.report.exports`).
 

@@ -12,12 +12,20 @@
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from momentid.core import html
 from momentid.core.html import pm
 from momentid.report import figures
 from momentid.report.page import Page, Provenance
+
+if TYPE_CHECKING:
+    from momentid.core.series import Experiment
+    from momentid.estimation.comparison import Comparison
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import AmplitudeTrend, ModalIdentification
 
 __all__ = ["identification_page"]
 
@@ -100,7 +108,9 @@ def _added_mass(page: Page, result, experiment, comparison) -> None:
                                                   "{c:g}) and identified"))
 
 
-def identification_page(result, experiment, made: Provenance, *, comparison=None, trend=None) -> Page:
+def identification_page(result: Identification | ModalIdentification | tuple[ModalIdentification, ...],
+                        experiment: Experiment, made: Provenance, *,
+                        comparison: Comparison | None = None, trend: AmplitudeTrend | None = None) -> Page:
     """The page of an identification of ``experiment`` (module docstring).
 
     Parameters

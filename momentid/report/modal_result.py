@@ -11,9 +11,14 @@ and the key.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from momentid.errors import ViewerError
+
+if TYPE_CHECKING:
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["is_modal_payload", "modal_from_dict"]
 
@@ -21,7 +26,7 @@ __all__ = ["is_modal_payload", "modal_from_dict"]
 MODAL_KEYS = ("frequency_hz", "damping_ratio", "mode_shapes", "runs")
 
 
-def is_modal_payload(data) -> bool:
+def is_modal_payload(data: object) -> bool:
     """True for the JSON object of a modal fit (runs without added mass)."""
     return isinstance(data, dict) and "frequency_hz" in data and "mu" not in data
 
@@ -97,7 +102,7 @@ class _Reader:
 
 
 def _mode_damping(read: _Reader, entry: dict):
-    """One mode's damping answer (``damping`` entries: :meth:`ModeDamping.to_dict`)."""
+    """One mode's damping answer (``damping`` entries: :meth:`~momentid.estimation.damping.ModeDamping.to_dict`)."""
     from momentid.estimation.damping import ModeDamping
 
     interval = read.array("interval_95", (2,), entry)
@@ -117,7 +122,8 @@ def _mode_damping(read: _Reader, entry: dict):
 
 
 def _extra_mode(read: _Reader, entry: dict, d: int):
-    """One resonance beyond the storey modes (``extra_modes`` entries: :meth:`ExtraMode.to_dict`)."""
+    """One resonance beyond the storey modes (``extra_modes`` entries:
+    :meth:`~momentid.estimation.modal_checks.ExtraMode.to_dict`)."""
     from momentid.estimation.modal_checks import ExtraMode
 
     return ExtraMode(
@@ -128,7 +134,7 @@ def _extra_mode(read: _Reader, entry: dict, d: int):
         residues_quadrature=read.array("residues_quadrature", (d,), entry, optional=True))
 
 
-def modal_from_dict(data: dict, source: str):
+def modal_from_dict(data: dict, source: str) -> ModalIdentification:
     """The :class:`~momentid.estimation.scaled.ModalIdentification` of a modal ``identify --json`` object.
 
     Parameters

@@ -86,7 +86,7 @@ class Provenance:
     versions: tuple
 
 
-def sha256(path) -> str:
+def sha256(path: str | os.PathLike) -> str:
     """The SHA-256 (hex) of the file at ``path``, read in blocks."""
     digest = hashlib.sha256()
     with open(path, "rb") as f:
@@ -211,7 +211,7 @@ def missing_note(what: str, exc: BaseException) -> str:
             f"{escape(type(exc).__name__)}: {escape(exc)}{escape(at)}.</p>")
 
 
-def write_text_atomic(path, text: str) -> Path:
+def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
     """Write ``text`` (UTF-8) to ``path`` through a temporary file beside it, renamed into place: a
     reader never sees half a file, and an error leaves any previous file as it was."""
     path = Path(path)

@@ -8,11 +8,15 @@ drifts, a scale bar) under ``/runs/<run>/rig``; :mod:`momentid.report.viewer` dr
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from momentid.core.series import RunData
 from momentid.report.scene import Scene, nice_number
+
+if TYPE_CHECKING:
+    import rerun as rr
 
 __all__ = ["TIMELINE", "RIG_RATE", "PALETTE", "BASE_COLOR", "run_path", "rig_samples", "log_rig"]
 
@@ -43,7 +47,8 @@ def rig_samples(run: RunData) -> np.ndarray:
     return np.arange(0, run.n_samples, step)
 
 
-def log_rig(rec, scene: Scene, run: RunData, root: str | None = None, motion=None) -> None:
+def log_rig(rec: rr.RecordingStream, scene: Scene, run: RunData, root: str | None = None,
+            motion: tuple[np.ndarray, np.ndarray] | None = None) -> None:
     """Draw the rig of ``run`` moving: table and floors, at ``root`` (default ``/runs/<run>/rig``),
     with ``motion = (z, q)`` (table displacement (n,), floors relative to it (n, d), m; default: the
     recording's, :meth:`Scene.drawn`)."""

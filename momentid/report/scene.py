@@ -8,13 +8,20 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass, field
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 import scipy.signal
 
 from momentid.core.series import Experiment, RunData
 from momentid.errors import IdentificationError, SensorDataError, ViewerError
+
+if TYPE_CHECKING:
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["Scene", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "DISPLACEMENT_ORDER",
            "MAX_EXAGGERATION", "auto_exaggeration", "nice_number", "is_modal", "load_result", "check_result",
@@ -147,7 +154,8 @@ def nice_number(x: float) -> float:
 MAX_EXAGGERATION = 1e4
 
 
-def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict | None = None) -> float:
+def auto_exaggeration(experiment: Experiment, heights: ArrayLike | None = None, reconstructed: dict | None = None
+                      ) -> float:
     """A 1-2-5 factor that draws the largest recorded displacement at about a
     fifth of the building height (never below 1).
 
@@ -178,7 +186,7 @@ def auto_exaggeration(experiment: Experiment, heights=None, reconstructed: dict 
     return max(1.0, nice_number(0.2 * height / peak))
 
 
-def load_result(path, experiment: Experiment):
+def load_result(path: str | os.PathLike, experiment: Experiment) -> Identification | ModalIdentification:
     """Read an identification saved by ``momentid identify --json``: of runs with added mass (M, C, K,
     mu, kappa) or without (the modes: :func:`momentid.report.modal_result.modal_from_dict`).
 
@@ -244,7 +252,7 @@ def load_result(path, experiment: Experiment):
     return result
 
 
-def check_result(result, experiment: Experiment, source: str = "result") -> None:
+def check_result(result: Identification | ModalIdentification, experiment: Experiment, source: str = "result") -> None:
     """Refuse a result that does not belong to ``experiment`` (storeys, run names).
 
     Raises
@@ -261,8 +269,9 @@ def check_result(result, experiment: Experiment, source: str = "result") -> None
                           f"{', '.join(names)}): the result belongs to another recording")
 
 
-def prepare(experiment: Experiment, *, result=None, exaggeration: float | None = None,
-            run: str | None = None, identify_options: dict | None = None, identify: bool = True) -> Scene:
+def prepare(experiment: Experiment, *, result: Identification | ModalIdentification | None = None,
+            exaggeration: float | None = None, run: str | None = None, identify_options: dict | None = None,
+            identify: bool = True) -> Scene:
     """Identify (unless ``result`` is given), compare and collect what to show.
 
     Parameters
@@ -346,7 +355,7 @@ def prepare(experiment: Experiment, *, result=None, exaggeration: float | None =
     return scene
 
 
-def is_modal(result) -> bool:
+def is_modal(result: object) -> bool:
     """True for the modal fit of runs without added mass (it has no M, mu, kappa of eq. (3))."""
     from momentid.estimation.scaled import ModalIdentification
 

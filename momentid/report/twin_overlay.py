@@ -20,13 +20,20 @@ Entity paths::
 from __future__ import annotations
 
 from dataclasses import dataclass
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from momentid.core.series import Experiment
+from momentid.core.series import Experiment, RunData
 from momentid.twin.files import check_against, read_twin
 from momentid.twin.replay import Replay, replay_run
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
+    from momentid.report.scene import Scene
 
 __all__ = ["TwinOverlay", "TWIN_COLOR"]
 
@@ -51,7 +58,7 @@ class TwinOverlay:
     replays: dict
 
     @classmethod
-    def from_folder(cls, folder, experiment: Experiment) -> TwinOverlay:
+    def from_folder(cls, folder: str | os.PathLike, experiment: Experiment) -> TwinOverlay:
         """Read the twin of ``folder`` and replay every run of ``experiment`` through it.
 
         Raises
@@ -70,13 +77,15 @@ class TwinOverlay:
 
         return f"/runs/{rr.escape_entity_path_part(run.name)}/twin"
 
-    def spatial_views(self, scene, run, eye) -> list:
+    def spatial_views(self, scene: Scene, run: RunData, eye: rrb.EyeControls3D) -> list[rrb.View]:
+        """The twin's rig moving, beside the recording's (a 3D view with the same ``eye``)."""
         import rerun.blueprint as rrb
 
         return [rrb.Spatial3DView(origin=f"{self._root(run)}/rig", eye_controls=eye,
                                   name=f"{run.name}: the twin, displacements drawn x{scene.exaggeration:g}")]
 
-    def series_views(self, scene, run) -> list:
+    def series_views(self, scene: Scene, run: RunData) -> list[rrb.View]:
+        """Per floor sensor, the recorded and the twin's acceleration in one time-series view."""
         import rerun as rr
         import rerun.blueprint as rrb
 
@@ -89,12 +98,13 @@ class TwinOverlay:
             plot_legend=rrb.PlotLegend(rrb.Corner2D.RightTop, visible=True))
             for j in range(self.parameters.storeys)]
 
-    def side_views(self) -> list:
+    def side_views(self) -> list[rrb.View]:
+        """The twin's summary (modes and NRMSE per trial) as a text view."""
         import rerun.blueprint as rrb
 
         return [rrb.TextDocumentView(origin="/twin/summary", name="twin: modes and NRMSE per trial")]
 
-    def log(self, rec, scene, run) -> None:
+    def log(self, rec: rr.RecordingStream, scene: Scene, run: RunData) -> None:
         """The twin's rig moving and its floor sensors, for ``run``."""
         import rerun as rr
 
@@ -111,7 +121,8 @@ class TwinOverlay:
                     static=True)
             rec.send_columns(entity, indexes=[time], columns=rr.Scalars.columns(scalars=replay.twin[:, j]))
 
-    def log_static(self, rec) -> None:
+    def log_static(self, rec: rr.RecordingStream) -> None:
+        """The twin's summary, once for every run."""
         import rerun as rr
 
         rec.log("/twin/summary", rr.TextDocument(self.markdown(), media_type=rr.MediaType.MARKDOWN), static=True)

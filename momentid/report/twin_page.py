@@ -5,8 +5,14 @@ against the twin's replay with a zoom on its largest response."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from momentid.core import html
 from momentid.report.page import Page, Provenance
+
+if TYPE_CHECKING:
+    from momentid.core.series import Experiment
+    from momentid.twin.build import Twin
 
 __all__ = ["twin_page", "OVERLAY_BINS"]
 
@@ -24,7 +30,7 @@ def _sensor_rows(twin) -> list:
     return rows
 
 
-def twin_page(twin, experiment, made: Provenance) -> Page:
+def twin_page(twin: Twin, experiment: Experiment, made: Provenance) -> Page:
     """The page of ``twin`` (a :class:`~momentid.twin.build.Twin` of ``experiment``; module docstring)."""
     from momentid.twin.plots import replay_figure, transfer_figure
 

@@ -49,6 +49,7 @@ import shutil
 import socket
 import sys
 from pathlib import Path
+from typing import Any, TYPE_CHECKING
 
 import numpy as np
 
@@ -60,6 +61,12 @@ from momentid.report.rig_drawing import (BASE_COLOR, PALETTE, RIG_RATE, TIMELINE
                                          run_path)
 from momentid.report.scene import (DISPLACEMENT_HIGHPASS, Scene, auto_exaggeration, check_result,
                                    displacements_from_accelerations, load_result, prepare)
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["Scene", "auto_exaggeration", "displacements_from_accelerations", "DISPLACEMENT_HIGHPASS", "load_result",
            "check_result", "prepare", "blueprint", "log_scene", "write_rrd", "show", "view", "rig_samples", "log_rig",
@@ -84,7 +91,7 @@ def _series_paths(scene: Scene, run: RunData, base: str | None, prefix: str | No
     return [f"{root}/sensors/{c}" for c in chans if run.has(c)]
 
 
-def blueprint(scene: Scene):
+def blueprint(scene: Scene) -> rrb.Blueprint:
     """The layout: run tabs (3D + time series) beside the identification column.
 
     Returns
@@ -156,7 +163,7 @@ def _channel_label(channel: str) -> tuple[str, tuple]:
     return f"{channel}: table ({channel_unit(channel)})", BASE_COLOR
 
 
-def log_scene(rec, scene: Scene) -> None:
+def log_scene(rec: rr.RecordingStream, scene: Scene) -> None:
     """Send everything of ``scene`` to the recording stream ``rec`` (series via ``send_columns``)."""
     import rerun as rr
 
@@ -197,7 +204,7 @@ def log_scene(rec, scene: Scene) -> None:
                         PALETTE[i % len(PALETTE)])
 
 
-def write_rrd(experiment, path, **options) -> Path:
+def write_rrd(experiment: Experiment | Scene, path: str | os.PathLike, **options: Any) -> Path:
     """Write an experiment with its blueprint to a ``.rrd`` file (no viewer needed).
 
     Parameters
@@ -290,8 +297,11 @@ def show(scene: Scene, *, port: int = 9876) -> None:
         rec.disconnect()
 
 
-def view(recording, *, save=None, result=None, exaggeration: float | None = None, run: str | None = None,
-         identify_options: dict | None = None, port: int = 9876, twin=None) -> Path | None:
+def view(recording: str | os.PathLike | Experiment, *, save: str | os.PathLike | None = None,
+         result: str | os.PathLike | Identification | ModalIdentification | None = None,
+         exaggeration: float | None = None, run: str | None = None, identify_options: dict | None = None,
+         port: int = 9876,
+         twin: str | os.PathLike | None = None) -> Path | None:
     """Read ``recording``, then show it in the viewer or, with ``save``, write a ``.rrd``.
 
     Parameters

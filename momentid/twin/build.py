@@ -11,7 +11,9 @@ refusal: the twin carries each sensor's gain, and the warning is repeated.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 import mujoco
 import numpy as np
@@ -22,6 +24,10 @@ from momentid.errors import IdentificationError, SensorDataError
 from momentid.twin.parameters import TwinParameters, from_identification
 from momentid.twin.replay import Replay, replay_run
 from momentid.twin.spec import Timing, model_matrices, timing, twin_spec
+
+if TYPE_CHECKING:
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["Twin", "build_twin", "default_runs", "check_recording", "refusals", "check_xml", "MIN_TRIALS",
            "CHECK_STEPS", "MISFIT_FACTOR", "MISFIT_MARGIN", "misfit_warning"]
@@ -76,6 +82,7 @@ class Twin:
 
     @property
     def notes(self) -> tuple:
+        """What the build noted: the trials left out, then the parameters' and the identification's notes."""
         return tuple(self.left_out) + tuple(self.parameters.notes) + tuple(self.identification.notes)
 
     def replay(self, run: str) -> Replay:
@@ -137,7 +144,7 @@ class Twin:
         return "\n".join(lines)
 
 
-def check_recording(experiment: Experiment, runs=None) -> tuple:
+def check_recording(experiment: Experiment, runs: Sequence[str] | None = None) -> tuple[str, ...]:
     """The run names a twin can be calibrated on; refuses what it cannot honour.
 
     Every trial of the recording is replayed, so every one needs the table sensor and each floor's.
@@ -197,7 +204,7 @@ def _modal_refusals(result) -> tuple[list, list]:
     return [w for w in result.warnings if w not in accepted], accepted
 
 
-def refusals(result) -> tuple[list, list]:
+def refusals(result: Identification | ModalIdentification) -> tuple[list, list]:
     """Why ``result`` cannot calibrate a twin, and which of its warnings the twin accepts.
 
     Parameters
@@ -238,7 +245,7 @@ def check_xml(xml: str) -> object:
     return modal_properties(M, C, K)
 
 
-def build_twin(experiment: Experiment, runs=None) -> Twin:
+def build_twin(experiment: Experiment, runs: Sequence[str] | None = None) -> Twin:
     """Identify ``experiment`` on ``runs``, build its MJCF twin and replay every trial through it.
 
     Parameters
@@ -318,7 +325,7 @@ def default_runs(experiment: Experiment) -> tuple:
     return [r.name for r in experiment.runs if state.belongs(r.name)], notes
 
 
-def misfit_warning(replays) -> tuple:
+def misfit_warning(replays: Sequence[Replay]) -> tuple[str, ...]:
     """A WARNING (one-tuple) when some trials replay far above their noise (:data:`MISFIT_FACTOR`), else ().
 
     The twin is still written: it is the best linear model of the rig, and the gap is what

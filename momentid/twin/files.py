@@ -11,15 +11,21 @@ twin is written, so a second writer of the same folder gets one line naming it.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 import json
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from momentid.core.series import json_safe
+from momentid.core.series import Experiment, json_safe
 from momentid.errors import MomentidError, RecordingError
 from momentid.io.outputs import OwnedFolder
 from momentid.twin.parameters import ExtraMode, SensorModel, TwinParameters
+
+if TYPE_CHECKING:
+    from momentid.twin.build import Twin
 
 __all__ = ["write_twin", "read_twin", "check_against", "file_names", "output_folder", "TWIN_XML", "TWIN_JSON",
            "TRANSFER_PNG", "TwinFolderError"]
@@ -31,14 +37,14 @@ class TwinFolderError(MomentidError):
     """The twin's output folder cannot be used, or a twin folder cannot be read."""
 
 
-def file_names(runs, plots: bool = True) -> list[str]:
+def file_names(runs: Iterable[str], plots: bool = True) -> list[str]:
     """Every file a twin of trials ``runs`` may write (checked against the folder before the build)."""
     from momentid.twin.plots import replay_files
 
     return [TWIN_XML, TWIN_JSON] + ([TRANSFER_PNG, *replay_files(runs).values()] if plots else [])
 
 
-def output_folder(out, *, force: bool = False) -> OwnedFolder:
+def output_folder(out: str | os.PathLike, *, force: bool = False) -> OwnedFolder:
     """The twin's folder ``out`` under the one output rule (:mod:`momentid.io.outputs`)."""
     return OwnedFolder(out, "twin", force=force)
 
@@ -66,7 +72,8 @@ def _write_files(twin, experiment, folder: Path, plots: bool, extra=None) -> lis
     return names
 
 
-def write_twin(twin, experiment, out, *, plots: bool = True, force: bool = False, extra=None) -> list:
+def write_twin(twin: Twin, experiment: Experiment, out: str | os.PathLike, *, plots: bool = True, force: bool = False,
+               extra: Callable[[Path], list[str]] | None = None) -> list[str]:
     """Write ``twin.xml``, ``twin.json`` and the plots into the folder ``out``, each file whole.
 
     The folder follows the one output rule (:class:`momentid.io.outputs.OwnedFolder`): only the
@@ -110,7 +117,7 @@ def _sensors(d: dict) -> SensorModel:
                        np.asarray(d["bias_m_s2"], float))
 
 
-def read_twin(folder) -> TwinParameters:
+def read_twin(folder: str | os.PathLike) -> TwinParameters:
     """The parameters of a twin folder written by :func:`write_twin` (from its ``twin.json``).
 
     Raises
@@ -180,7 +187,7 @@ def _check_values(params: TwinParameters, path: Path) -> None:
                    "clock offsets within 1 s (the import aligns clocks to a few samples)")
 
 
-def check_against(params: TwinParameters, experiment) -> None:
+def check_against(params: TwinParameters, experiment: Experiment) -> None:
     """Refuse a twin of another rig or recording than ``experiment``: another storey count, trials it
     was calibrated on that the recording does not hold (the twin of another recording: a simulated
     scenario's twin over a real rig), or other stated floor masses.

@@ -1,6 +1,6 @@
 """Fit a real rig's MuJoCo twin to recorded trials by re-simulation, with or without physics beyond it.
 
-The twin (:class:`~momentid.lab.FittedRig`: stated floor masses, a full stiffness matrix, modal
+The twin (:class:`~momentid.twin.fitted_rig.FittedRig`: stated floor masses, a full stiffness matrix, modal
 damping, records of the registry's real-rig kinds in chosen storeys (``joint_friction``, ``cubic_spring``,
 ``quadratic_damping``: each MJCF-only, no Python in the loop), one gain and clock offset per floor
 sensor) is fitted by output error: every training trial is re-simulated through MuJoCo under its recorded table
@@ -17,39 +17,34 @@ re-simulated while fitting; held-out trials are always simulated whole.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Sequence
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import scipy.optimize
 
-from momentid.core.series import RunData
-from momentid.core.structure import Mechanism
-from momentid.errors import IdentificationError, MomentidError
-from momentid.estimation.noise import quiet_lead_in
+from momentid.errors import IdentificationError
 from momentid.lab import resim
-from momentid.lab.rig_model import RigModel
 from momentid.lab.sensors import gain_and_delay
-from momentid.lab.tendons import pair_coefficient
 from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
+from momentid.twin.fitted_rig import (FIT_ENERGY, REFERENCE_DRIFT, FittedRig, Trial, friction_records, friction_start,
+                                      joint_tendon_stiffness, mechanism_start, storey_levels, trial, twin_modes)
 from momentid.twin.replay import nrmse as replay_nrmse
 
 __all__ = ["FittedRig", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
            "sensor_jacobian", "FIT_ENERGY", "friction_start", "mechanism_start", "storey_levels", "twin_modes",
            "joint_tendon_stiffness", "workers", "each"]
 
-#: Fraction of a training trial's floor-signal energy the fit re-simulates (the rest is a quiet tail).
-FIT_ENERGY = 0.99
 #: Seconds of a trial's quiet lead-in simulated before its shaking starts (the rest is the floors at rest).
 LEAD_IN_MARGIN = 1.0
 #: Forward-difference step, relative to each parameter's typical size.
 DIFF_STEP = 1e-3
 #: Optimiser's evaluation cap per fit (each evaluation re-simulates the training trials once).
 MAX_NFEV = 40
-#: Drift (m) at which the fit states a joint's stiffness loss (storey drifts of a bench rig: 0.1-10 mm).
-REFERENCE_DRIFT = 1e-3
 #: Bounds of the friction parameters in the fit: stiffness lost at REFERENCE_DRIFT (N/m), slip drift (m),
 #: exponent.
 FRICTION_BOUNDS = ((1e-3, 300.0), (2e-4, 0.05), (-0.9, 1.0))
@@ -57,113 +52,15 @@ FRICTION_BOUNDS = ((1e-3, 300.0), (2e-4, 0.05), (-0.9, 1.0))
 DAMPING_BOUNDS = (-0.01, 0.1)
 GAIN_BOUNDS = (-0.2, 0.2)
 OFFSET_BOUNDS = (-0.02, 0.02)
-#: Share of the linear twin's viscous damping an augmented fit starts from.
-START_DAMPING_SHARE = 0.3
 _INVALID = 10.0     # residual of a parameter set whose stiffness is not positive definite
 
 
-@dataclass(frozen=True)
-class FittedRig:
-    """A real rig as the twin's fit sizes it: the parameters it searches, and the rig they make
-    (:meth:`rig`, built and re-simulated by the lab: :mod:`momentid.lab.resim`).
-
-    Attributes
-    ----------
-    masses : ndarray, shape (d,)
-        Floor masses (kg).
-    stiffness : ndarray, shape (d, d)
-        K (N/m) of the stuck joints (small drifts), symmetric positive definite.
-    damping_ratio : ndarray, shape (d,)
-        Modal viscous damping ratios (1) on the modes of (M, K), ascending frequency.
-    friction : tuple of Mechanism
-        Records of real-rig kinds (``joint_friction``, ``cubic_spring``, ``quadratic_damping``; at most one
-        of a kind per storey; the field keeps its first kind's name); empty: the linear twin.
-    gain, offset : ndarray, shape (d,)
-        Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
-    """
-
-    masses: np.ndarray
-    stiffness: np.ndarray
-    damping_ratio: np.ndarray
-    friction: tuple = ()
-    gain: np.ndarray = field(default=None)
-    offset: np.ndarray = field(default=None)
-
-    def __post_init__(self):
-        d = len(self.masses)
-        if self.gain is None:
-            object.__setattr__(self, "gain", np.ones(d))
-        if self.offset is None:
-            object.__setattr__(self, "offset", np.zeros(d))
-
-    @property
-    def storeys(self) -> int:
-        return len(self.masses)
-
-    @property
-    def damping(self) -> np.ndarray:
-        """C (N s/m), shape (d, d)."""
-        return resim.modal_damping(self.masses, self.stiffness, self.damping_ratio)
-
-    def linear(self) -> FittedRig:
-        """The same rig without its friction."""
-        return replace(self, friction=())
-
-    def rig(self) -> RigModel:
-        """The rig MuJoCo simulates (sensors apart): K and C as tendons, the friction on its storeys."""
-        return RigModel.from_matrices(self.masses, self.stiffness, self.damping,
-                                      np.full(self.storeys, resim.STOREY_HEIGHT), base_mass=resim.BASE_MASS,
-                                      mechanisms=self.friction)
-
-    def to_dict(self) -> dict:
-        return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
-                "damping_ratio": np.asarray(self.damping_ratio).tolist(),
-                "friction": [{"type": m.type, **registry.get(m.type).place(m.location).location,
-                              **dict(m.parameters)} for m in self.friction],
-                "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
 
 
-def friction_records(storeys, params) -> tuple:
-    """``joint_friction`` records from per-storey ``params`` dicts."""
-    return tuple(Mechanism("joint_friction", int(s), tuple(p.items())) for s, p in zip(storeys, params))
 
 
-@dataclass(frozen=True)
-class Trial:
-    """One recorded trial: table acceleration, floor accelerations, where its shaking starts.
-
-    Attributes
-    ----------
-    name : str
-    zdd : ndarray, shape (n,)
-    a : ndarray, shape (n, d)
-    dt : float
-    start : int
-        First sample after the quiet lead-in.
-    fit_stop : int
-        Samples re-simulated while fitting (:data:`FIT_ENERGY`).
-    norm : float
-        ``sqrt(sum |a - mean|^2)`` after ``start`` (the NRMSE's denominator).
-    """
-
-    name: str
-    zdd: np.ndarray
-    a: np.ndarray
-    dt: float
-    start: int
-    fit_stop: int
-    norm: float
 
 
-def trial(run: RunData, d: int) -> Trial:
-    """A :class:`Trial` from a run with ``zdd`` and ``a1..ad`` (m/s^2)."""
-    a = run.group("a", d)
-    start = quiet_lead_in(run)
-    active = a[start:]
-    energy = np.cumsum(np.sum(a ** 2, axis=1))
-    stop = int(min(len(a), np.searchsorted(energy, FIT_ENERGY * energy[-1]) + 1))
-    return Trial(run.name, np.asarray(run["zdd"], float), a, 1.0 / run.sample_rate, start, max(stop, start + 2),
-                 float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2))))
 
 
 @dataclass(frozen=True)
@@ -244,19 +141,6 @@ class _ParamCodec:
         return dict(p)
 
 
-def storey_levels(model: FittedRig, trials) -> dict:
-    """Per storey ``(stiffness N/m, viscous damping N s/m, peak drift m, peak drift velocity m/s)`` of
-    ``model``'s linear part and the ``trials``: the drift and its velocity from the storey's recorded
-    relative acceleration (floor less the level below; the table's for storey 1) at its 99th percentile,
-    divided by the squared and the first power of mode 1's angular frequency."""
-    omega = float(np.min(twin_modes(model)[0]))
-    K, C = np.asarray(model.stiffness), np.asarray(model.damping)
-    out = {}
-    for s in range(1, model.storeys + 1):
-        rel = [np.abs(t.a[t.start:, s - 1] - (t.zdd[t.start:] if s == 1 else t.a[t.start:, s - 2])) for t in trials]
-        peak = max(float(np.percentile(r, 99)) for r in rel)
-        out[s] = (pair_coefficient(K, s - 1, s), pair_coefficient(C, s - 1, s), peak / omega ** 2, peak / omega)
-    return out
 
 
 def _codec(kind_name: str, level):
@@ -342,12 +226,6 @@ def _valid(model: FittedRig) -> bool:
                if m.type == "joint_friction")
 
 
-def joint_tendon_stiffness(K: np.ndarray, mech) -> float:
-    """The stiffness (N/m) of the tendon in K between the two levels a joint mechanism ``mech`` acts across
-    (its kind's :class:`~momentid.mechanisms.place.Place` ``nodes``; the tendons of
-    :func:`momentid.lab.tendons.tendon_layout`)."""
-    nodes = registry.get(mech.type).place(mech.location).nodes
-    return pair_coefficient(K, *nodes)
 
 
 def workers() -> int:
@@ -356,7 +234,7 @@ def workers() -> int:
     return max(1, resim.ROLLOUT_THREADS or os.cpu_count() or 1)
 
 
-def each(fn, items) -> list:
+def each(fn: Callable[[Any], Any], items: Iterable[Any]) -> list:
     """``[fn(x) for x in items]``, on up to :func:`workers` threads (results in ``items``' order)."""
     items = list(items)
     if len(items) < 2 or workers() < 2:
@@ -514,7 +392,7 @@ class _Problem:
         return J
 
 
-def fit_twin(trials, start: FittedRig, *, substeps: int | None = None,
+def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None = None,
              max_nfev: int = MAX_NFEV, shared: bool = False) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
@@ -559,42 +437,7 @@ def nrmse(model: FittedRig, tr: Trial, substeps: int | None = None) -> float:
     return float(replay_nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:]))
 
 
-def twin_modes(model: FittedRig):
-    """``(omega (rad/s), zeta, residues (d modes, d floors))`` of the twin's stuck (small-drift) linear part,
-    in :func:`~momentid.diagnosis.modal.check.replay`'s form."""
-    m = np.asarray(model.masses, float)
-    m_half = np.sqrt(m)
-    w2, psi = np.linalg.eigh(np.asarray(model.stiffness) / m_half[:, None] / m_half[None, :])
-    phi = psi / m_half[:, None]                       # mass-normalised shapes, columns
-    gamma = phi.T @ m
-    return np.sqrt(w2), np.asarray(model.damping_ratio, float), gamma[:, None] * phi.T
 
 
-def mechanism_start(linear: FittedRig, kind_name: str, storeys, trials) -> FittedRig:
-    """A start for the augmented fit with a real-rig kind other than ``joint_friction`` in ``storeys``: each
-    record at its kind's declared start (:meth:`~momentid.mechanisms.base.MechanismKind.twin_parameters`
-    at the storey's :func:`storey_levels`), the linear part as it is."""
-    kind, levels = registry.get(kind_name), storey_levels(linear, trials)
-    records = tuple(Mechanism(kind_name, int(s), tuple((n, float(v[1])) for n, v in
-                                                         kind.twin_parameters(*levels[s]).items())) for s in storeys)
-    return replace(linear, friction=records)
 
 
-def friction_start(linear: FittedRig, storeys, loss: float, slip_drift: float,
-                   exponent: float) -> FittedRig:
-    """A start for the augmented fit: ``linear`` with joint friction in ``storeys`` that has lost ``loss``
-    of the storey's stiffness at :data:`REFERENCE_DRIFT`, fully slipping at ``slip_drift`` (m), exponent
-    ``exponent``; K stiffened by that loss (K is the stuck joints' stiffness) and the viscous damping
-    lowered by :data:`START_DAMPING_SHARE` (the friction dissipates the rest)."""
-    K = np.asarray(linear.stiffness)
-    share = jf.lost_fraction(REFERENCE_DRIFT, slip_drift, exponent)
-    unit = friction_records(storeys, [{"stiffness": 1.0, "slip_drift": slip_drift, "exponent": exponent}]
-                                  * len(storeys))
-    params = [{"stiffness": loss * joint_tendon_stiffness(K, m) / share, "slip_drift": slip_drift, "exponent": exponent}
-              for m in unit]
-    if any(p["stiffness"] <= 0 for p in params):
-        raise MomentidError(f"storeys {list(storeys)} of stiffness {K.tolist()}: a storey with no positive stiffness "
-                            f"cannot carry joint friction")
-    return replace(linear, stiffness=K * (1.0 + loss),
-                   damping_ratio=np.asarray(linear.damping_ratio) * START_DAMPING_SHARE,
-                   friction=friction_records(storeys, params))

@@ -14,13 +14,19 @@ M, C, K and the mass-proportional damping ``mu`` that an added mass brings).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.core.series import Experiment
 from momentid.errors import IdentificationError
 from momentid.lab.rig_model import RigModel
 from momentid.lab.tendons import Tendon, pair_coefficient, tendon_layout
+
+if TYPE_CHECKING:
+    from momentid.estimation.identified import Identification
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["SensorModel", "ExtraMode", "TwinParameters", "Tendon", "tendon_layout", "pair_coefficient",
            "from_identification", "matrices_from_modes", "masses_from_shapes", "DEFAULT_STOREY_HEIGHT"]
@@ -56,11 +62,12 @@ class SensorModel:
         """Gain 1, no clock offset, no bias on ``d`` floors."""
         return cls(np.ones(d), np.zeros(d), np.zeros(d))
 
-    def with_bias(self, bias) -> SensorModel:
+    def with_bias(self, bias: ArrayLike) -> SensorModel:
         """The same sensors with ``bias`` (m/s^2, shape (d,))."""
         return SensorModel(self.gain, self.clock_offset, np.asarray(bias, float))
 
     def to_dict(self) -> dict:
+        """Gains (1), clock offsets (s) and biases (m/s^2) as lists."""
         return {"gain": self.gain.tolist(), "clock_offset_s": self.clock_offset.tolist(),
                 "bias_m_s2": self.bias.tolist()}
 
@@ -89,6 +96,7 @@ class ExtraMode:
     residues: np.ndarray
 
     def to_dict(self) -> dict:
+        """The mode's frequency (Hz), damping ratio and residues as JSON-ready values."""
         return {"frequency_hz": self.frequency, "damping_ratio": self.damping_ratio,
                 "residues": self.residues.tolist()}
 
@@ -137,9 +145,10 @@ class TwinParameters:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys ``d``."""
         return self.masses.shape[0]
 
-    def rig(self, added_mass=None) -> RigModel:
+    def rig(self, added_mass: ArrayLike | None = None) -> RigModel:
         """The rig MuJoCo builds (sensors and extra modes apart) with ``added_mass`` (kg, (d,); none by
         default): K and C as tendons, each floor joint damped by ``mu dm`` (:attr:`added_mass_damping`)."""
         dm = np.zeros(self.storeys) if added_mass is None else np.asarray(added_mass, float)
@@ -151,7 +160,8 @@ class TwinParameters:
         return self.sensors.get(run, self.nominal)
 
 
-def matrices_from_modes(frequency, damping_ratio, shapes, masses):
+def matrices_from_modes(frequency: ArrayLike, damping_ratio: ArrayLike, shapes: ArrayLike, masses: ArrayLike
+                        ) -> tuple[np.ndarray, np.ndarray]:
     """Symmetric K and C with exactly these modes' frequencies and damping ratios and the mass matrix
     ``diag(masses)``: the M-orthonormal set nearest to the shapes (polar decomposition of
     ``M^1/2 Phi``), as :mod:`momentid.estimation.scaled` derives K and C from stated masses.
@@ -179,7 +189,7 @@ def matrices_from_modes(frequency, damping_ratio, shapes, masses):
     return S @ np.diag(w ** 2) @ S.T, S @ np.diag(2 * np.asarray(damping_ratio, float) * w) @ S.T
 
 
-def masses_from_shapes(shapes) -> np.ndarray | None:
+def masses_from_shapes(shapes: ArrayLike) -> np.ndarray | None:
     """Floor masses, mean 1 kg, in the proportions that make the mode shapes most nearly orthogonal.
 
     Orthogonality ``phi_i^T M phi_k = 0`` (``i < k``) is linear in the diagonal of ``M``: its least-squares
@@ -244,7 +254,7 @@ def _mean_sensors(sensors: dict, d: int) -> SensorModel:
                        np.zeros(d))
 
 
-def from_identification(result, experiment: Experiment) -> TwinParameters:
+def from_identification(result: Identification | ModalIdentification, experiment: Experiment) -> TwinParameters:
     """The twin's parameters from an identification of ``experiment``.
 
     Parameters

@@ -12,15 +12,24 @@ The ``*_figure`` functions return the matplotlib figure (the report page draws t
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 import hashlib
 import re
 from pathlib import Path
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from momentid.estimation.noise import quiet_lead_in
 from momentid.estimation.frf import MIN_COHERENCE, SEGMENT, measured_transfer
 from momentid.twin.replay import Replay, transfer
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+    from momentid.core.series import Experiment
+    from momentid.twin.build import Twin
+    from momentid.twin.parameters import TwinParameters
 
 __all__ = ["plot_replay", "plot_transfer", "replay_figure", "transfer_figure", "overlay_figure", "replay_file",
            "replay_files", "pyplot", "envelope", "ENVELOPE_BINS", "ZOOM_S", "MIN_COHERENCE", "SEGMENT"]
@@ -32,7 +41,7 @@ ZOOM_S = 4.0
 _RECORDED, _TWIN = "0.15", "tab:orange"
 
 
-def pyplot():
+def pyplot() -> ModuleType:
     """``matplotlib.pyplot`` on the Agg backend (files only, no display)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -47,7 +56,7 @@ def _margins(fig, rows: int) -> None:
                         hspace=0.45 if rows > 1 else 0.2)
 
 
-def envelope(t: np.ndarray, x: np.ndarray, bins: int = ENVELOPE_BINS):
+def envelope(t: np.ndarray, x: np.ndarray, bins: int = ENVELOPE_BINS) -> tuple[np.ndarray, np.ndarray]:
     """``(t, x)`` reduced to each of ``bins`` equal stretches' minimum and maximum, in time order: the
     same picture as every sample at a plot's width (a column of pixels shows a stretch's range)."""
     if t.size <= 2 * bins:
@@ -69,14 +78,14 @@ def replay_file(run: str) -> str:
     return f"replay_{safe}.png"
 
 
-def replay_files(runs) -> dict[str, str]:
+def replay_files(runs: Iterable[str]) -> dict[str, str]:
     """Each trial's replay plot file name (:func:`replay_file`), in trial order."""
     return {run: replay_file(run) for run in runs}
 
 
 def overlay_figure(t: np.ndarray, recorded: np.ndarray, models: dict, start: int, *, title: str,
-                   panel_titles=None, unit: str = "m/s²", label: str = "floor {j} sensor",
-                   bins: int = ENVELOPE_BINS):
+                   panel_titles: Sequence[str] | None = None, unit: str = "m/s²", label: str = "floor {j} sensor",
+                   bins: int = ENVELOPE_BINS) -> Figure:
     """Recorded channels against model replays: per channel (top floor on top), the record from sample
     ``start`` on (left, drawn as :func:`envelope` of ``bins`` stretches) and the :data:`ZOOM_S` seconds
     around the largest recorded response (right).
@@ -131,7 +140,7 @@ def overlay_figure(t: np.ndarray, recorded: np.ndarray, models: dict, start: int
     return fig
 
 
-def replay_figure(replay: Replay, bins: int = ENVELOPE_BINS):
+def replay_figure(replay: Replay, bins: int = ENVELOPE_BINS) -> Figure:
     """Recorded and twin floor accelerations of one trial, whole and zoomed (:func:`overlay_figure`)."""
     sensors = "sensors calibrated on this trial" if replay.calibrated else "nominal sensors (trial not calibrated on)"
     return overlay_figure(
@@ -152,8 +161,9 @@ def _save(fig, path: Path) -> Path:
     return path
 
 
-def transfer_figure(params, experiment, runs, top: float, *, model: str = "twin (nominal sensors)",
-                    title: str = "table-to-floor transfer functions: recorded (coherence >= {c:g}) and twin"):
+def transfer_figure(params: TwinParameters | None, experiment: Experiment, runs: Iterable[str], top: float, *,
+                    model: str = "twin (nominal sensors)",
+                    title: str = "table-to-floor transfer functions: recorded (coherence >= {c:g}) and twin") -> Figure:
     """Magnitude of each floor sensor's transfer from the table: each run's H1 estimate after its quiet
     lead-in and the model's (:func:`momentid.twin.replay.transfer` of ``params``).
 
@@ -203,7 +213,7 @@ def transfer_figure(params, experiment, runs, top: float, *, model: str = "twin 
     return fig
 
 
-def plot_transfer(twin, experiment, path: Path) -> Path:
+def plot_transfer(twin: Twin, experiment: Experiment, path: Path) -> Path:
     """Every calibration trial's transfer estimate and the twin's (:func:`transfer_figure`) as a PNG;
     returns ``path``."""
     top = max([*twin.modes.frequency, *(e.frequency for e in twin.parameters.extra_modes)])

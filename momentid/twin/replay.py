@@ -21,11 +21,13 @@ sensor's, which drives the twin and reaches the floors through it.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from mujoco import rollout
+from numpy.typing import ArrayLike
 
 from momentid.core.series import RunData
 from momentid.errors import SimulationError
@@ -83,6 +85,7 @@ class Replay:
     noise_nrmse: float
 
     def to_dict(self) -> dict:
+        """The trial's scores as a JSON-ready dict (NRMSE as fractions; the sensors it was replayed with)."""
         return {"run": self.run, "calibration": self.calibrated, "nrmse": self.nrmse,
                 "nrmse_per_floor": self.nrmse_floors.tolist(), "noise_nrmse": self.noise_nrmse,
                 "samples": int(self.time.size), "scored_from_s": float(self.time[self.start]),
@@ -90,7 +93,7 @@ class Replay:
                 "sensor_model": self.sensors.to_dict()}
 
 
-def nrmse(measured: np.ndarray, model: np.ndarray, axis=None):
+def nrmse(measured: np.ndarray, model: np.ndarray, axis: int | None = None) -> np.ndarray | float:
     """``sqrt(sum |measured - model|^2 / sum |measured - mean|^2)`` over ``axis`` (all by default)."""
     centred = measured - measured.mean(axis=0)
     return np.sqrt(np.sum((measured - model) ** 2, axis=axis) / np.sum(centred ** 2, axis=axis))
@@ -114,7 +117,7 @@ def _command(zdd: np.ndarray, timing: Timing, lag: float) -> np.ndarray:
     return np.interp(t_step, np.arange(n) / timing.sample_rate, zdd)
 
 
-def roll(model: mujoco.MjModel, zdd: np.ndarray, timing: Timing, names) -> dict:
+def roll(model: mujoco.MjModel, zdd: np.ndarray, timing: Timing, names: Sequence[str]) -> dict:
     """Drive ``model`` (a compiled twin) with the table acceleration ``zdd`` and read sensors.
 
     Parameters
@@ -207,7 +210,7 @@ def _noise_nrmse(run: RunData, recorded: np.ndarray, start: int, stated, params:
 
 
 def replay_run(params: TwinParameters, run: RunData, *, model: mujoco.MjModel | None = None,
-               stated_noise=None) -> Replay:
+               stated_noise: dict | None = None) -> Replay:
     """Replay ``run`` through the twin of ``params`` and score it.
 
     Parameters
@@ -250,7 +253,7 @@ def replay_run(params: TwinParameters, run: RunData, *, model: mujoco.MjModel | 
                   noise_nrmse=_noise_nrmse(run, recorded, start, stated_noise, params, sensors))
 
 
-def transfer(params: TwinParameters, frequency, sensors: SensorModel | None = None) -> np.ndarray:
+def transfer(params: TwinParameters, frequency: ArrayLike, sensors: SensorModel | None = None) -> np.ndarray:
     """The twin's table-to-floor-sensor transfer ``a_j / z''`` at ``frequency`` (Hz).
 
     ``1 + w^2 (K - w^2 M + i w C)^-1 M 1`` for the floors, plus each extra mode's

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.errors import ModelError
 from momentid.lab import rig
@@ -182,7 +183,8 @@ def _custom(spec: mujoco.MjSpec, params: TwinParameters, sensors: SensorModel, l
         spec.add_text(name="mass_note", data="mass-normalised twin: 1 kg floors, K and C per kilogram of floor")
 
 
-def twin_spec(params: TwinParameters, step: float, *, sensors: SensorModel | None = None, added_mass=None,
+def twin_spec(params: TwinParameters, step: float, *, sensors: SensorModel | None = None,
+              added_mass: ArrayLike | None = None,
               name: str = "twin") -> mujoco.MjSpec:
     """The MJCF twin of ``params`` with the floor sensors ``sensors`` (default: the nominal ones).
 
@@ -215,7 +217,7 @@ def twin_spec(params: TwinParameters, step: float, *, sensors: SensorModel | Non
     return spec
 
 
-def model_matrices(model: mujoco.MjModel):
+def model_matrices(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mass, damping and stiffness matrices of the floors of a compiled twin, read back from MuJoCo.
 
     ``M``: the floor block of MuJoCo's joint-space inertia; ``K`` and ``C``: every tendon's

@@ -4,13 +4,16 @@ trial, its warnings."""
 
 from __future__ import annotations
 
+from typing import Any
+
 from momentid.core import html
 
 __all__ = ["twin_html", "twin_headline"]
 
 
-def twin_headline(twin) -> str:
-    """One sentence: the rig, its masses, the trials it is calibrated on."""
+def twin_headline(twin: Any) -> str:
+    """One sentence of a :class:`~momentid.twin.build.Twin` (which this module's caller imports: typed
+    ``Any``): the rig, its masses, the trials it is calibrated on, the replays' NRMSE."""
     p = twin.parameters
     masses = ("mass-normalised (no floor masses stated)" if p.mass_normalised
               else f"floor masses {', '.join(f'{m:g}' for m in p.masses)} kg")
@@ -21,7 +24,7 @@ def twin_headline(twin) -> str:
             f"{worst.nrmse / max(worst.noise_nrmse, 1e-12):.1f} x the noise alone).")
 
 
-def twin_html(twin) -> str:
+def twin_html(twin: Any) -> str:
     """The answer of a :class:`~momentid.twin.build.Twin` (module docstring)."""
     ident = twin.identification.modes()
     body = html.table(["mode", "frequency (Hz)", "damping ratio (%)", "identified frequency (Hz)",

@@ -9,6 +9,7 @@ held-out run's before/after comparison every diagnosis reports.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -18,6 +19,7 @@ from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.added_mass.residuals import LinearModel, nrmse
 from momentid.errors import SimulationError
+from momentid.estimation.identified import Identification
 from momentid.lab import rig
 from momentid.mechanisms.base import MechanismKind
 from momentid.mechanisms.place import Place, Target
@@ -48,12 +50,12 @@ class Entry(NamedTuple):
         return self.kind.name, self.place.location, self.parameters
 
 
-def records(entries) -> tuple[Mechanism, ...]:
+def records(entries: Iterable[Entry]) -> tuple[Mechanism, ...]:
     """Every model record of ``entries`` (sensor faults have none)."""
     return tuple(r for entry in entries for r in entry.records())
 
 
-def identified_structure(result, nominal: Structure | None) -> Structure:
+def identified_structure(result: Identification, nominal: Structure | None) -> Structure:
     """An identification result as a :class:`Structure` (least-squares storey stiffnesses)."""
     d = result.storeys
     A = np.stack([shear_stiffness(np.eye(d)[s]) for s in range(d)], axis=-1).reshape(d * d, d)
@@ -70,7 +72,8 @@ def measured_groups(run: RunData, d: int) -> dict[str, np.ndarray]:
     return {g: run.group(g, d) for g in ("a", "q") if run.has(f"{g}1")}
 
 
-def joint_replay(structure: Structure, entries, mechanism_records, run: RunData, d: int, static: bool = True):
+def joint_replay(structure: Structure, entries: Iterable[Entry], mechanism_records: Sequence[Mechanism], run: RunData,
+                 d: int, static: bool = True) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Replay ``run`` through an augmented model: (simulated, measured-and-corrected) channels.
 
     ``entries``: the :class:`Entry` of each mechanism, applied in turn: its structure change
@@ -89,8 +92,8 @@ def joint_replay(structure: Structure, entries, mechanism_records, run: RunData,
     return replay(structure, mechanism_records, run, run["zdd"]), measured
 
 
-def replay_check(model: LinearModel, linear_structure: Structure, structure: Structure, entries,
-                 mechanism_records):
+def replay_check(model: LinearModel, linear_structure: Structure, structure: Structure, entries: Sequence[Entry],
+                 mechanism_records: Sequence[Mechanism]) -> tuple[float, float, dict, str]:
     """NRMSE of the evaluation run: linear model vs. augmented model, both in MuJoCo.
 
     ``entries``: the :class:`Entry` of every mechanism of the augmented model (sensor faults are undone

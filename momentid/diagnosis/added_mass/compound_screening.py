@@ -7,6 +7,7 @@ refitted with the forces found; and which candidates of it are re-simulated (:fu
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 from dataclasses import replace
 
 from momentid import mechanisms
@@ -17,6 +18,7 @@ from momentid.diagnosis.added_mass.screening import (Candidate, Domain, damping_
 from momentid.diagnosis.added_mass.selection import SHORTLIST_FLOOR
 from momentid.diagnosis.added_mass.stages import Stages
 from momentid.diagnosis.thresholds import EXCESS
+from momentid.estimation.identified import Identification
 from momentid.mechanisms.base import Refit
 from momentid.mechanisms.place import Target
 
@@ -27,7 +29,7 @@ __all__ = ["candidates", "shortlist", "force_entries", "refitted", "elastic", "S
 STEP_SHORTLIST = 3
 
 
-def candidates(stages: Stages, entries) -> list[Candidate]:
+def candidates(stages: Stages, entries: Sequence[Entry]) -> list[Candidate]:
     """The library screened on what the mechanisms of ``entries`` leave in the equation residual,
     in the domains (identified, nominal model) where an excess is left; best first."""
     model, residuals = stages.model, stages.residuals
@@ -90,20 +92,20 @@ def shortlist(candidates: list[Candidate]) -> list[Candidate]:
     return out
 
 
-def force_entries(stages: Stages, entries) -> list[Entry]:
+def force_entries(stages: Stages, entries: Iterable[Entry]) -> list[Entry]:
     """The forces (``RESIMULATE`` kinds) of ``entries`` the errors-in-variables refit takes as inputs
     (none for noise-free data, identified by the plain equation error)."""
     return [] if stages.model.ideal else [e for e in entries if e.kind.refit is Refit.RESIMULATE]
 
 
-def refitted(stages: Stages, entries) -> ForceRefit | None:
+def refitted(stages: Stages, entries: Iterable[Entry]) -> ForceRefit | None:
     """The linear model refitted by errors-in-variables with the forces of ``entries`` as inputs; None
     when there are none (or noise-free data, or runs the refit cannot use)."""
     forces = force_entries(stages, entries)
     return stages.refitter.refit_forces(forces) if forces else None
 
 
-def elastic(stages: Stages, entries, result):
+def elastic(stages: Stages, entries: Iterable[Entry], result: Identification) -> Identification:
     """``result`` with its stiffness matrix as the storeys' elastic one, the one Rayleigh damping is
     proportional to: without what the mechanisms of ``entries`` take from it in the model (P-Delta's
     loss to the floors' own weight, which an identified K holds)."""

@@ -26,9 +26,11 @@ removes.  Offsets (biases) do not enter: the band excludes 0 Hz.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.core.series import RunData
 from momentid.estimation.noise import band_level, windowed_dft
@@ -64,6 +66,7 @@ class KinematicCheck:
 
     @property
     def consistent(self) -> bool:
+        """Whether every channel's kinematic residual is within ``EXCESS`` of its noise."""
         return max(self.excess.values()) <= EXCESS
 
 
@@ -87,7 +90,7 @@ def noise_sigma(run: RunData) -> dict[str, float]:
 ROUND_OFF = float(np.finfo(float).eps)
 
 
-def inter_sample(omega_h):
+def inter_sample(omega_h: ArrayLike) -> np.ndarray:
     """Relative size of what a sampled signal leaves open between its samples, at ``omega h``.
 
     A band-limited signal and one held to a straight line between samples (a first-order hold:
@@ -154,7 +157,7 @@ def _fit_shift(X, T, W, omega, taus):
             "info": (float(xx), float(np.sum(W * omega ** 2 * np.abs(X) ** 2)))}
 
 
-def kinematic_check(runs, d: int, f_top: float) -> KinematicCheck | None:
+def kinematic_check(runs: Sequence[RunData], d: int, f_top: float) -> KinematicCheck | None:
     """Check ``a_j = zdd + q_j''`` on every floor of ``runs``; fit a fault on each channel.
 
     Parameters

@@ -22,13 +22,20 @@ means "nothing there".  This describes the mismatch; naming the physics is
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from momentid.diagnosis.thresholds import EXCESS
 from momentid.mechanisms.base import drifts
 from momentid.mechanisms.coulomb_friction import SCREENING_SMOOTHING
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+    from momentid.diagnosis.added_mass.residuals import ResidualRow
 
 __all__ = ["Localisation", "locate", "plot_localisation", "localisation_figure"]
 
@@ -52,6 +59,7 @@ class Localisation:
     words: str
 
     def to_dict(self) -> dict:
+        """The breakdown as ``report.json``'s ``localisation`` (what :func:`localisation_figure` draws)."""
         return {"storeys": self.storeys, "storey": self.storey, "runs": self.runs, "windows": self.windows,
                 "amplitude": self.amplitude, "bands": self.bands, "signature": self.signature,
                 "words": self.words}
@@ -75,7 +83,8 @@ def _share(v: np.ndarray, phi: np.ndarray) -> float:
     return float((phi @ v) ** 2 / (pp * vv))
 
 
-def locate(rows, d: int, f_modes: tuple[float, float], *, window_s: float | None = None) -> Localisation:
+def locate(rows: Sequence[ResidualRow], d: int, f_modes: tuple[float, float], *, window_s: float | None = None
+           ) -> Localisation:
     """Break the equation residual down by storey, run, time, amplitude, band and shape.
 
     Parameters
@@ -212,7 +221,7 @@ def _words(loc: Localisation, rows) -> str:
     return ", ".join(parts) + "."
 
 
-def localisation_figure(where: dict, title: str = ""):
+def localisation_figure(where: dict, title: str = "") -> Figure:
     """The storey shear residual over noise by storey, run, time and drift amplitude (a matplotlib figure).
 
     Parameters
@@ -257,7 +266,7 @@ def localisation_figure(where: dict, title: str = ""):
     return fig
 
 
-def plot_localisation(where: dict, path, title: str = "") -> None:
+def plot_localisation(where: dict, path: str | os.PathLike, title: str = "") -> None:
     """``locate.png``: :func:`localisation_figure` as a PNG."""
     import matplotlib.pyplot as plt
 

@@ -17,8 +17,11 @@ above the noise.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import math
 from dataclasses import dataclass, field, replace
+import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.optimize
@@ -30,14 +33,18 @@ from momentid.diagnosis.function_library import ALWAYS, Selected, columns, hyste
 from momentid.diagnosis.discovered_physics import describe, physics
 from momentid.diagnosis.added_mass.resimulation import Refitter, Resimulator, brent_opening, side_by_side
 from momentid.diagnosis.added_mass.augmented import Entry, measured_groups
-from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel, blocks, nrmse
+from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel, ResidualRow, blocks, nrmse
 from momentid.diagnosis.added_mass.selection import Finding, OutsideLibrary, explained_share
 from momentid.diagnosis.thresholds import EXCESS
 from momentid.diagnosis.verdict import Verdict
 from momentid.core.processes import run_forked
+from momentid.diagnosis.added_mass.screening import Candidate
 from momentid.errors import ModelError, SimulationError
 from momentid.mechanisms.data_driven import TERMS
 from momentid.mechanisms.place import Place, Target
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["Discovery", "Found", "discover", "search", "found_terms", "challenge", "as_unexplained", "plot_discovered",
            "discovered_figure", "ACCEPTED_SHARE", "BEATS_LIBRARY", "TERM_EARNS", "SCALE_RANGE", "SCALE_REPLAYS",
@@ -105,13 +112,15 @@ class Discovery:
 
     @property
     def location(self) -> dict:
+        """The place as a record's location (``{"storey": 2}``, ...)."""
         return self.place.location
 
-    def draw(self, path) -> None:
+    def draw(self, path: str | os.PathLike) -> None:
         """``discovered.png`` at ``path``: :func:`plot_discovered`."""
         plot_discovered(self, path)
 
     def to_dict(self) -> dict:
+        """The discovery as ``report.json`` states it: place, force in words and terms, the replays' NRMSE."""
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
                 "physics": self.physics, "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
                 "replaces": self.replaces.to_dict() if self.replaces is not None else None}
@@ -136,7 +145,7 @@ def _places(d: int) -> list[Place]:
     return [Place(Target.STOREY, i) for i in range(1, d + 1)] + [Place(Target.FLOOR_TABLE, j) for j in range(2, d + 1)]
 
 
-def search(rows, noise_floor: np.ndarray, d: int) -> Found | None:
+def search(rows: Sequence[ResidualRow], noise_floor: np.ndarray, d: int) -> Found | None:
     """The force at the place where the library explains the held-out residual best.
 
     Parameters
@@ -280,8 +289,8 @@ def discover(model: LinearModel, residuals: EquationResiduals, refitter: Resimul
     return _open_search(model, residuals, refitter, before)
 
 
-def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Resimulator, named: Finding, entries,
-              before: float, confirmed=None) -> Discovery | None:
+def challenge(model: LinearModel, residuals: EquationResiduals, refitter: Resimulator, named: Finding,
+              entries: Sequence[Entry], before: float, confirmed: Candidate | None = None) -> Discovery | None:
     """The open search against the physics the library named: the discovered force when it beats it.
 
     A library mechanism can take in part of a force outside the library (a cubic stiffness the
@@ -394,7 +403,7 @@ def found_terms(found: Found, scale: float) -> list[dict]:
     return out
 
 
-def discovered_figure(discovery: Discovery):
+def discovered_figure(discovery: Discovery) -> Figure:
     """The residual's force at the place against ``x``, measured and discovered (a matplotlib figure)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -414,7 +423,7 @@ def discovered_figure(discovery: Discovery):
     return fig
 
 
-def plot_discovered(discovery: Discovery, path) -> None:
+def plot_discovered(discovery: Discovery, path: str | os.PathLike) -> None:
     """``discovered.png``: :func:`discovered_figure` as a PNG."""
     import matplotlib.pyplot as plt
 

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.core.analytic import modal_properties
 from momentid.core.series import Experiment, RunData
@@ -22,6 +23,7 @@ from momentid.diagnosis.added_mass.kinematic_check import noise_sigma
 from momentid.diagnosis.thresholds import BLOCK_S, EXCESS
 from momentid.errors import IdentificationError
 from momentid.estimation.identification import identify
+from momentid.estimation.identified import Identification
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
 from momentid.estimation.reconstruct import band_filter
@@ -81,6 +83,7 @@ class LinearModel:
 
     @property
     def storeys(self) -> int:
+        """Number of storeys ``d``."""
         return self.experiment.storeys
 
     @property
@@ -141,8 +144,9 @@ def band_signals(run: RunData, d: int, band: Prefilter) -> dict[str, np.ndarray]
     return s
 
 
-def floor_residual(result, signals: dict, added_mass) -> np.ndarray:
-    """``(M + dM) a + (C + mu dM) v + K q``, shape (n, d) (N)."""
+def floor_residual(result: Identification, signals: dict, added_mass: ArrayLike) -> np.ndarray:
+    """``(M + dM) a + (C + mu dM) v + K q``, shape (n, d) (N), from ``signals`` ``a``, ``v``, ``q`` (n, d) (SI)
+    and the run's added masses (d,) (kg)."""
     D = np.diag(added_mass)
     return (signals["a"] @ (result.M + D).T + signals["v"] @ (result.C + result.mu * D).T
             + signals["q"] @ result.K.T)
@@ -154,13 +158,13 @@ def blocks(n: int, fs: float) -> tuple[np.ndarray, np.ndarray]:
     return idx == 0, idx == 1
 
 
-def nominal_result(structure: Structure, like):
+def nominal_result(structure: Structure, like: Identification) -> Identification:
     """The nominal model in the shape of an identification result."""
     return replace(like, M=structure.mass_matrix(), C=structure.damping_matrix(), K=structure.stiffness_matrix(),
                    mu=structure.rayleigh_mu, kappa=structure.rayleigh_kappa, covariance=None)
 
 
-def fit_linear_model(experiment: Experiment, result=None) -> LinearModel:
+def fit_linear_model(experiment: Experiment, result: Identification | None = None) -> LinearModel:
     """Stage 1: identify the linear model from the training runs; choose the band.
 
     ``result``: the training runs' identification when it is already known (a compound diagnosis's
@@ -223,7 +227,7 @@ def equation_residuals(model: LinearModel) -> EquationResiduals:
 
 # ----------------------------------------------------------------------------- replays of the linear model
 
-def replay_outputs(result, run: RunData, zdd=None) -> dict[str, np.ndarray]:
+def replay_outputs(result: Identification, run: RunData, zdd: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Channels (``'a'``, ``'q'``, ``'v'``: (n, d)) of ``run`` replayed through the linear model,
     driven by ``zdd`` (n,) (default: the run's recorded table acceleration)."""
     dm = np.diag(run.added_mass)
@@ -231,7 +235,7 @@ def replay_outputs(result, run: RunData, zdd=None) -> dict[str, np.ndarray]:
     return outputs(linear, simulate_linear(linear, run["zdd"] if zdd is None else zdd))
 
 
-def replay_noise(result, run: RunData, d: int, band: Prefilter) -> dict[str, np.ndarray]:
+def replay_noise(result: Identification, run: RunData, d: int, band: Prefilter) -> dict[str, np.ndarray]:
     """RMS per channel group (``'a'``, ``'q'``: (d,)) that sensor noise alone leaves between a
     band-limited recording and a replay of the right model: the channel's own noise plus the
     table accelerometer's noise carried through the structure into the replay (which the

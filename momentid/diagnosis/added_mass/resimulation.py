@@ -15,10 +15,11 @@ stages by providing the same.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Sequence
 import json
 import math
 from dataclasses import dataclass, replace
-from typing import Protocol, runtime_checkable
+from typing import Any, Protocol, TYPE_CHECKING, runtime_checkable
 
 import numpy as np
 import scipy.optimize
@@ -30,9 +31,13 @@ from momentid.diagnosis.added_mass.residuals import LinearModel, band_signals, n
 from momentid.core.processes import run_forked, run_threaded
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
+from momentid.estimation.identified import Identification
 from momentid.estimation.reconstruct import Prefilter, band_filter
 from momentid.mechanisms.base import MechanismKind, Refit
 from momentid.mechanisms.place import Place
+
+if TYPE_CHECKING:
+    from momentid.estimation.scaled import ModalIdentification
 
 __all__ = ["Augmented", "ForceRefit", "Refitter", "Resimulator", "refit_eiv", "noise_ratios", "noise_carrier",
            "brent_opening", "side_by_side", "SEARCH_RANGE"]
@@ -90,7 +95,7 @@ def brent_opening(bounds: tuple[float, float], xatol: float, values: tuple[float
     return [_golden_step(a, x2, x1, xatol)]
 
 
-def side_by_side(job, tasks, mechanisms=()) -> list:
+def side_by_side(job: Callable[[Any], Any], tasks: Iterable[Any], mechanisms: Iterable[Mechanism] = ()) -> list:
     """``[job(task) for task in tasks]`` for jobs that replay models with ``mechanisms`` (the records of
     every task's model together), side by side on the machine's cores: on threads when those replays run
     no Python in MuJoCo's step (:func:`momentid.lab.native_forces.threadable`: ``mujoco.rollout``
@@ -150,7 +155,8 @@ def _force_signature(entry: Entry, run: RunData, signals: dict, d: int):
     return place.direction(d)[:, None], signal[:, None]
 
 
-def refit_eiv(entries, runs, result, band, f_top) -> ForceRefit | None:
+def refit_eiv(entries: Sequence[Entry], runs: Sequence[RunData], result: Identification, band: Prefilter,
+              f_top: float) -> ForceRefit | None:
     """Errors-in-variables fit of the linear model together with the mechanisms' forces.
 
     ``entries``: the :class:`~momentid.diagnosis.added_mass.augmented.Entry` of each force at a link
@@ -181,7 +187,7 @@ def refit_eiv(entries, runs, result, band, f_top) -> ForceRefit | None:
                       tuple({key: float(np.sqrt(fit.covariance[k, k]))} for key, k in zip(keys, i)))
 
 
-def noise_ratios(result, run: RunData, d: int, band: Prefilter) -> list[float]:
+def noise_ratios(result: Identification, run: RunData, d: int, band: Prefilter) -> list[float]:
     """Per recorded floor channel of ``run``: the RMS sensor noise alone leaves between it and a replay
     of the right model, over its own RMS (band-limited)."""
     out = []
@@ -202,20 +208,46 @@ class Resimulator(Protocol):
 
     linear_structure: Structure
 
-    def augment(self, kind: MechanismKind, place: Place, params: dict, std: dict) -> Augmented: ...
-    def score(self, augmented: Augmented) -> float: ...
-    def score_joint(self, structure: Structure, entries, mechanism_records) -> float: ...
-    def linear_score(self) -> float: ...
-    def noise_nrmse(self) -> float: ...
-    def misfit(self, structure: Structure, entries) -> float: ...
-    def better_of(self, structures, entries) -> Structure: ...
-    def resimulate(self, structure: Structure, entry: Entry, others=(), span=SEARCH_RANGE,
-                   grid: int = 0) -> tuple[dict, dict]: ...
-    def search(self, structure: Structure, entry: Entry, names: tuple[str, ...]) -> tuple[dict, dict]: ...
-    def refit_forces(self, entries) -> ForceRefit | None: ...
-    def identify_corrected(self, kind: MechanismKind, place: Place, params: dict): ...
-    def remember(self, augmented: Augmented, score: float) -> None: ...
-    def remember_refit(self, entries, refit: ForceRefit | None) -> None: ...
+    def augment(self, kind: MechanismKind, place: Place, params: dict, std: dict) -> Augmented:
+        """The model with ``kind`` added at ``place``, sized (:meth:`~momentid.mechanisms.base.MechanismKind.size`)."""
+
+    def score(self, augmented: Augmented) -> float:
+        """Mean NRMSE of the training runs replayed through ``augmented``'s model."""
+
+    def score_joint(self, structure: Structure, entries: Sequence[Entry],
+                    mechanism_records: Sequence[Mechanism]) -> float:
+        """:meth:`score` of a model with several mechanisms."""
+
+    def linear_score(self) -> float:
+        """:meth:`score` of the linear model alone."""
+
+    def noise_nrmse(self) -> float:
+        """The NRMSE the sensor noise alone leaves in :meth:`score`."""
+
+    def misfit(self, structure: Structure, entries: Sequence[Entry]) -> float:
+        """Normalised sum of squares of a training replay through the model with ``entries``."""
+
+    def better_of(self, structures: Sequence[Structure], entries: Sequence[Entry]) -> Structure:
+        """Of ``structures``, the one whose model with ``entries`` has the least :meth:`misfit`."""
+
+    def resimulate(self, structure: Structure, entry: Entry, others: Sequence[Entry] = (),
+                   span: tuple[float, float] = SEARCH_RANGE, grid: int = 0) -> tuple[dict, dict]:
+        """``entry``'s fitted coefficient searched by re-simulation: (parameters, standard errors)."""
+
+    def search(self, structure: Structure, entry: Entry, names: tuple[str, ...]) -> tuple[dict, dict]:
+        """``entry``'s parameters ``names`` searched together by re-simulation: (parameters, standard errors)."""
+
+    def refit_forces(self, entries: Sequence[Entry]) -> ForceRefit | None:
+        """The errors-in-variables refit of the linear model with these forces (None: the runs allow none)."""
+
+    def identify_corrected(self, kind: MechanismKind, place: Place, params: dict) -> Any:
+        """The linear identification of the training runs with the sensor fault undone."""
+
+    def remember(self, augmented: Augmented, score: float) -> None:
+        """Record an augmented model built elsewhere and its :meth:`score`."""
+
+    def remember_refit(self, entries: Sequence[Entry], refit: ForceRefit | None) -> None:
+        """Record a refit of the forces ``entries`` computed elsewhere."""
 
 
 def _stable(result) -> bool:
@@ -227,7 +259,7 @@ def _stable(result) -> bool:
     return bool(np.all(np.linalg.eigvals(A).real < 0))
 
 
-def noise_carrier(model: LinearModel):
+def noise_carrier(model: LinearModel) -> Identification:
     """The linear model that carries sensor noise into a replay (:func:`noise_ratios`): the identified
     one, or the lab's nominal one when a strong nonlinearity left the identified one unstable (it would
     carry the noise without bound; the nominal model carries it as the rig does)."""
@@ -281,7 +313,7 @@ class Refitter:
             key = self._corrected_key(kind, place, augmented.parameters)
             self._corrected.setdefault(key, augmented.corrected)
 
-    def remember_refit(self, entries, refit: ForceRefit | None) -> None:
+    def remember_refit(self, entries: Sequence[Entry], refit: ForceRefit | None) -> None:
         """Record the errors-in-variables refit of the forces ``entries`` computed elsewhere (the first
         one recorded for a set of kinds and places stays)."""
         self._refits.setdefault(self._refit_key(entries), refit)
@@ -294,7 +326,7 @@ class Refitter:
             return Augmented(None, None, self.linear_structure, params, std, ())
         return self._build(kind, place, params, std)
 
-    def refit_forces(self, entries) -> ForceRefit | None:
+    def refit_forces(self, entries: Sequence[Entry]) -> ForceRefit | None:
         """:func:`refit_eiv` of the training runs with the forces of ``entries`` (:class:`Entry` each),
         once per set of kinds and places (see the class docstring); each entry's fitted coefficient in
         the returned parameters, the entries' other parameters kept.  None when the runs do not allow it."""
@@ -308,7 +340,8 @@ class Refitter:
         return replace(out, parameters=tuple(dict(e.parameters, **{e.kind.fitted.name: p[e.kind.fitted.name]})
                                              for e, p in zip(entries, out.parameters)))
 
-    def identify_corrected(self, kind: MechanismKind, place: Place, params: dict):
+    def identify_corrected(self, kind: MechanismKind, place: Place, params: dict
+                           ) -> Identification | ModalIdentification:
         """The linear model identified from the training runs with the sensor fault ``kind`` at ``place``
         undone."""
         key = self._corrected_key(kind, place, params)
@@ -335,7 +368,7 @@ class Refitter:
         """One mechanism of an augmented model (:class:`~momentid.diagnosis.added_mass.augmented.Entry`)."""
         return Entry(kind, place, params)
 
-    def structure_of(self, result) -> Structure:
+    def structure_of(self, result: Identification) -> Structure:
         """An identification as the structure a replay is built on (the nominal one's heights and base)."""
         return identified_structure(result, self.nominal)
 
@@ -345,7 +378,7 @@ class Refitter:
         """The training run with the most added mass (the strongest test of a force)."""
         return max(self.model.train.runs, key=lambda r: float(np.sum(r.added_mass)))
 
-    def misfit(self, structure: Structure, entries) -> float:
+    def misfit(self, structure: Structure, entries: Sequence[Entry]) -> float:
         """Normalised sum of squares of the search run replayed through the model with ``entries``
         (:class:`Entry` each): sum over channels and samples of ((measured - simulated) / RMS(measured))^2."""
         run = self._search_run()
@@ -360,21 +393,21 @@ class Refitter:
             q += float(np.sum(((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
         return q
 
-    def misfits(self, trials) -> list[float]:
+    def misfits(self, trials: Iterable[tuple[Structure, Sequence[Entry]]]) -> list[float]:
         """:meth:`misfit` of each ``(structure, entries)`` of ``trials``, side by side when there are several
         (:func:`side_by_side`; independent replays: the same values as one after the other)."""
         trials = list(trials)
         return side_by_side(lambda trial: self.misfit(*trial), trials,
                             [m for _, entries in trials for m in records(entries)])
 
-    def better_of(self, structures, entries) -> Structure:
+    def better_of(self, structures: Sequence[Structure], entries: Sequence[Entry]) -> Structure:
         """The one of ``structures`` whose model with ``entries`` has the least :meth:`misfit` (the
         first of equals)."""
         q = self.misfits([(b, entries) for b in structures])
         return structures[min(range(len(q)), key=q.__getitem__)]
 
-    def resimulate(self, structure: Structure, entry: Entry, others=(), span=SEARCH_RANGE,
-                   grid: int = 0) -> tuple[dict, dict]:
+    def resimulate(self, structure: Structure, entry: Entry, others: Sequence[Entry] = (),
+                   span: tuple[float, float] = SEARCH_RANGE, grid: int = 0) -> tuple[dict, dict]:
         """Output-error refinement of a nonlinear force's size by re-simulation.
 
         The regression estimates it from measured drift velocities and drifts, whose noise
@@ -501,7 +534,8 @@ class Refitter:
         """Mean NRMSE of the training runs replayed through an augmented model (band-limited)."""
         return self.score_joint(augmented.structure, augmented.entries, augmented.records)
 
-    def score_joint(self, structure: Structure, entries, mechanism_records) -> float:
+    def score_joint(self, structure: Structure, entries: Sequence[Entry], mechanism_records: Sequence[Mechanism]
+                    ) -> float:
         """:meth:`score` of a model with several mechanisms (:class:`Entry` each, applied as
         :func:`~momentid.diagnosis.added_mass.augmented.joint_replay` does) and their ``mechanism_records``."""
         key = self._score_key(structure, entries, mechanism_records)

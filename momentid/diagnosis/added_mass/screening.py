@@ -13,6 +13,7 @@ target (:meth:`~momentid.mechanisms.base.MechanismKind.places`), links first.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Sequence
 import enum
 import math
 from dataclasses import dataclass
@@ -21,12 +22,14 @@ import numpy as np
 import scipy.optimize
 
 from momentid import mechanisms
+from momentid.core.series import RunData
 from momentid.diagnosis.added_mass.kinematic_check import ROUND_OFF
 from momentid.diagnosis.added_mass.residuals import (ResidualRow, blocks, replay_noise, replay_outputs)
-from momentid.estimation.reconstruct import band_filter
+from momentid.estimation.reconstruct import Prefilter, band_filter
 from momentid.diagnosis.thresholds import EXCESS, NOTHING_TO_EXPLAIN
 from momentid.errors import IdentificationError
 from momentid.estimation.identification import damping_models
+from momentid.estimation.identified import Identification
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.mechanisms.base import EquationSignals, MechanismKind, Refit, Screened, drifts
 from momentid.mechanisms.place import Place, Target
@@ -77,10 +80,12 @@ class Candidate:
 
     @property
     def mechanism(self) -> str:
+        """The kind's name."""
         return self.kind.name
 
     @property
     def location(self) -> dict:
+        """The place as a record's location (``{"storey": 2}``, ...)."""
         return self.place.location
 
     def same_as(self, other: Candidate) -> bool:
@@ -105,6 +110,7 @@ class ReplayResiduals:
 
     @property
     def mismatch(self) -> bool:
+        """Whether some channel's replay residual exceeds ``EXCESS`` times its noise."""
         return max(self.excess.values(), default=0) > EXCESS
 
 
@@ -210,15 +216,16 @@ def signature_columns(kind: MechanismKind, signals: EquationSignals, place: Plac
     return taken
 
 
-def screening_order(kinds, storeys: int) -> list[tuple[MechanismKind, Place]]:
+def screening_order(kinds: Iterable[MechanismKind], storeys: int) -> list[tuple[MechanismKind, Place]]:
     """Every (kind, place) of ``kinds`` in a rig of ``storeys`` storeys, in the order screening visits
     them: storeys first, then the other places, each floor from the lowest up, the kinds in turn."""
     pairs = [(kind, place) for kind in kinds for place in kind.places(storeys)]
     return sorted(pairs, key=lambda kp: (kp[1].target is not Target.STOREY, kp[1].level))
 
 
-def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
-                    domain: Domain, found=(), kinds=None) -> list[Candidate]:
+def screen_equation(result: Identification, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
+                    domain: Domain, found: Sequence[tuple[MechanismKind, Place]] = (),
+                    kinds: Iterable[MechanismKind] | None = None) -> list[Candidate]:
     """Candidates whose signature lives in the floor-force residual ``rows`` of the model ``result``.
 
     ``found``: (kind, place) of mechanisms already found; their columns are fitted with every
@@ -240,8 +247,8 @@ def screen_equation(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarr
             for s in kind.screen_equation(signals, fit, place) if (kind, s.place) not in done]
 
 
-def remaining_excess(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
-                     found) -> np.ndarray:
+def remaining_excess(result: Identification, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float,
+                     found: Sequence[tuple[MechanismKind, Place]]) -> np.ndarray:
     """Per floor (d,): RMS of the residual ``rows`` on the held-out blocks once the columns of the
     mechanisms ``found`` ((kind, place) each) are fitted on the others, over the noise-only RMS.
 
@@ -262,8 +269,9 @@ def remaining_excess(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndar
     return np.sqrt(np.mean(left ** 2, axis=0)) / noise_floor
 
 
-def linear_springs_left(result, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, f_top: float, found,
-                        candidates) -> list[Candidate]:
+def linear_springs_left(result: Identification, rows: tuple[ResidualRow, ...], noise_floor: np.ndarray,
+                        f_top: float, found: Sequence[tuple[MechanismKind, Place]],
+                        candidates: Iterable[Candidate]) -> list[Candidate]:
     """Candidates of ``linear_spring`` kinds (P-Delta) fitted to the nominal model's residual ``rows``,
     scored by the share of the excess the mechanisms ``found`` leave that their columns (with their
     confounds: a spring and a dashpot at the storey) remove on held-out blocks.
@@ -291,8 +299,9 @@ def storey_shear(x: np.ndarray) -> np.ndarray:
     return np.cumsum(x[..., ::-1], axis=-1)[..., ::-1]
 
 
-def screen_storeys(result, rows: tuple[ResidualRow, ...], f_top: float, domain: Domain, found=(),
-                   kinds=None) -> list[Candidate]:
+def screen_storeys(result: Identification, rows: tuple[ResidualRow, ...], f_top: float, domain: Domain,
+                   found: Sequence[tuple[MechanismKind, Place]] = (),
+                   kinds: Iterable[MechanismKind] | None = None) -> list[Candidate]:
     """Storey candidates scored on their own storey's shear residual, at the storeys where the
     mechanisms ``found`` leave an excess there (above ``EXCESS`` of the noise's shear).
 
@@ -339,7 +348,7 @@ def screen_storeys(result, rows: tuple[ResidualRow, ...], f_top: float, domain: 
     return out
 
 
-def screen_replay(result, runs, d: int, band) -> ReplayResiduals:
+def screen_replay(result: Identification, runs: Sequence[RunData], d: int, band: Prefilter) -> ReplayResiduals:
     """Table-accelerometer faults: visible only when the model is driven by the recorded base."""
     fs = runs[0].sample_rate
     target, sims, rates, steps, noise = [], [], [], [], []
@@ -387,7 +396,8 @@ def _attachment_replay(kind, result, run, d, j, f_a, zeta):
     return outputs(linear, simulate_linear(linear, run["zdd"]))["a"][:, :d]
 
 
-def screen_attachment(result, runs, d: int, band, f_top: float) -> list[Candidate]:
+def screen_attachment(result: Identification, runs: Sequence[RunData], d: int, band: Prefilter, f_top: float
+                      ) -> list[Candidate]:
     """A flexibly attached added mass, tested by replay (sensor noise does not enter the signature)."""
     fs = runs[0].sample_rate
     out = []
@@ -478,7 +488,7 @@ def _refine_oscillator(rss, f0: float, zeta0: float, n_eff: float):
     return {"frequency": float(f), "damping_ratio": float(zeta)}, std, float(q0)
 
 
-def damping_pattern(result, d: int) -> DampingPattern | None:
+def damping_pattern(result: Identification, d: int) -> DampingPattern | None:
     """A linear dashpot hides in the identified C: look for the pattern of one, of any kind the
     library sizes by it (``Refit.DAMPING_PATTERN``) at any of its places (``C = a M + b K + c P``, ``P``
     the kind's term there, :meth:`~momentid.mechanisms.base.MechanismKind.damping_pattern`).  The place
@@ -496,7 +506,7 @@ def damping_pattern(result, d: int) -> DampingPattern | None:
                                  "with_damper_misfit": mis, "coefficients": [float(x) for x in coef]})
 
 
-def pattern_fit(result, pattern: np.ndarray) -> tuple[float, np.ndarray]:
+def pattern_fit(result: Identification, pattern: np.ndarray) -> tuple[float, np.ndarray]:
     """The identified C as ``a M + b K + c P`` (``pattern`` P: (d, d), a dashpot's term), least squares
     over the upper triangle.  Returns (relative misfit, (a, b, c))."""
     iu = np.triu_indices(result.storeys)

@@ -83,6 +83,7 @@ class Tried:
     nrmse: float
 
     def to_dict(self) -> dict:
+        """The candidate tried and its training NRMSE."""
         return {"mechanism": self.candidate.mechanism, "location": self.candidate.location, "nrmse": self.nrmse}
 
 
@@ -98,6 +99,7 @@ class Partial:
     augmented: Augmented
 
     def to_dict(self) -> dict:
+        """The candidate that explains part of the mismatch, with its parameters."""
         return {"mechanism": self.candidate.mechanism, "location": self.candidate.location,
                 "parameters": self.parameters}
 
@@ -124,6 +126,7 @@ class Step:
         return self.explained >= EARNS
 
     def to_dict(self) -> dict:
+        """The step of a compound diagnosis as ``report.json`` states it (NRMSE as fractions)."""
         out = {"mechanism": self.mechanism, "location": self.location,
                "screening_explained": self.screening_explained, "training_nrmse_before": self.before,
                "training_nrmse_with": self.after, "training_nrmse_noise": self.noise, "explained": self.explained,
@@ -149,6 +152,7 @@ class OutsideLibrary:
     explained: float
 
     def to_dict(self) -> dict:
+        """The named physics and the discovered force's training NRMSE, against the noise's."""
         return {"named": [self.mechanism, self.location], "training_nrmse_named": self.named,
                 "training_nrmse_discovered": self.discovered, "training_nrmse_noise": self.noise,
                 "explained": self.explained}
@@ -194,6 +198,7 @@ class Selection:
     outside_library: OutsideLibrary | None = None
 
     def to_dict(self) -> dict:
+        """The selection as ``report.json``'s ``selection`` (NRMSE as fractions; absent parts None)."""
         out = {"training_nrmse_linear": self.linear,
                "training_nrmse": [t.to_dict() for t in self.tried] if self.tried else None,
                "training_nrmse_augmented": self.augmented, "training_nrmse_noise": self.noise,

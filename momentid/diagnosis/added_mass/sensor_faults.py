@@ -45,6 +45,7 @@ class SensorCheck:
 
     @property
     def consistent(self) -> bool:
+        """Whether the kinematic check ran and found every channel consistent."""
         return self.check is not None and self.check.consistent
 
     def rules_out(self, candidate: Candidate) -> bool:

@@ -15,6 +15,7 @@ from momentid.diagnosis.added_mass.resimulation import Refitter
 from momentid.diagnosis.added_mass.residuals import EquationResiduals, LinearModel, equation_residuals, fit_linear_model
 from momentid.diagnosis.added_mass.selection import Finding, Screening, choose, screen, select
 from momentid.diagnosis.added_mass.sensor_faults import SensorCheck, check_sensors
+from momentid.estimation.identified import Identification
 
 __all__ = ["Stages", "run_stages"]
 
@@ -32,7 +33,7 @@ class Stages:
     found: Finding
 
 
-def run_stages(experiment: Experiment, *, replay: bool, result=None) -> Stages:
+def run_stages(experiment: Experiment, *, replay: bool, result: Identification | None = None) -> Stages:
     """Stages 1-6 on ``experiment`` (runs with added mass); ``replay``: size and accept by re-simulation;
     ``result``: the training runs' identification, when known (see :func:`fit_linear_model`)."""
     model = fit_linear_model(experiment, result)

@@ -57,18 +57,25 @@ class AddedMassEvidence(Evidence):
     localisation: Localisation
 
     def to_dict(self) -> dict:
+        """The added-mass path's entries of ``report.json``: excesses, sensor check, selection, localisation,
+        candidates.
+        """
         return {"excess_equation": self.excess_equation, "excess_replay": self.excess_replay,
                 "parameter_pattern": self.parameter_pattern, "sensor_check": self.sensor_check,
                 "selection": self.selection.to_dict(), "localisation": self.localisation.to_dict(),
                 "candidates": [c.to_dict() for c in self.candidates], "path": "added mass"}
 
     def words(self, diag: Diagnosis) -> str:
+        """The report's text: :func:`summary` of ``diag``."""
         return summary(diag)
 
     def plot_replay(self, diag: Diagnosis, path: Path) -> None:
+        """``replay.png``: :func:`momentid.diagnosis.figures.plot_replay`."""
         figures.plot_replay(diag, path)
 
     def figures(self, diag: Diagnosis, folder: Path) -> list[str]:
+        """``locate.png``: where the mismatch is
+        (:func:`~momentid.diagnosis.added_mass.locate.plot_localisation`)."""
         from momentid.diagnosis.added_mass.locate import plot_localisation
         plot_localisation(self.localisation.to_dict(), folder / "locate.png")
         return ["locate.png"]

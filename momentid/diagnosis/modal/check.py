@@ -20,9 +20,11 @@ the samples after the run's quiet lead-in (where the table moves).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from momentid.core.series import Experiment, RunData
 from momentid.errors import IdentificationError
@@ -91,7 +93,7 @@ def _stated_noise(experiment: Experiment):
     return dict(experiment.statement.noise) if experiment.statement is not None else None
 
 
-def fit_runs(experiment: Experiment, names) -> RunsFit:
+def fit_runs(experiment: Experiment, names: Sequence[str]) -> RunsFit:
     """Fit the modal model of :mod:`momentid.estimation.modal` to the runs ``names`` together.
 
     Parameters
@@ -126,7 +128,7 @@ def fit_runs(experiment: Experiment, names) -> RunsFit:
                    scale=fit.scale, noise=fit.noise_sources)
 
 
-def pooled(fits) -> RunsFit:
+def pooled(fits: Sequence[RunsFit]) -> RunsFit:
     """One amplitude-independent linear model from per-run fits.
 
     Each mode's frequency and damping ratio: the inverse-variance weighted mean over the runs (the
@@ -159,7 +161,8 @@ def active_start(run: RunData) -> int:
     return quiet_lead_in(run)
 
 
-def replay(omega, zeta, residues, gain, offset, zdd: np.ndarray, dt: float) -> np.ndarray:
+def replay(omega: ArrayLike, zeta: ArrayLike, residues: ArrayLike, gain: ArrayLike, offset: ArrayLike, zdd: np.ndarray,
+           dt: float) -> np.ndarray:
     """Floor accelerations of the modal model driven by a measured table acceleration.
 
     ``a_j = z'' + sum_i R_ij eta_i''`` with ``eta_i'' + 2 zeta_i w_i eta_i' + w_i^2 eta_i = -z''``
@@ -203,8 +206,12 @@ def channel_nrmse(measured: np.ndarray, model: np.ndarray) -> np.ndarray:
     return np.sqrt(np.sum((measured - model) ** 2, axis=0) / np.sum(centred ** 2, axis=0))
 
 
-def noise_nrmse(fit_omega, fit_zeta, residues, gain, run: RunData, experiment: Experiment) -> float:
+def noise_nrmse(fit_omega: ArrayLike, fit_zeta: ArrayLike, residues: ArrayLike, gain: ArrayLike, run: RunData,
+                experiment: Experiment) -> float:
     """NRMSE that sensor noise alone leaves on ``run``'s floor channels after its lead-in.
+
+    ``fit_omega`` (rad/s), ``fit_zeta``, ``residues`` (modes, d) and ``gain`` (d,): the model of
+    :func:`replay`.
 
     Expected power of the floor sensors' noise (``sigma_aj^2``) plus the table sensor's white noise
     pushed through the model (``sigma_zdd^2 sum_k h_jk^2``, ``h`` the model's impulse response over
@@ -258,13 +265,16 @@ class AmplitudeModel:
         x = [float(r.amplitude[0]) for r in self.runs]
         return min(x), max(x)
 
-    def predict(self, amplitude: float):
+    def predict(self, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
         """Angular frequencies (rad/s) and damping ratios at response amplitude ``amplitude`` (m/s^2)."""
         f = self.frequency_coef[:, 0] + self.frequency_coef[:, 1] * amplitude
         z = self.damping_coef[:, 0] + self.damping_coef[:, 1] * amplitude
         return 2 * np.pi * f, z
 
     def to_dict(self) -> dict:
+        """Each training run's amplitude (m/s^2), frequencies (Hz) and damping ratios, and the slopes with their
+        standard errors.
+        """
         return {"runs": [r.runs[0] for r in self.runs],
                 "amplitude_m_s2": [float(r.amplitude[0]) for r in self.runs],
                 "frequency_hz": [r.frequency.tolist() for r in self.runs],
@@ -275,7 +285,7 @@ class AmplitudeModel:
                 "dzeta_dA_std": self.damping_slope_std.tolist()}
 
 
-def amplitude_model(fits) -> AmplitudeModel:
+def amplitude_model(fits: Sequence[RunsFit]) -> AmplitudeModel:
     """Regress each mode's frequency and damping ratio on the response amplitude over per-run fits.
 
     Parameters

@@ -28,8 +28,11 @@ switch), and the held-out run is replayed with it.  Steps:
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 import math
 from dataclasses import dataclass, field
+import os
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.linalg
@@ -40,6 +43,9 @@ from momentid.diagnosis.function_library import DELTA_FRACTIONS, SIGN_SCALE, Col
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.lab.sensors import gain_and_delay
 from momentid.mechanisms.data_driven import TERMS, term_signal
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = ["ModalDiscovery", "discover_modal", "plot_modal_discovered", "modal_discovered_figure",
            "HIGH_PASS_OVER_MODE_1", "MIN_GAIN", "MAX_TERMS", "MIN_HELD_OUT_GAIN", "ITERATIONS", "DISSIPATIVE",
@@ -117,11 +123,14 @@ class ModalDiscovery:
     checks: dict
     plot: dict = field(repr=False)
 
-    def draw(self, path) -> None:
+    def draw(self, path: str | os.PathLike) -> None:
         """``discovered.png`` at ``path``: :func:`plot_modal_discovered`."""
         plot_modal_discovered(self, path)
 
     def to_dict(self) -> dict:
+        """The discovery as ``report.json`` states it: the mode and sensor, the law in words and terms, the NRMSE,
+        the checks.
+        """
         return {"location": self.location, "description": self.description, "terms": list(self.terms),
                 "nrmse_before": self.nrmse_before, "nrmse_after": self.nrmse_after,
                 "beats_linear": self.beats_linear, **self.checks}
@@ -483,7 +492,7 @@ def _search_mode(experiment: Experiment, linear: mc.RunsFit, train, m: int, dt: 
     return data, cols, (chosen, errors), errors[law] / errors["linear"] if chosen else 1.0, loro
 
 
-def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str, location: dict,
+def discover_modal(experiment: Experiment, linear: mc.RunsFit, train: Sequence[str], held: str, location: dict,
                    before: float) -> ModalDiscovery | None:
     """The open search: the mode whose law lowers the equation error most, checked on ``held`` (see the
     module docstring).
@@ -548,7 +557,7 @@ def discover_modal(experiment: Experiment, linear: mc.RunsFit, train, held: str,
               "law": sum(th * col.signal[pick] for col, th in zip(law, theta))})
 
 
-def modal_discovered_figure(discovery: ModalDiscovery):
+def modal_discovered_figure(discovery: ModalDiscovery) -> Figure:
     """The mode's restoring force per unit modal mass beyond the law's linear part, against its
     displacement, from the data (equation form) and from the discovered law's terms (a matplotlib figure)."""
     import matplotlib
@@ -569,7 +578,7 @@ def modal_discovered_figure(discovery: ModalDiscovery):
     return fig
 
 
-def plot_modal_discovered(discovery: ModalDiscovery, path) -> None:
+def plot_modal_discovered(discovery: ModalDiscovery, path: str | os.PathLike) -> None:
     """``discovered.png``: :func:`modal_discovered_figure` as a PNG."""
     import matplotlib.pyplot as plt
 

@@ -52,13 +52,16 @@ class ModalEvidence(Evidence):
     searched: bool = False
 
     def to_dict(self) -> dict:
+        """The modal path's entries of ``report.json``: channel NRMSE, training, candidate, findings."""
         return {"channel_nrmse": self.channel_nrmse, "training": self.training, "candidate": self.candidate,
                 "findings": list(self.findings), "path": "modal (no added mass)"}
 
     def words(self, diag: Diagnosis) -> str:
+        """The report's text: :func:`summary` of ``diag``."""
         return summary(diag)
 
     def plot_replay(self, diag: Diagnosis, path: Path) -> None:
+        """``replay.png``: :func:`momentid.diagnosis.figures.plot_replay`."""
         figures.plot_replay(diag, path)
 
 

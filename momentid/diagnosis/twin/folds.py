@@ -27,7 +27,9 @@ drifting frequency into damping is then the same on both sides).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -36,7 +38,7 @@ from momentid.diagnosis.modal import check as mc
 from momentid.twin import fit as twin_fit
 from momentid.errors import IdentificationError
 from momentid.estimation.noise import estimate_noise
-from momentid.estimation.scaled import amplitude_trend as trend_of, identify_modal
+from momentid.estimation.scaled import AmplitudeTrend, amplitude_trend as trend_of, identify_modal
 from momentid.mechanisms import registry
 
 __all__ = ["Fold", "Candidate", "candidates", "select", "inner_hold_out", "hold_out", "linear_start",
@@ -77,6 +79,9 @@ class Fold:
     selection: dict = None
 
     def to_dict(self) -> dict:
+        """The fold as ``report.json`` states it: held-out and training trials, the NRMSE of each twin and their
+        ratios, the fits.
+        """
         return {"held_out": self.held_out, "training": list(self.training),
                 "nrmse_linear_refit": self.nrmse_linear_refit, "nrmse_after": self.nrmse_after,
                 "nrmse_linear_own": self.nrmse_linear_own, "noise_nrmse": self.noise_nrmse,
@@ -89,7 +94,7 @@ class Fold:
                 "inner_held_out": self.inner_held_out, "selection": self.selection or {}}
 
 
-def linear_start(experiment: Experiment, names) -> twin_fit.FittedRig:
+def linear_start(experiment: Experiment, names: str | Sequence[str]) -> twin_fit.FittedRig:
     """The linear twin of the modal identification of run(s) ``names`` (a name or a list) with the lab's
     stated masses.
 
@@ -116,11 +121,13 @@ class Candidate:
 
     @property
     def name(self) -> str:
+        """The candidate's name in reports (``"linear"``, ``"joint_friction_shared"``, ...)."""
         if self.kind is None:
             return "linear"
         return self.kind + ("_shared" if self.shared else "")
 
     def words(self, storeys: int) -> str:
+        """The candidate in words for a rig of ``storeys`` storeys."""
         if self.kind is None:
             return "no physics (the linear twin)"
         where = "storey 1" if storeys == 1 else ("every storey, one law shared" if self.shared
@@ -138,7 +145,7 @@ def candidates(storeys: int) -> tuple:
     return tuple(out)
 
 
-def inner_hold_out(trials: dict, training) -> str:
+def inner_hold_out(trials: dict[str, twin_fit.Trial], training: Sequence[str]) -> str:
     """The training trial the selection holds out: the last whose RMS floor response lies inside the other
     training trials' (an interpolation, as the outer hold-out's default), else the last."""
     level = {n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))) for n in training}
@@ -156,9 +163,10 @@ def _augmented_start(linear: twin_fit.FittedRig, candidate: Candidate, starts, t
     return [twin_fit.friction_start(linear, storeys, loss, slip, chi) for loss, slip, chi in starts]
 
 
-def select(trials: dict, training, *, substeps: int | None = None, max_nfev: int = twin_fit.MAX_NFEV,
-           augmented_nfev: int = AUGMENTED_NFEV, starts=FRICTION_STARTS, start: twin_fit.FittedRig,
-           pool=None) -> tuple:
+def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, substeps: int | None = None,
+           max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
+           starts: Sequence[tuple[float, float, float]] = FRICTION_STARTS, start: twin_fit.FittedRig,
+           pool: Callable[[Callable[[Any], Any], list], list] | None = None) -> tuple:
     """The physics the training trials alone choose: every :func:`candidates` fitted on the training trials
     but :func:`inner_hold_out`, replayed on that one; the lowest NRMSE wins (the linear twin when no
     physics predicts it better).
@@ -192,9 +200,9 @@ def select(trials: dict, training, *, substeps: int | None = None, max_nfev: int
     return best, inner, table
 
 
-def hold_out(experiment: Experiment, held: str, training, *, substeps: int | None = None,
+def hold_out(experiment: Experiment, held: str, training: Sequence[str], *, substeps: int | None = None,
              max_nfev: int = twin_fit.MAX_NFEV, augmented_nfev: int = AUGMENTED_NFEV,
-             starts=FRICTION_STARTS, start: twin_fit.FittedRig | None = None,
+             starts: Sequence[tuple[float, float, float]] = FRICTION_STARTS, start: twin_fit.FittedRig | None = None,
              candidate: Candidate | None = None) -> Fold:
     """Choose the physics on ``training`` (:func:`select`), fit the linear and the chosen twin on all of
     ``training`` and check them on ``held`` (module docstring).
@@ -275,8 +283,8 @@ def _simulated_experiment(experiment: Experiment, model: twin_fit.FittedRig, nam
     return replace(experiment, runs=tuple(runs))
 
 
-def amplitude_trend(experiment: Experiment, model: twin_fit.FittedRig, names,
-                    substeps: int | None = None):
+def amplitude_trend(experiment: Experiment, model: twin_fit.FittedRig, names: Sequence[str],
+                    substeps: int | None = None) -> AmplitudeTrend:
     """Mode 1 against the response amplitude, as the twin ``model`` predicts it on the runs ``names``.
 
     Returns

@@ -40,6 +40,7 @@ places are their ``mechanisms`` entries'.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 import time
 
 import numpy as np
@@ -54,7 +55,7 @@ from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, LINEAR_ROOM, remove
 from momentid.diagnosis.twin.words import TwinEvidence
 from momentid.diagnosis.verdict import Named, Verdict
 from momentid.errors import IdentificationError, MomentidError
-from momentid.estimation.scaled import identify_per_run, weighted_line
+from momentid.estimation.scaled import ModalIdentification, identify_per_run, weighted_line
 from momentid.lab import resim
 from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
@@ -71,7 +72,7 @@ def applies(experiment: Experiment) -> bool:
     return st is not None and st.masses is not None and len(experiment.runs) >= MIN_TRAINING + 1
 
 
-def default_hold_out(per_run, state: StateCheck) -> str:
+def default_hold_out(per_run: Sequence[ModalIdentification], state: StateCheck) -> str:
     """The last trial that belongs whose amplitude lies inside the other such trials' (module docstring)."""
     inside = [r for r in per_run if state.belongs(r.runs[0])]
     if not inside:

@@ -60,17 +60,21 @@ class TwinEvidence(Evidence):
     per_run: tuple = field(default=(), repr=False, compare=False)
 
     def to_dict(self) -> dict:
+        """The twin path's entries of ``report.json``: trials, rig state, exclusions, channel NRMSE, fits, seconds."""
         return {"training": list(self.training), "reference": self.reference, "rig_state": self.state.to_dict(),
                 "excluded": list(self.excluded), "channel_nrmse": self.channel_nrmse, "fits": self.fits,
                 "seconds": self.seconds, "path": "twin (no added mass)"}
 
     def words(self, diag: Diagnosis) -> str:
+        """The report's text: :func:`summary` of ``diag``."""
         return summary(diag)
 
     def plot_replay(self, diag: Diagnosis, path: Path) -> None:
+        """``replay.png``: the held-out trial recorded and as the twins replay it."""
         plot_replay(diag, path)
 
     def models(self) -> dict[str, str]:
+        """``twin.xml``: the linear twin's MJCF."""
         return {"twin.xml": self.twin_xml}
 
 

@@ -6,7 +6,7 @@ import enum
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -36,7 +36,7 @@ GZIP_CHUNK = 4 * 2 ** 20
 #: Peak memory of reading a text file, per byte of text: the text, its lines and the parsed table.
 TEXT_MEMORY_FACTOR = 4.0
 #: Longest run of consecutive missing samples a reader interpolates over (the same limit as
-#: identification's repair, :data:`momentid.lab.sensors.MAX_REPAIR_GAP`): 5 samples are 42 ms at
+#: identification's repair, :data:`momentid.io.run_checks.MAX_REPAIR_GAP`): 5 samples are 42 ms at
 #: 120 Hz, a tenth of the shortest period of a bench-top model's modes; across a longer gap a straight
 #: line would invent the response.
 MAX_REPAIR_GAP = 5
@@ -202,8 +202,8 @@ def _runs_of(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def repair_missing(values: np.ndarray, rows, names, where: str, what: str = "samples"
-                   ) -> tuple[np.ndarray, slice, list[str]]:
+def repair_missing(values: np.ndarray, rows: Callable[[int, int], str], names: Sequence[str], where: str,
+                   what: str = "samples") -> tuple[np.ndarray, slice, list[str]]:
     """Interpolate short runs of missing (``nan``) samples; refuse long ones.
 
     Parameters

@@ -13,6 +13,7 @@ scanned line by line to name the first bad row and column.
 from __future__ import annotations
 
 import io
+import os
 import warnings
 from pathlib import Path
 
@@ -156,7 +157,7 @@ def _uniform_time(path: Path, t: np.ndarray) -> np.ndarray:
     return grid
 
 
-def read_csv_run(path, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+def read_csv_run(path: str | os.PathLike, storeys: int) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
     """Read and check one run's CSV file.
 
     Parameters

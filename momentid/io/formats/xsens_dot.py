@@ -34,6 +34,7 @@ lines, a last row cut short and a row that repeats an earlier row exactly.
 from __future__ import annotations
 
 import io
+import os
 import warnings
 from pathlib import Path
 
@@ -316,7 +317,7 @@ def _units(path: Path, acc: np.ndarray) -> tuple[np.ndarray, list[str]]:
                           f"(or the same in g): not accelerations of a sensor under gravity, or an unknown unit")
 
 
-def read_xsens_dot(path) -> SensorRecord:
+def read_xsens_dot(path: str | os.PathLike) -> SensorRecord:
     """Read one Xsens DOT CSV export (plain or gzip-compressed).
 
     Parameters

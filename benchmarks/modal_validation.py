@@ -366,6 +366,7 @@ def evaluate(case: Case) -> dict:
                frequency_sigmas=f_sig.tolist(),
                damping_error=z_err.tolist(), damping_sigmas=z_sig.tolist(),
                extra=[m.frequency for m in extra], warnings=list(r.warnings), capped=capped,
+               refused=[int(i) + 1 for i in np.flatnonzero(~np.asarray(r.damping_is_answer, bool))],
                ok=bool(np.all(frequency_ok) and np.all(damping_ok) and not capped))
     return row
 
@@ -385,12 +386,14 @@ def _table(rows) -> str:
         i = int(np.argmax(np.abs(row["frequency_error"])))
         k = int(np.argmax(np.abs(row["damping_error"])))
         extra = " ".join(f"{f:.3f}" for f in row["extra"]) or "-"
+        # a damping refused on these linear rigs is a miss: its estimate is judged all the same
+        refused = f" (mode {', '.join(map(str, row['refused']))} refused)" if row.get("refused") else ""
         lines.append(f"| {c['index']} | {c['storeys']} | {c['sample_rate']:g} | {c['excitation']} | "
                      f"{c['duration']:g} | {app} | {100 * row['frequency_error'][i]:+.3f} "
                      f"[{row['frequency_sigmas'][i]:.1f}] | "
                      f"{100 * row['damping_error'][k]:+.1f} "
-                     f"[{row['damping_sigmas'][k]:.1f}] | {zt} | {extra} | {'yes' if row['capped'] else 'no'} | "
-                     f"{'yes' if row['ok'] else 'NO'} |")
+                     f"[{row['damping_sigmas'][k]:.1f}]{refused} | {zt} | {extra} | "
+                     f"{'yes' if row['capped'] else 'no'} | {'yes' if row['ok'] else 'NO'} |")
     return "\n".join(lines)
 
 

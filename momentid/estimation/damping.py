@@ -41,11 +41,13 @@ from momentid.errors import MomentidError
 from momentid.estimation import ringdown
 from momentid.estimation.eiv import spectra
 from momentid.estimation.modal import refine
+from momentid.estimation.periodic import periodic_fundamental, periodic_refusal
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
 
-__all__ = ["Source", "ModeDamping", "resolve_damping", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES"]
+__all__ = ["Source", "ModeDamping", "resolve_damping", "forced_line", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES",
+           "FORCED_LINE"]
 
 #: A linear fit whose residual stays within this factor of the noise level explains the record: the
 #: structure is linear at its amplitudes and the fit's damping is the answer (a rig that is not, 2-50x
@@ -87,6 +89,7 @@ class Source:
     LINEAR = "linear fit"
     FREE_DECAY = "free decays"
     FORCED = "forced response"
+    POOLED = "free decays and forced windows"
 
 
 @dataclass(frozen=True)
@@ -282,7 +285,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         if weak:
             out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=weak))
             continue
-        periodic = _periodic_refusal(runs, float(freq[i]))
+        periodic = periodic_refusal(runs, float(freq[i]))
         # a record forced only at a periodic table's harmonics beside the mode (a constant amplitude: no
         # trend can show; the harmonics read the detuning, not the damping) does not prove the rig linear
         linear = base_linear and not periodic
@@ -297,10 +300,11 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                        max(said.evidence, abs(_frequency_trend(windows[k])[1])) if said is not None else 0.0)
         changes = evidence > needed
         if decay is not None and (changes or not linear):
-            out.append(replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
-                                       decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
-                                       decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
-                               evidence=decay.evidence))
+            answer = replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
+                                     decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
+                                     decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
+                             evidence=decay.evidence)
+            out.append(_pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
         elif exact or (linear and evidence <= HINT_SIGMAS):
             # a linear structure at these amplitudes: the linear fit's damping with its own error
             out.append(_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), Source.LINEAR, False,
@@ -315,6 +319,36 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         else:
             out.append(said)
     return tuple(out)
+
+
+#: Two estimates of one damping at small amplitude are pooled only when they differ by at most this many
+#: standard errors of their difference (beyond, one of them is biased and their mean is no answer).
+POOL_SIGMAS = 2.0
+
+
+def _pooled(decay: ModeDamping, windows, equivalent: float, f0: float, cycles: float) -> ModeDamping:
+    """The free decays' answer, or, when it is too uncertain on its own (its standard error beyond
+    :data:`MAX_RELATIVE_STD` of it: a single short decay whose extrapolation to small amplitude is wide),
+    its inverse-variance mean with the forced windows' value at zero amplitude, when that is positive,
+    rests on enough windows and agrees within :data:`POOL_SIGMAS`.  The two come from different stretches
+    of the record (the decays ring where the windows' forcing is weak), so their errors are independent."""
+    z1, s1 = decay.damping_ratio, decay.damping_ratio_std
+    if not decay.refusal or not (z1 > 0 and decay.dof >= MIN_DOF and np.isfinite(s1) and s1 > 0):
+        return decay
+    said = _windows_say(windows, equivalent, f0, cycles, trend=True)
+    z2, s2 = said.damping_ratio, said.damping_ratio_std
+    if not (said.amplitude_dependent and z2 > 0 and said.dof >= MIN_DOF and np.isfinite(s2) and s2 > 0):
+        return decay
+    if abs(z1 - z2) > POOL_SIGMAS * float(np.hypot(s1, s2)):
+        return decay
+    w1, w2 = 1 / s1 ** 2, 1 / s2 ** 2
+    z, sd = (w1 * z1 + w2 * z2) / (w1 + w2), float(np.sqrt(1 / (w1 + w2)))
+    lo = min(decay.amplitude_range[0], said.amplitude_range[0])
+    hi = max(decay.amplitude_range[1], said.amplitude_range[1])
+    answer = _answer(z, sd, decay.dof + said.dof, Source.POOLED, True, decay.slope, decay.exponent, decay.frequency,
+                     decay.frequency_slope, (lo, hi), equivalent, decay.cycles + said.cycles)
+    return replace(answer, evidence=decay.evidence,
+                   refusal=answer.refusal and f"{answer.refusal} (and by the free decays alone: {decay.refusal})")
 
 
 def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
@@ -509,84 +543,44 @@ def _refusal(z: float, sd: float, dof: int, f0: float, source: str) -> str:
     return ""
 
 
-#: A table motion is periodic when lines at the multiples of one fundamental (within
-#: :data:`LINE_BINS` bins) hold this share of its power (a sine test beside its servo's noise) ...
-PERIODIC_SHARE = 0.5
-#: ... and it forces a mode only at its harmonics when they hold this share of the table's power within
-#: :data:`NEAR_LINES` (relative) of the mode.
-LOCAL_LINE_SHARE = 0.5
-NEAR_LINES = 0.2
-#: Combs whose shares differ by less than this hold the same lines (a denser one adds only noise bins).
-COMB_SLACK = 0.05
-#: ... and the power per bin on the lines is this many times the power per bin off them: a dense comb (a
-#: low fundamental in a short record) covers most bins, and any broadband motion fills it (a broadband
-#: table gives about 1, a sine test 10-100).
-CONCENTRATION = 4.0
-LINE_BINS = 2
-#: Fundamentals (Hz) tried: the table's strongest lines and their halves and thirds, down to this.
-MIN_FUNDAMENTAL = 0.3
+#: The words that mark a mode's frequency as not an answer (:func:`forced_line`).
+FORCED_LINE = "its frequency is NOT AN ANSWER"
 
 
-def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
-    """The fundamental (Hz) of a periodic table motion (a sine test and its harmonics), or None.
+def forced_line(runs: Sequence[RunData], frequency: float, damping: ModeDamping | None = None) -> str:
+    """Why a mode's fitted frequency may be a periodic table's forced line, not the mode ('' when not).
 
-    The table's power (Hann window) is periodic when lines at the multiples of one frequency hold
-    :data:`PERIODIC_SHARE` of it, at :data:`CONCENTRATION` times the power per bin off them; the
-    fundamentals tried are the five strongest lines and their halves
-    and thirds.
+    A table that moves periodically (a sine test and its harmonics, :func:`periodic_fundamental`) forces
+    the structure only at multiples of its fundamental.  A fitted frequency closer to one of them than
+    the record resolves (one DFT bin, ``1 / T``) is the line's as much as the mode's: the data cannot
+    tell them apart.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        The runs the mode was fitted on (``zdd``, m/s^2).
+    frequency : float
+        The mode's fitted frequency (Hz).
+    damping : ModeDamping, optional
+        The mode's damping answer: when it comes from free decays, their frequency is quoted.
+
+    Returns
+    -------
+    str
+        The warning in words (containing :data:`FORCED_LINE`), or ``''``.
     """
-    u = np.asarray(table, float) - np.mean(table)
-    n = u.size
-    power = np.abs(np.fft.rfft(u * np.hanning(n))) ** 2
-    freq = np.fft.rfftfreq(n, 1.0 / sample_rate)
-    keep = freq > MIN_FUNDAMENTAL
-    total = float(np.sum(power[keep]))
-    if total <= 0:
-        return None
-    df = freq[1]
-    found = []
-    for k in np.argsort(power * keep)[::-1][:5]:
-        for m in (1, 2, 3):
-            f0 = freq[k] / m
-            if f0 < MIN_FUNDAMENTAL:
-                continue
-            lines = np.zeros(freq.size, bool)
-            for h in np.arange(1, int(freq[-1] / f0) + 1):
-                lines |= np.abs(freq - h * f0) <= LINE_BINS * df
-            share = float(np.sum(power[lines & keep])) / total
-            covered = float(np.count_nonzero(lines & keep)) / float(np.count_nonzero(keep))
-            if share >= PERIODIC_SHARE and share * (1 - covered) >= CONCENTRATION * covered * (1 - share):
-                found.append((share, float(f0)))
-    if not found:
-        return None
-    best = max(share for share, _ in found)
-    # the sparsest comb that holds as much of the power (a denser one holds its lines and more noise)
-    return max(f0 for share, f0 in found if share >= best - COMB_SLACK)
-
-
-def _periodic_refusal(runs, f_mode: float) -> str:
-    """Why a mode forced only by a periodic table cannot give its damping ('' when the table is not periodic,
-    or its broadband motion beside the mode is as strong as its harmonics there)."""
     for run in runs:
         f0 = periodic_fundamental(run["zdd"], run.sample_rate)
         if f0 is None:
             continue
-        k = int(np.floor(f_mode / f0))
-        n = run.n_samples
-        power = np.abs(np.fft.rfft((run["zdd"] - np.mean(run["zdd"])) * np.hanning(n))) ** 2
-        freq = np.fft.rfftfreq(n, 1.0 / run.sample_rate)
-        df = freq[1]
-        near = np.abs(freq / f_mode - 1) <= NEAR_LINES
-        lines = np.abs(freq / f0 - np.round(freq / f0)) * f0 <= LINE_BINS * df
-        if float(np.sum(power[near & lines])) < LOCAL_LINE_SHARE * float(np.sum(power[near])):
-            continue                       # beside the mode the table's broadband motion drives it too
-        at = [float(np.max(power[np.abs(freq - h * f0) <= LINE_BINS * df])) for h in (k, k + 1)
-              if h >= 1 and h * f0 < freq[-1] - LINE_BINS * df]
-        between = (freq > k * f0 + 3 * df) & (freq < (k + 1) * f0 - 3 * df)
-        level = float(np.median(power[between])) if between.any() else 0.0
-        ratio = min(at) / max(level, 1e-300) if at else np.inf
-        return (f"the table's motion in run {run.name!r} is periodic at {f0:.4g} Hz and never leaves the mode at "
-                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} "
-                f"Hz), and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
-                f"the detuning, not the damping")
+        k = max(int(round(frequency / f0)), 1)
+        gap, resolution = abs(frequency - k * f0), run.sample_rate / run.n_samples
+        if gap > resolution:
+            continue
+        ring = ""
+        if damping is not None and damping.source in (Source.FREE_DECAY, Source.POOLED) and damping.cycles > 0:
+            ring = f"; where it rings free, it rings at {damping.frequency:.4g} Hz at small amplitude"
+        return (f"mode at {frequency:.4g} Hz: {FORCED_LINE}: it lies {gap:.2g} Hz from harmonic {k} "
+                f"({k * f0:.4g} Hz) of run {run.name!r}'s periodic table ({f0:.4g} Hz), closer than the record "
+                f"resolves (1/T = {resolution:.2g} Hz), so the fit cannot tell the mode from the forced line{ring}")
     return ""

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
+import scipy.signal
 import scipy.stats
 
 from momentid.core.series import RunData
@@ -195,22 +196,53 @@ def local_polynomial_noise(run: RunData) -> dict | None:
     if centres.size < MIN_BINS:
         return None
     r = np.arange(-w, w + 1)
+    rows = centres[:, None] + r[None, :]                   # (bins, 2w+1): each centre's neighbourhood
+    A = np.empty((centres.size, r.size, 4), complex)
+    A[:, :, 0], A[:, :, 1], A[:, :, 2], A[:, :, 3] = U[rows], r * U[rows], 1.0, r
+    Ainv = np.linalg.pinv(A)                               # least squares per bin, all bins at once
+    dof = 2 * (r.size - 4)                                 # real degrees of freedom of each bin's scatter
     out = {}
     for c in floors:
-        Y = np.fft.rfft(run[c]) / np.sqrt(n)
-        level = np.empty(centres.size)
-        for k, centre in enumerate(centres):
-            A = np.column_stack([U[centre + r], r * U[centre + r], np.ones(r.size), r])
-            b = Y[centre + r]
-            coef = np.linalg.lstsq(A, b, rcond=None)[0]
-            res = b - A @ coef
-            # the scatter holds the floor's noise and the table's through the response G: with sensors
-            # of one kind, sigma^2 (1 + |G|^2)
-            level[k] = float(np.sum(np.abs(res) ** 2)) / (r.size - A.shape[1]) / (1 + abs(coef[0]) ** 2)
-        dof = 2 * (r.size - 4)                     # real degrees of freedom of each bin's scatter
+        b = (np.fft.rfft(run[c]) / np.sqrt(n))[rows]
+        coef = np.einsum("bkj,bj->bk", Ainv, b)
+        res = b - np.einsum("bjk,bk->bj", A, coef)
+        # the scatter holds the floor's noise and the table's through the response G: with sensors
+        # of one kind, sigma^2 (1 + |G|^2)
+        level = np.sum(np.abs(res) ** 2, axis=1) / (r.size - A.shape[2]) / (1 + np.abs(coef[:, 0]) ** 2)
         out[c] = float(np.sqrt(np.median(level) / (scipy.stats.chi2.median(dof) / dof)))
     out["zdd"] = float(np.median([out[c] for c in floors]))
     return out
+
+
+#: A lead-in is rest only when no floor's level there exceeds this multiple of the record's own scatter
+#: (:func:`local_polynomial_noise`, an upper bound on the noise: it also holds a rig's distortion; its
+#: median over hundreds of bins scatters by a few %) ...
+REST_BOUND = 1.5
+#: ... and the table and each floor share less than this coherence there (median over frequency): sensor
+#: noise is independent from sensor to sensor, motion is not (a lull between two bursts of shaking, where a
+#: window of a record may start, is motion; a short rest's median coherence is ~0.1).
+REST_COHERENCE = 0.5
+
+
+def _not_rest(run: RunData, n_quiet: int, level: dict) -> str:
+    """Why the record's first ``n_quiet`` samples, quiet as they look, hold motion and not sensor noise
+    ('' when they are rest): a floor's level above the record's own scatter, or table and floor coherent."""
+    floors = [c for c in run.channels if c != "zdd" and c[:1] == "a"]
+    if not run.has("zdd") or not floors:
+        return ""
+    bound = local_polynomial_noise(run)
+    for c in floors:
+        if bound is not None and level[c] > REST_BOUND * bound[c]:
+            return (f" (its first {n_quiet / run.sample_rate:.3g} s are quiet but not at rest: {c} reads "
+                    f"{level[c]:.3g} there, {level[c] / bound[c]:.2g}x the record's own scatter)")
+        x = run.values[:n_quiet]
+        C = scipy.signal.coherence(x[:, run.channels.index("zdd")], x[:, run.channels.index(c)],
+                                   nperseg=max(min(64, n_quiet // 4), 8))[1]
+        share = float(np.median(C[1:]))
+        if share > REST_COHERENCE:
+            return (f" (its first {n_quiet / run.sample_rate:.3g} s are quiet but not at rest: the table and {c} "
+                    f"move together there, coherence {share:.2f})")
+    return ""
 
 
 def estimate_noise(run: RunData, *, f_max: float | None = None,
@@ -244,6 +276,7 @@ def estimate_noise(run: RunData, *, f_max: float | None = None,
             return NoiseEstimate({c: float(s) for c, s in sigma.items()}, NoiseSource.STATED,
                                  "stated by the lab")
     fs = run.sample_rate
+    not_rest = ""
     if noise_floor is None:
         n_quiet = quiet_lead_in(run)
         if n_quiet:
@@ -251,9 +284,10 @@ def estimate_noise(run: RunData, *, f_max: float | None = None,
             freq = np.fft.rfftfreq(n_quiet, 1.0 / fs)
             # Skip the lowest bins: drift and the mean removed there are not white noise.
             band = freq > 2.0 * fs / n_quiet
-            level = band_level(X, band)
-            return NoiseEstimate(dict(zip(run.channels, map(float, level))), NoiseSource.QUIET_LEAD_IN,
-                                 f"quiet lead-in 0-{n_quiet / fs:.3g} s")
+            level = dict(zip(run.channels, map(float, band_level(X, band))))
+            not_rest = _not_rest(run, n_quiet, level)
+            if not not_rest:
+                return NoiseEstimate(level, NoiseSource.QUIET_LEAD_IN, f"quiet lead-in 0-{n_quiet / fs:.3g} s")
     low, high = noise_floor or ((HIGH_BAND_FACTOR * f_max, HIGH_BAND_TOP * fs / 2) if f_max
                                 else (0.25 * fs, 0.45 * fs))
     sigma = high_band_noise(run, low, high)
@@ -261,9 +295,9 @@ def estimate_noise(run: RunData, *, f_max: float | None = None,
         scatter = local_polynomial_noise(run)
         if scatter is not None:
             return NoiseEstimate(scatter, NoiseSource.LOCAL_POLYNOMIAL,
-                                 "no quiet lead-in, no band above the structure: the floors' scatter between "
-                                 "neighbouring frequencies (local polynomial; with any distortion of a rig that is not "
-                                 "linear), the table taken as noisy as the floors")
+                                 f"no quiet lead-in{not_rest}, no band above the structure: the floors' scatter "
+                                 "between neighbouring frequencies (local polynomial; with any distortion of a rig "
+                                 "that is not linear), the table taken as noisy as the floors")
     if sigma is None:
         band = (f"fewer than {MIN_BINS} DFT bins between {low:.3g} and {high:.3g} Hz" if low < high else
                 f"no band above the structure's response ({low:.3g} Hz, {HIGH_BAND_FACTOR:g} x its highest "

@@ -34,7 +34,7 @@ from momentid.errors import IdentificationError
 from momentid.estimation.modal import ModalModel
 from momentid.estimation.modal_checks import ExtraMode, check, extra_modes
 from momentid.estimation.modal_select import ModeSelection, select_modes
-from momentid.estimation.damping import ModeDamping, resolve_damping
+from momentid.estimation.damping import ModeDamping, forced_line, resolve_damping
 from momentid.estimation.noise import estimate_noise, quiet_lead_in
 from momentid.estimation.peaks import response_amplitude
 
@@ -354,6 +354,7 @@ def identify_modal(experiment: Experiment, runs: Sequence[str] | None = None) ->
     equivalent, equivalent_std = values["damping_ratio"].copy(), std["damping_ratio"].copy()
     damping = _small_amplitude_damping(selected, selection, stated, values["frequency"], warnings, notes)
     answer = answer & np.array([m.is_answer for m in damping])
+    warnings += [w for w in (forced_line(selected, float(f), m) for f, m in zip(values["frequency"], damping)) if w]
     if selection.extra:
         notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more "
                      f"than the {d} storeys: the extra ones are fitted with the storey modes and reported apart")

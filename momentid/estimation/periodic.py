@@ -1,0 +1,112 @@
+"""A periodic table: a sine test and its harmonics force a mode only at the lines of one fundamental.
+
+:func:`periodic_fundamental` finds that fundamental in the table's spectrum; :func:`periodic_refusal`
+says when a mode is forced only at those lines (its damping then cannot be read from the forced
+response: the lines read the detuning, not the damping).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from momentid.core.series import RunData
+
+__all__ = ["periodic_fundamental", "periodic_refusal", "PERIODIC_SHARE", "LOCAL_LINE_SHARE", "NEAR_LINES",
+           "CONCENTRATION", "LINE_BINS", "MIN_FUNDAMENTAL"]
+
+#: A table motion is periodic when lines at the multiples of one fundamental (within
+#: :data:`LINE_BINS` bins) hold this share of its power (a sine test beside its servo's noise) ...
+PERIODIC_SHARE = 0.5
+#: ... and it forces a mode only at its harmonics when they hold this share of the table's power within
+#: :data:`NEAR_LINES` (relative) of the mode.
+LOCAL_LINE_SHARE = 0.5
+NEAR_LINES = 0.2
+#: Combs whose shares differ by less than this hold the same lines (a denser one adds only noise bins).
+COMB_SLACK = 0.05
+#: ... and the power per bin on the lines is this many times the power per bin off them: a dense comb (a
+#: low fundamental in a short record) covers most bins, and any broadband motion fills it (a broadband
+#: table gives about 1, a sine test 10-100).
+CONCENTRATION = 4.0
+LINE_BINS = 2
+#: Fundamentals (Hz) tried: the table's strongest lines and their halves and thirds, down to this.
+MIN_FUNDAMENTAL = 0.3
+
+
+def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
+    """The fundamental (Hz) of a periodic table motion (a sine test and its harmonics), or None.
+
+    The table's power (Hann window) is periodic when lines at the multiples of one frequency hold
+    :data:`PERIODIC_SHARE` of it, at :data:`CONCENTRATION` times the power per bin off them; the
+    fundamentals tried are the five strongest lines and their halves
+    and thirds.
+    """
+    u = np.asarray(table, float) - np.mean(table)
+    n = u.size
+    power = np.abs(np.fft.rfft(u * np.hanning(n))) ** 2
+    freq = np.fft.rfftfreq(n, 1.0 / sample_rate)
+    keep = freq > MIN_FUNDAMENTAL
+    total = float(np.sum(power[keep]))
+    if total <= 0:
+        return None
+    df = freq[1]
+    found = []
+    for k in np.argsort(power * keep)[::-1][:5]:
+        for m in (1, 2, 3):
+            f0 = freq[k] / m
+            if f0 < MIN_FUNDAMENTAL:
+                continue
+            lines = np.zeros(freq.size, bool)
+            for h in np.arange(1, int(freq[-1] / f0) + 1):
+                lines |= np.abs(freq - h * f0) <= LINE_BINS * df
+            share = float(np.sum(power[lines & keep])) / total
+            covered = float(np.count_nonzero(lines & keep)) / float(np.count_nonzero(keep))
+            if share >= PERIODIC_SHARE and share * (1 - covered) >= CONCENTRATION * covered * (1 - share):
+                found.append((share, float(f0)))
+    if not found:
+        return None
+    best = max(share for share, _ in found)
+    # the sparsest comb that holds as much of the power (a denser one holds its lines and more noise)
+    return max(f0 for share, f0 in found if share >= best - COMB_SLACK)
+
+
+def periodic_refusal(runs: Sequence[RunData], f_mode: float) -> str:
+    """Why a mode forced only by a periodic table cannot give its damping.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        The runs the mode was fitted on (``zdd``, m/s^2).
+    f_mode : float
+        The mode's frequency (Hz).
+
+    Returns
+    -------
+    str
+        The refusal in words, or ``''`` when no run's table is periodic, or its broadband motion beside
+        the mode is as strong as its harmonics there.
+    """
+    for run in runs:
+        f0 = periodic_fundamental(run["zdd"], run.sample_rate)
+        if f0 is None:
+            continue
+        k = int(np.floor(f_mode / f0))
+        n = run.n_samples
+        power = np.abs(np.fft.rfft((run["zdd"] - np.mean(run["zdd"])) * np.hanning(n))) ** 2
+        freq = np.fft.rfftfreq(n, 1.0 / run.sample_rate)
+        df = freq[1]
+        near = np.abs(freq / f_mode - 1) <= NEAR_LINES
+        lines = np.abs(freq / f0 - np.round(freq / f0)) * f0 <= LINE_BINS * df
+        if float(np.sum(power[near & lines])) < LOCAL_LINE_SHARE * float(np.sum(power[near])):
+            continue                       # beside the mode the table's broadband motion drives it too
+        at = [float(np.max(power[np.abs(freq - h * f0) <= LINE_BINS * df])) for h in (k, k + 1)
+              if h >= 1 and h * f0 < freq[-1] - LINE_BINS * df]
+        between = (freq > k * f0 + 3 * df) & (freq < (k + 1) * f0 - 3 * df)
+        level = float(np.median(power[between])) if between.any() else 0.0
+        ratio = min(at) / max(level, 1e-300) if at else np.inf
+        return (f"the table's motion in run {run.name!r} is periodic at {f0:.4g} Hz and never leaves the mode at "
+                f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} "
+                f"Hz), and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
+                f"the detuning, not the damping")
+    return ""

@@ -165,7 +165,7 @@ def test_a_frequency_at_a_periodic_tables_line_is_not_an_answer():
     """A 2 Hz table rich in harmonics forces a 22 Hz mode at 20, 22 and 24 Hz: a fitted 22.01 Hz lies closer
     to the 22 Hz line than 20 s resolve (0.05 Hz) and is flagged; 22.3 Hz is not, and neither is any
     frequency under a broadband table."""
-    from momentid.estimation.damping import FORCED_LINE, forced_line
+    from momentid.estimation.periodic import FORCED_LINE, forced_line
 
     t = np.arange(int(20 * FS)) / FS
     rng = np.random.default_rng(0)

@@ -40,14 +40,14 @@ from momentid.core.series import RunData
 from momentid.errors import MomentidError
 from momentid.estimation import ringdown
 from momentid.estimation.eiv import spectra
+from momentid.estimation.noise import quietest_level
 from momentid.estimation.modal import refine
-from momentid.estimation.periodic import periodic_fundamental, periodic_refusal
+from momentid.estimation.periodic import periodic_refusal
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
 
-__all__ = ["Source", "ModeDamping", "resolve_damping", "forced_line", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES",
-           "FORCED_LINE"]
+__all__ = ["Source", "ModeDamping", "resolve_damping", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES"]
 
 #: A linear fit whose residual stays within this factor of the noise level explains the record: the
 #: structure is linear at its amplitudes and the fit's damping is the answer (a rig that is not, 2-50x
@@ -67,6 +67,11 @@ HINT_SIGMAS = 3.0
 #: A damping ratio whose standard error exceeds this share of itself is not an answer (its 95 % interval
 #: then reaches zero: the data do not tell the damping from none).
 MAX_RELATIVE_STD = 0.5
+#: A constant damping read from free decays is the damping at small amplitude only when they fall by at
+#: least this factor with no sign of a trend: a shorter fall cannot tell a constant damping from one that
+#: grows with amplitude as a joint's micro-slip makes it (both shipped rigs damp 2-3x more at 2-4 m/s^2
+#: than near 0.2 m/s^2, and a decay from 4.3 to 2.5 m/s^2 shows no trend of its own).
+MIN_CONSTANT_SPAN = 3.0
 #: Fewest degrees of freedom (independent stretches less the parameters) of an answer's error.
 MIN_DOF = 2
 #: Windows of the forced-response estimate hold this many cycles of mode 1 ...
@@ -251,8 +256,8 @@ def _band_noise(sigma: dict, j: int, band, sample_rate: float) -> float:
     return float(np.hypot(sigma["zdd"], sigma[f"a{j + 1}"]) * np.sqrt(2 * (band[1] - band[0]) / sample_rate))
 
 
-def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma: Sequence[dict]
-                    ) -> tuple[ModeDamping, ...]:
+def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma: Sequence[dict],
+                    scatter: bool = False) -> tuple[ModeDamping, ...]:
     """Each storey mode's damping at small amplitude, with an honest error, or its refusal.
 
     Per mode, in this order: the free decays when they show a damping that changes with amplitude;
@@ -267,6 +272,10 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         The linear modal fit (:func:`momentid.estimation.modal_select.select_modes`).
     sigma : sequence of dict
         Per run, the noise standard deviation (m/s^2) of every channel (``zdd``, ``a1``, ...).
+    scatter : bool
+        Some run's noise levels were read from the data's own scatter
+        (:func:`~momentid.estimation.noise.local_polynomial_noise`): they hold any distortion of a rig that
+        is not linear, so a linear fit that explains the record to them proves nothing.
 
     Returns
     -------
@@ -279,6 +288,14 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
     seconds = sum(run.n_samples / run.sample_rate for run in runs)
     windows = None if exact else _forced(runs, selection, sigma, list(selection.storey))
+    decays = [None if exact else _free_decays(runs, selection, sigma, i, scatter) for i in selection.storey]
+    saids = [None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+             for k, i in enumerate(selection.storey)]
+    # with the noise read from the data's own scatter (it holds the rig's distortion) a linear fit that
+    # explains the record proves nothing (on windows of the shipped rigs it answered 1-3 % for modes damped
+    # 0.07-0.2 %); a rig that changes with amplitude in any mode gives no mode's damping at small amplitude
+    # from windows without a trend of their own
+    rig_changes = _rig_changes(decays, saids, windows) if scatter else ""
     out = []
     for k, i in enumerate(selection.storey):
         weak = "" if exact else weak_refusal(runs, selection, sigma, i)
@@ -288,9 +305,8 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         periodic = periodic_refusal(runs, float(freq[i]))
         # a record forced only at a periodic table's harmonics beside the mode (a constant amplitude: no
         # trend can show; the harmonics read the detuning, not the damping) does not prove the rig linear
-        linear = base_linear and not periodic
-        decay = None if exact else _free_decays(runs, selection, sigma, i)
-        said = None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+        linear = (exact or (base_linear and not scatter)) and not periodic
+        decay, said = decays[k], saids[k]
         # a record the linear fit explains must show a strong amplitude dependence (of the damping, or of
         # the frequency: a joint that slips softens too) before it is believed
         needed = STRONG_SIGMAS if linear else ringdown.SLOPE_SIGMAS
@@ -304,6 +320,13 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                                      decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
                                      decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
                              evidence=decay.evidence)
+            if not answer.refusal and not decay.amplitude_dependent and decay.span < MIN_CONSTANT_SPAN:
+                lo, hi = decay.amplitude_range
+                answer = replace(answer, refusal=(
+                    f"the free decays fall only {decay.span:.2g}x (at {lo:.2g}-{hi:.2g} m/s^2) and show no trend: "
+                    f"too short a fall to tell a constant damping ({100 * decay.zeta0:.3g} % there) from one that "
+                    f"grows with amplitude, so the damping at small amplitude is not read (at least "
+                    f"{MIN_CONSTANT_SPAN:g}x is needed)"))
             out.append(_pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
         elif exact or (linear and evidence <= HINT_SIGMAS):
             # a linear structure at these amplitudes: the linear fit's damping with its own error
@@ -316,9 +339,32 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
             # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
             # amplitude, with the error of that extrapolation
             out.append(_windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i], trend=True))
+        elif rig_changes and not said.amplitude_dependent and not said.refusal:
+            lo, hi = said.amplitude_range
+            out.append(replace(said, refusal=(
+                f"{rig_changes}, and this mode's windows ({lo:.2g}-{hi:.2g} m/s^2) show no trend of their own: their "
+                f"damping ({100 * said.damping_ratio:.3g} %) is the damping at those amplitudes, not at small "
+                f"amplitude")))
         else:
             out.append(said)
     return tuple(out)
+
+
+def _rig_changes(decays, saids, windows) -> str:
+    """How the record shows the rig changing with amplitude in some mode ('' when none does): a free decay's
+    damping trend or a frequency moving across the windows, beyond :data:`STRONG_SIGMAS` standard errors
+    (the strength that makes a record the linear fit explains believed amplitude-dependent), or a frequency
+    that moves by more than its half-power width (:func:`_drift_refusal`)."""
+    for k, (decay, said) in enumerate(zip(decays, saids)):
+        if decay is not None and decay.dof >= MIN_DOF and decay.evidence > STRONG_SIGMAS:
+            return f"the rig's joints change with amplitude (mode {k + 1}'s free decays, {decay.evidence:.2g} sigma)"
+        t = abs(_frequency_trend(windows[k])[1]) if windows is not None else 0.0
+        if said is not None and t > STRONG_SIGMAS:
+            return f"the rig changes with amplitude (mode {k + 1}'s frequency moves with it, {t:.2g} sigma)"
+        drift = _drift_refusal(windows[k], said.equivalent) if said is not None else ""
+        if drift:
+            return f"the rig changes with amplitude (mode {k + 1}: {drift.split(', and it never')[0]})"
+    return ""
 
 
 #: Two estimates of one damping at small amplitude are pooled only when they differ by at most this many
@@ -333,8 +379,8 @@ def _pooled(decay: ModeDamping, windows, equivalent: float, f0: float, cycles: f
     rests on enough windows and agrees within :data:`POOL_SIGMAS`.  The two come from different stretches
     of the record (the decays ring where the windows' forcing is weak), so their errors are independent."""
     z1, s1 = decay.damping_ratio, decay.damping_ratio_std
-    if not decay.refusal or not (z1 > 0 and decay.dof >= MIN_DOF and np.isfinite(s1) and s1 > 0):
-        return decay
+    if not (z1 > 0 and decay.dof >= MIN_DOF and np.isfinite(s1) and s1 > MAX_RELATIVE_STD * z1):
+        return decay                               # an answer, or refused for a reason pooling cannot mend
     said = _windows_say(windows, equivalent, f0, cycles, trend=True)
     z2, s2 = said.damping_ratio, said.damping_ratio_std
     if not (said.amplitude_dependent and z2 > 0 and said.dof >= MIN_DOF and np.isfinite(s2) and s2 > 0):
@@ -413,8 +459,11 @@ def weak_refusal(runs: Sequence[RunData], selection: ModeSelection, sigma: Seque
             f"at least {MIN_SIGNAL_TO_NOISE:g}x is needed to read a damping)")
 
 
-def _free_decays(runs, selection, sigma, i: int):
-    """:class:`~momentid.estimation.ringdown.DecayFit` of mode ``i``'s free decays, or None (too few)."""
+def _free_decays(runs, selection, sigma, i: int, scatter: bool = False):
+    """:class:`~momentid.estimation.ringdown.DecayFit` of mode ``i``'s free decays, or None (too few).
+    ``scatter``: the noise levels are the data's own scatter, an upper bound that holds the rig's distortion;
+    the table's netted from its motion is then at most its level in its quietest second (netting more would
+    take real forcing for noise, and a forced stretch for a free one)."""
     model, theta = selection.model, selection.fit.theta
     freq, zeta, R = model.omega(theta) / (2 * np.pi), model.zeta(theta), model.residues(theta)
     j = int(np.argmax(np.abs(R[i])))
@@ -426,7 +475,8 @@ def _free_decays(runs, selection, sigma, i: int):
         band = ringdown.band_for(freq[i], [freq[k] for k in selection.storey], fs)
         corr = int(round(ringdown.correlation_time(band, freq[i]) * fs))
         rings += ringdown.ring_downs(run.name, run["zdd"], run["zdd"] - floor, fs, freq[i], zeta[i], R[i, j], band,
-                                     sigma[r]["zdd"], float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"])))
+                                     min(sigma[r]["zdd"], quietest_level(run, "zdd")) if scatter else sigma[r]["zdd"],
+                                     float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"])))
     if not rings or sum(rg.cycles for rg in rings) < ringdown.MIN_CYCLES:
         return None
     return ringdown.fit_decay(rings, corr)
@@ -540,47 +590,4 @@ def _refusal(z: float, sd: float, dof: int, f0: float, source: str) -> str:
     if sd > MAX_RELATIVE_STD * z:
         return (f"not determined by the {source}: {100 * z:.3g} +- {100 * sd:.2g} %, the standard error more than "
                 f"{MAX_RELATIVE_STD:.0%} of the ratio")
-    return ""
-
-
-#: The words that mark a mode's frequency as not an answer (:func:`forced_line`).
-FORCED_LINE = "its frequency is NOT AN ANSWER"
-
-
-def forced_line(runs: Sequence[RunData], frequency: float, damping: ModeDamping | None = None) -> str:
-    """Why a mode's fitted frequency may be a periodic table's forced line, not the mode ('' when not).
-
-    A table that moves periodically (a sine test and its harmonics, :func:`periodic_fundamental`) forces
-    the structure only at multiples of its fundamental.  A fitted frequency closer to one of them than
-    the record resolves (one DFT bin, ``1 / T``) is the line's as much as the mode's: the data cannot
-    tell them apart.
-
-    Parameters
-    ----------
-    runs : sequence of RunData
-        The runs the mode was fitted on (``zdd``, m/s^2).
-    frequency : float
-        The mode's fitted frequency (Hz).
-    damping : ModeDamping, optional
-        The mode's damping answer: when it comes from free decays, their frequency is quoted.
-
-    Returns
-    -------
-    str
-        The warning in words (containing :data:`FORCED_LINE`), or ``''``.
-    """
-    for run in runs:
-        f0 = periodic_fundamental(run["zdd"], run.sample_rate)
-        if f0 is None:
-            continue
-        k = max(int(round(frequency / f0)), 1)
-        gap, resolution = abs(frequency - k * f0), run.sample_rate / run.n_samples
-        if gap > resolution:
-            continue
-        ring = ""
-        if damping is not None and damping.source in (Source.FREE_DECAY, Source.POOLED) and damping.cycles > 0:
-            ring = f"; where it rings free, it rings at {damping.frequency:.4g} Hz at small amplitude"
-        return (f"mode at {frequency:.4g} Hz: {FORCED_LINE}: it lies {gap:.2g} Hz from harmonic {k} "
-                f"({k * f0:.4g} Hz) of run {run.name!r}'s periodic table ({f0:.4g} Hz), closer than the record "
-                f"resolves (1/T = {resolution:.2g} Hz), so the fit cannot tell the mode from the forced line{ring}")
     return ""

@@ -50,6 +50,7 @@ from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 
 __all__ = ["NoiseSource", "NoiseEstimate", "estimate_noise", "band_level", "windowed_dft", "quiet_lead_in",
+           "quietest_level",
            "local_polynomial_noise",
            "high_band_noise", "HIGH_BAND_FACTOR"]
 
@@ -139,6 +140,35 @@ def windowed_dft(values: np.ndarray) -> np.ndarray:
     n = values.shape[0]
     w = np.hanning(n)
     return np.fft.rfft(values * w[:, None], axis=0) / np.sqrt(np.sum(w ** 2))
+
+
+def quietest_level(run: RunData, channel: str, seconds: float = 1.0) -> float:
+    """The noise level one channel cannot exceed: its level (:func:`band_level`) in its quietest stretch.
+
+    Sensor noise is there all the time, so no stretch of the record reads less; where the channel
+    moves least (a table between bursts, or at rest after the shaking) the level is nearly noise only.
+
+    Parameters
+    ----------
+    run : RunData
+    channel : str
+        The channel's name (``"zdd"``, ...).
+    seconds : float
+        Length (s) of the stretches compared.
+
+    Returns
+    -------
+    float
+        The lowest level (the channel's SI unit) over consecutive stretches; ``inf`` when the record is
+        shorter than one stretch.
+    """
+    n = int(seconds * run.sample_rate)
+    x = run[channel]
+    if n < MIN_BINS or x.size < n:
+        return float("inf")
+    chunks = np.stack([x[a:a + n] - np.mean(x[a:a + n]) for a in range(0, x.size - n + 1, n)], axis=1)
+    freq = np.fft.rfftfreq(n, 1.0 / run.sample_rate)
+    return float(np.min(band_level(windowed_dft(chunks), freq > 2.0 * run.sample_rate / n)))
 
 
 def high_band_noise(run: RunData, low: float, high: float) -> dict | None:

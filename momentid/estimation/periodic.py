@@ -2,7 +2,8 @@
 
 :func:`periodic_fundamental` finds that fundamental in the table's spectrum; :func:`periodic_refusal`
 says when a mode is forced only at those lines (its damping then cannot be read from the forced
-response: the lines read the detuning, not the damping).
+response: the lines read the detuning, not the damping); :func:`forced_line` when a mode's fitted frequency
+sits on one of those lines, closer than the record resolves.
 """
 
 from __future__ import annotations
@@ -13,7 +14,8 @@ import numpy as np
 
 from momentid.core.series import RunData
 
-__all__ = ["periodic_fundamental", "periodic_refusal", "PERIODIC_SHARE", "LOCAL_LINE_SHARE", "NEAR_LINES",
+__all__ = ["periodic_fundamental", "periodic_refusal", "forced_line", "FORCED_LINE", "PERIODIC_SHARE",
+           "LOCAL_LINE_SHARE", "NEAR_LINES",
            "CONCENTRATION", "LINE_BINS", "MIN_FUNDAMENTAL"]
 
 #: A table motion is periodic when lines at the multiples of one fundamental (within
@@ -109,4 +111,46 @@ def periodic_refusal(runs: Sequence[RunData], f_mode: float) -> str:
                 f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} "
                 f"Hz), and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
                 f"the detuning, not the damping")
+    return ""
+
+
+#: The words that mark a mode's frequency as not an answer (:func:`forced_line`).
+FORCED_LINE = "its frequency is NOT AN ANSWER"
+
+
+def forced_line(runs: Sequence[RunData], frequency: float, ring_frequency: float | None = None) -> str:
+    """Why a mode's fitted frequency may be a periodic table's forced line, not the mode ('' when not).
+
+    A table that moves periodically (a sine test and its harmonics, :func:`periodic_fundamental`) forces
+    the structure only at multiples of its fundamental.  A fitted frequency closer to one of them than
+    the record resolves (one DFT bin, ``1 / T``) is the line's as much as the mode's: the data cannot
+    tell them apart.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        The runs the mode was fitted on (``zdd``, m/s^2).
+    frequency : float
+        The mode's fitted frequency (Hz).
+    ring_frequency : float, optional
+        The frequency (Hz) at which the mode rings free in the record's free decays, quoted when given.
+
+    Returns
+    -------
+    str
+        The warning in words (containing :data:`FORCED_LINE`), or ``''``.
+    """
+    for run in runs:
+        f0 = periodic_fundamental(run["zdd"], run.sample_rate)
+        if f0 is None:
+            continue
+        k = max(int(round(frequency / f0)), 1)
+        gap, resolution = abs(frequency - k * f0), run.sample_rate / run.n_samples
+        if gap > resolution:
+            continue
+        ring = ("" if ring_frequency is None else
+                f"; where it rings free, it rings at {ring_frequency:.4g} Hz at small amplitude")
+        return (f"mode at {frequency:.4g} Hz: {FORCED_LINE}: it lies {gap:.2g} Hz from harmonic {k} "
+                f"({k * f0:.4g} Hz) of run {run.name!r}'s periodic table ({f0:.4g} Hz), closer than the record "
+                f"resolves (1/T = {resolution:.2g} Hz), so the fit cannot tell the mode from the forced line{ring}")
     return ""

@@ -129,6 +129,8 @@ class DecayFit:
         10th and 90th percentiles of the envelope fitted (m/s^2).
     cycles : float
         Cycles of free decay fitted.
+    span : float
+        How far the envelopes fall: their largest value over their smallest.
     """
 
     zeta0: float
@@ -144,6 +146,7 @@ class DecayFit:
     frequency_slope_std: float
     amplitude_range: tuple
     cycles: float
+    span: float = np.inf
 
 
 def advance(tau: float, x: np.ndarray, sample_rate: float) -> np.ndarray:
@@ -362,4 +365,4 @@ def fit_decay(rings: Iterable[RingDown], correlation_samples: int, slope_sigmas:
         frequency_slope=float(coef[1]),
         frequency_slope_std=float(np.sqrt(max(fcov[1, 1], 0.0))),
         amplitude_range=tuple(float(x) for x in np.percentile(E, [10, 90])),
-        cycles=float(sum(r.cycles for r in rings)))
+        cycles=float(sum(r.cycles for r in rings)), span=float(np.max(E) / max(float(np.min(E)), 1e-300)))

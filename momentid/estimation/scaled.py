@@ -34,8 +34,9 @@ from momentid.errors import IdentificationError
 from momentid.estimation.modal import ModalModel
 from momentid.estimation.modal_checks import ExtraMode, check, extra_modes
 from momentid.estimation.modal_select import ModeSelection, select_modes
-from momentid.estimation.damping import ModeDamping, forced_line, resolve_damping
-from momentid.estimation.noise import estimate_noise, quiet_lead_in
+from momentid.estimation.damping import ModeDamping, Source, resolve_damping
+from momentid.estimation.noise import NoiseSource, estimate_noise, quiet_lead_in
+from momentid.estimation.periodic import forced_line
 from momentid.estimation.peaks import response_amplitude
 
 __all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run",
@@ -354,7 +355,8 @@ def identify_modal(experiment: Experiment, runs: Sequence[str] | None = None) ->
     equivalent, equivalent_std = values["damping_ratio"].copy(), std["damping_ratio"].copy()
     damping = _small_amplitude_damping(selected, selection, stated, values["frequency"], warnings, notes)
     answer = answer & np.array([m.is_answer for m in damping])
-    warnings += [w for w in (forced_line(selected, float(f), m) for f, m in zip(values["frequency"], damping)) if w]
+    rings = [m.frequency if m.source in (Source.FREE_DECAY, Source.POOLED) and m.cycles > 0 else None for m in damping]
+    warnings += [w for w in (forced_line(selected, float(f), r) for f, r in zip(values["frequency"], rings)) if w]
     if selection.extra:
         notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more "
                      f"than the {d} storeys: the extra ones are fitted with the storey modes and reported apart")
@@ -427,9 +429,10 @@ def _small_amplitude_damping(selected: tuple[RunData, ...], selection: ModeSelec
     """Each storey mode's damping at small amplitude, in ascending frequency order; what each says (or why
     it is no answer) appended to ``notes`` (``warnings``)."""
     fit, model = selection.fit, selection.model
-    sigma = [estimate_noise(r, f_max=fit.f_max, stated=stated).sigma for r in selected]
+    estimates = [estimate_noise(r, f_max=fit.f_max, stated=stated) for r in selected]
+    scatter = any(e.source is NoiseSource.LOCAL_POLYNOMIAL for e in estimates)
     with threadpool_limits(limits=1, user_api="blas"):
-        damping = resolve_damping(selected, selection, sigma=sigma)
+        damping = resolve_damping(selected, selection, sigma=[e.sigma for e in estimates], scatter=scatter)
     order = np.argsort([model.omega(fit.theta)[i] for i in selection.storey])     # storey order -> ascending
     damping = tuple(damping[k] for k in order)
     for i, m in enumerate(damping):

@@ -138,7 +138,7 @@ def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, flo
                    noise_source=source)
 
 
-def whitened_residual(layout: Layout, theta: np.ndarray, sp: Spectra, *, noise: bool = True) -> tuple[np.ndarray, int]:
+def whitened_residual(layout: Layout, theta: np.ndarray, sp: Spectra) -> tuple[np.ndarray, int]:
     """Noise-whitened DFT residual of one run, the transient term projected out.
 
     Parameters
@@ -147,8 +147,7 @@ def whitened_residual(layout: Layout, theta: np.ndarray, sp: Spectra, *, noise: 
     theta : ndarray, shape (p,) or (p + m,)
         Parameters (plus force coefficients when ``sp`` carries forces).
     sp : Spectra
-    noise : bool
-        Unused: the residual is always whitened by the run's noise levels.
+        One run's spectra; the residual is whitened by its noise levels.
 
     Returns
     -------

@@ -354,16 +354,16 @@ def _rig_changes(decays, saids, windows) -> str:
     """How the record shows the rig changing with amplitude in some mode ('' when none does): a free decay's
     damping trend or a frequency moving across the windows, beyond :data:`STRONG_SIGMAS` standard errors
     (the strength that makes a record the linear fit explains believed amplitude-dependent), or a frequency
-    that moves by more than its half-power width (:func:`_drift_refusal`)."""
+    that moves by more than its half-power width (:func:`_drift_words`)."""
     for k, (decay, said) in enumerate(zip(decays, saids)):
         if decay is not None and decay.dof >= MIN_DOF and decay.evidence > STRONG_SIGMAS:
             return f"the rig's joints change with amplitude (mode {k + 1}'s free decays, {decay.evidence:.2g} sigma)"
         t = abs(_frequency_trend(windows[k])[1]) if windows is not None else 0.0
         if said is not None and t > STRONG_SIGMAS:
             return f"the rig changes with amplitude (mode {k + 1}'s frequency moves with it, {t:.2g} sigma)"
-        drift = _drift_refusal(windows[k], said.equivalent) if said is not None else ""
-        if drift:
-            return f"the rig changes with amplitude (mode {k + 1}: {drift.split(', and it never')[0]})"
+        moves = _drift_words(windows[k], said.equivalent) if said is not None else ""
+        if moves:
+            return f"the rig changes with amplitude (mode {k + 1}: {moves})"
     return ""
 
 
@@ -543,6 +543,13 @@ def _drift_refusal(windows, equivalent: float) -> str:
     """Why the windows' damping cannot be read from a forced response ('' when it can): the mode's
     frequency moves with its amplitude across the windows by more than :data:`DRIFT_LIMIT` of its
     half-power half-width (a linear fit reads that spread as damping)."""
+    moves = _drift_words(windows, equivalent)
+    return f"{moves}, and it never rings free: a forced response reads that spread as damping" if moves else ""
+
+
+def _drift_words(windows, equivalent: float) -> str:
+    """How far the mode's frequency moves with its amplitude across the windows, in words, when that is more
+    than :data:`DRIFT_LIMIT` of its half-power half-width ('' otherwise)."""
     if len(windows) < 2:
         return ""
     z, _, f, sf, amp = (np.array(x) for x in zip(*windows))
@@ -551,8 +558,7 @@ def _drift_refusal(windows, equivalent: float) -> str:
     if spread <= DRIFT_LIMIT * width:
         return ""
     return (f"the mode's frequency moves by {100 * spread:.2g} % ({spread / width:.2g} half-power half-widths) "
-            f"across the record, with its amplitude, and it never rings free: a forced response reads that "
-            f"spread as damping")
+            f"across the record, with its amplitude")
 
 
 def _drift(f: np.ndarray, sf: np.ndarray, amp: np.ndarray) -> float:

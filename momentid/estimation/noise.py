@@ -254,13 +254,13 @@ REST_BOUND = 1.5
 REST_COHERENCE = 0.5
 
 
-def _not_rest(run: RunData, n_quiet: int, level: dict) -> str:
+def _not_rest(run: RunData, n_quiet: int, level: dict, bound: dict | None) -> str:
     """Why the record's first ``n_quiet`` samples, quiet as they look, hold motion and not sensor noise
-    ('' when they are rest): a floor's level above the record's own scatter, or table and floor coherent."""
+    ('' when they are rest): a floor's level above the record's own scatter ``bound``
+    (:func:`local_polynomial_noise`, None when the record is too short for it), or table and floor coherent."""
     floors = [c for c in run.channels if c != "zdd" and c[:1] == "a"]
     if not run.has("zdd") or not floors:
         return ""
-    bound = local_polynomial_noise(run)
     for c in floors:
         if bound is not None and level[c] > REST_BOUND * bound[c]:
             return (f" (its first {n_quiet / run.sample_rate:.3g} s are quiet but not at rest: {c} reads "
@@ -306,7 +306,7 @@ def estimate_noise(run: RunData, *, f_max: float | None = None,
             return NoiseEstimate({c: float(s) for c, s in sigma.items()}, NoiseSource.STATED,
                                  "stated by the lab")
     fs = run.sample_rate
-    not_rest = ""
+    not_rest, scatter = "", None
     if noise_floor is None:
         n_quiet = quiet_lead_in(run)
         if n_quiet:
@@ -315,14 +315,15 @@ def estimate_noise(run: RunData, *, f_max: float | None = None,
             # Skip the lowest bins: drift and the mean removed there are not white noise.
             band = freq > 2.0 * fs / n_quiet
             level = dict(zip(run.channels, map(float, band_level(X, band))))
-            not_rest = _not_rest(run, n_quiet, level)
+            scatter = local_polynomial_noise(run)           # the bound a rest may not exceed
+            not_rest = _not_rest(run, n_quiet, level, scatter)
             if not not_rest:
                 return NoiseEstimate(level, NoiseSource.QUIET_LEAD_IN, f"quiet lead-in 0-{n_quiet / fs:.3g} s")
     low, high = noise_floor or ((HIGH_BAND_FACTOR * f_max, HIGH_BAND_TOP * fs / 2) if f_max
                                 else (0.25 * fs, 0.45 * fs))
     sigma = high_band_noise(run, low, high)
     if sigma is None and noise_floor is None:
-        scatter = local_polynomial_noise(run)
+        scatter = scatter if scatter is not None else local_polynomial_noise(run)
         if scatter is not None:
             return NoiseEstimate(scatter, NoiseSource.LOCAL_POLYNOMIAL,
                                  f"no quiet lead-in{not_rest}, no band above the structure: the floors' scatter "

@@ -15,8 +15,7 @@ import numpy as np
 from momentid.core.series import RunData
 
 __all__ = ["periodic_fundamental", "periodic_refusal", "forced_line", "FORCED_LINE", "PERIODIC_SHARE",
-           "LOCAL_LINE_SHARE", "NEAR_LINES",
-           "CONCENTRATION", "LINE_BINS", "MIN_FUNDAMENTAL"]
+           "LOCAL_LINE_SHARE", "NEAR_LINES", "CONCENTRATION", "LINE_BINS", "MIN_FUNDAMENTAL"]
 
 #: A table motion is periodic when lines at the multiples of one fundamental (within
 #: :data:`LINE_BINS` bins) hold this share of its power (a sine test beside its servo's noise) ...

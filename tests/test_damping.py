@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -180,3 +182,52 @@ def test_a_frequency_at_a_periodic_tables_line_is_not_an_answer():
     broadband = [RunData(name="noise", added_mass=np.zeros(1), time=t, channels=("zdd", "a1"),
                          values=np.column_stack([noise, noise]))]
     assert forced_line(broadband, 22.01) == ""
+
+
+def test_a_linear_answer_carries_what_the_windows_scatter():
+    """The linear fit's own error counts white noise only.  When independent windows of the record scatter
+    more (model error), the answer takes their random-effects error and degrees of freedom; when they scatter
+    less, or are too few to say, the fit's own error stands."""
+    from momentid.estimation import damping as dm
+
+    said = dm._answer(0.0030, 0.0006, 5, dm.Source.FORCED, False, 0.0, 0.0, 10.0, 0.0, (0.1, 1.0), 0.003, 250.0)
+    assert dm._segment_error(0.0001, 900, said) == (0.0006, 5)
+    assert dm._segment_error(0.0009, 900, said) == (0.0009, 900)
+    assert dm._segment_error(0.0001, 900, None) == (0.0001, 900)
+    few = replace(said, dof=1)
+    assert dm._segment_error(0.0001, 900, few) == (0.0001, 900)
+
+
+def test_a_window_held_at_a_bound_of_its_refit_reads_no_mode():
+    """A window refit whose mode ends at its frequency bound (5 % off the record's), or at the damping
+    bound (50 %), was held there by the bound, not placed by the data; inside the bounds it counts."""
+    from momentid.estimation import windows
+    from momentid.estimation.modal_model import MAX_ABS_DAMPING
+
+    _held = windows._held
+    bounds = (9.5, 10.5)
+    assert _held(10.5, 0.01, bounds) and _held(9.5, 0.01, bounds)
+    assert _held(10.0, MAX_ABS_DAMPING, bounds) and _held(10.0, -MAX_ABS_DAMPING, bounds)
+    assert not _held(10.0, 0.01, bounds) and not _held(10.49, 0.3, bounds)
+
+
+@pytest.mark.parametrize("frequency_slope, extrapolated", [(-0.008, True), (0.0, False), (0.008, False)])
+def test_windows_whose_frequency_falls_with_amplitude_answer_at_zero_amplitude(frequency_slope, extrapolated):
+    """Twelve windows at 0.5-3 m/s^2 read a damping with no trend of its own.  When their frequency falls with
+    their amplitude (a joint softening as it slips, and so dissipating more), the answer is their trend's
+    value at zero amplitude, with that extrapolation's wider error; a steady or rising frequency leaves the
+    windows' mean."""
+    from momentid.estimation import damping as dm
+    from momentid.estimation.windows import Window
+
+    amp = np.linspace(0.5, 3.0, 12)
+    rng = np.random.default_rng(5)
+    windows = [Window(0.004 + rng.normal(0, 2e-4), 3e-4, 10.0 + frequency_slope * a + rng.normal(0, 2e-3), 3e-3, a)
+               for a in amp]
+    said = dm._windows_say(windows, 0.004, 10.0, 400.0)
+    assert not said.amplitude_dependent and said.is_answer, said
+    got = dm._softening(said, windows, 0.004, 10.0, 400.0)
+    if extrapolated:
+        assert got.amplitude_dependent and got.damping_ratio_std > said.damping_ratio_std, got
+    else:
+        assert got is said

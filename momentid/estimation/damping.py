@@ -19,8 +19,13 @@ above the structure's own damping: 0.44-2.4 % on the stiff 1-storey rig, whose f
   the laws' extrapolations when the damping depends on amplitude);
 * **from the forced response** otherwise: the linear modal model refitted on consecutive windows of
   :data:`WINDOW_CYCLES` cycles of mode 1 (each with its own transient, the record's sensor gains and
-  clock offsets), the windows' damping ratios pooled with a random effect for what they scatter beyond
-  their own errors (model error), Student's t on the windows.
+  clock offsets; :mod:`momentid.estimation.windows`), the windows' damping ratios pooled with a random
+  effect for what they scatter beyond their own errors (model error), Student's t on the windows; their
+  trend's value at zero amplitude when the damping grows with amplitude across them, or the frequency
+  falls with it (a joint that softens as it slips).
+
+The linear fit's own standard error counts white noise only; its answer carries the windows' error
+instead when that is larger (what independent stretches of the record scatter: model error).
 
 A damping ratio is refused, with the reason in words, when its standard error exceeds
 :data:`MAX_RELATIVE_STD` of itself, when it is not positive, or when too few independent stretches
@@ -37,12 +42,11 @@ import numpy as np
 import scipy.stats
 
 from momentid.core.series import RunData
-from momentid.errors import MomentidError
 from momentid.estimation import ringdown
-from momentid.estimation.eiv import spectra
 from momentid.estimation.noise import quietest_level
-from momentid.estimation.modal import refine
 from momentid.estimation.periodic import periodic_refusal
+from momentid.estimation.windows import (MIN_SIGNAL_TO_NOISE, WINDOW_CYCLES, band_noise, drift_words,
+                                         forced_windows, frequency_trend, random_effects)
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
@@ -74,18 +78,9 @@ MAX_RELATIVE_STD = 0.5
 MIN_CONSTANT_SPAN = 3.0
 #: Fewest degrees of freedom (independent stretches less the parameters) of an answer's error.
 MIN_DOF = 2
-#: Windows of the forced-response estimate hold this many cycles of mode 1 ...
-WINDOW_CYCLES = 25
-#: ... and a record is cut into at least this many (shorter windows when it is short).
-MIN_WINDOWS = 6
-#: A forced response is refused when the mode's frequency spreads across the windows by more than this
-#: share of its half-power half-width (``zeta f``): the spread a linear fit of the record reads as damping.
-DRIFT_LIMIT = 1.0
 #: The windows' pooled damping and the whole record's may differ by this many of the windows' standard
 #: errors when no amplitude dependence explains it; beyond, the windows' estimate is not one.
 CONSISTENCY_SIGMAS = 3.0
-#: A window refit may move a mode's frequency this far (relative) from the whole record's.
-WINDOW_FREQUENCY_SPAN = 0.05
 
 
 class Source:
@@ -175,87 +170,6 @@ class ModeDamping:
                 f"{100 * self.equivalent:.3g} %")
 
 
-def _window_runs(run: RunData, length: int) -> list:
-    """Consecutive windows of ``length`` samples as runs of their own (time from 0)."""
-    out = []
-    for a in range(0, run.n_samples - length + 1, length):
-        s = slice(a, a + length)
-        out.append(RunData(name=f"{run.name}@{a / run.sample_rate:.3g}s", added_mass=run.added_mass,
-                           time=run.time[s] - run.time[a], channels=run.channels, values=run.values[s]))
-    return out
-
-
-def _meta(z: np.ndarray, s: np.ndarray, X: np.ndarray):
-    """Random-effects least squares ``z = X b + u + e``: ``e`` the windows' own errors ``s``, ``u`` what they
-    scatter beyond them (variance by the method of moments, DerSimonian-Laird); coefficients and their
-    covariance."""
-    def wls(v):
-        W = 1 / v
-        cov = np.linalg.pinv(X.T @ (W[:, None] * X))      # pinv: windows of one amplitude leave no slope
-        return cov @ X.T @ (W * z), cov
-    b, _ = wls(s ** 2)
-    w = 1 / s ** 2
-    q = float(np.sum(w * (z - X @ b) ** 2))
-    P = np.diag(w) - (w[:, None] * X) @ np.linalg.pinv(X.T @ (w[:, None] * X)) @ (X.T * w[None, :])
-    tau2 = max((q - (z.size - X.shape[1])) / max(float(np.trace(P)), 1e-300), 0.0)
-    return wls(s ** 2 + tau2)
-
-
-def _forced(runs, selection, sigma: dict, storey_index: list) -> list:
-    """Per storey mode: the windows' (damping ratio, its standard error, frequency (Hz), its standard
-    error, amplitude (m/s^2)) of the linear model refitted window by window."""
-    model, fit = selection.model, selection.fit
-    d = model.d
-    f1 = float(np.min(model.omega(fit.theta)[storey_index]) / (2 * np.pi))
-    out = [[] for _ in storey_index]
-    w0 = model.omega(fit.theta)
-    bounds = {i: (w0[i] / (2 * np.pi) * (1 - WINDOW_FREQUENCY_SPAN), w0[i] / (2 * np.pi) * (1 + WINDOW_FREQUENCY_SPAN))
-              for i in range(model.n)}
-    for r, run in enumerate(runs):
-        length = int(min(WINDOW_CYCLES / f1, run.n_samples / run.sample_rate / MIN_WINDOWS) * run.sample_rate)
-        theta = fit.theta.copy()
-        single = type(model)(d, 1, model.n - d, model.quadrature)
-        theta1 = np.concatenate([theta[:model.n_modal], theta[model.sensor_slice(r)]])
-        free = np.arange(single.p) < single.n_modal              # the record's sensors stay as they are
-        for window in _window_runs(run, max(length, 8)):
-            try:
-                sp = [spectra(window, d, fit.f_max, sigma=sigma[r], groups=["a"])]
-                w_fit = refine(single, sp, [("whole record", theta1)], sample_rates=[run.sample_rate], f_max=fit.f_max,
-                               free=free, fix_nuisance=False,
-                               frequency_bounds=bounds)
-            except (MomentidError, np.linalg.LinAlgError, ValueError):
-                continue                   # a window the model cannot fit adds no estimate
-            sd = np.sqrt(np.clip(np.diag(w_fit.covariance), 0, None))
-            w = single.omega(w_fit.theta) / (2 * np.pi)
-            for k, i in enumerate(storey_index):
-                z, s = float(w_fit.theta[single.n + i]), float(sd[single.n + i])
-                # a window whose frequency ends at its bound (no standard error: held there) read no mode
-                if not (np.isfinite(z) and np.isfinite(s) and s > 0 and sd[i] > 0):
-                    continue
-                amplitude, noise = _window_amplitude(window, w_fit, single, i, sigma[r])
-                # a window where the mode stands barely above the sensor noise (a quiet lead-in or tail)
-                # reads the noise's ripple, not the mode: it would lever any trend in amplitude
-                if amplitude >= MIN_SIGNAL_TO_NOISE * noise:
-                    out[k].append((z, s, float(w[i]), float(w[i] * sd[i]), amplitude))
-    return out
-
-
-def _window_amplitude(window: RunData, w_fit, model, i: int, sigma: dict) -> tuple[float, float]:
-    """RMS (m/s^2) of mode ``i``'s relative acceleration on its strongest floor in a window, read from the
-    record band-passed around the mode's frequency there, and the white sensor noise's RMS in that band."""
-    R = model.residues(w_fit.theta)
-    j = int(np.argmax(np.abs(R[i])))
-    f = float(model.omega(w_fit.theta)[i] / (2 * np.pi))
-    band = ringdown.band_for(f, [f], window.sample_rate)
-    env, _, _ = ringdown.envelope(window["zdd"] - window[f"a{j + 1}"], band, window.sample_rate)
-    return float(np.sqrt(np.mean(env ** 2) / 2)), _band_noise(sigma, j, band, window.sample_rate)
-
-
-def _band_noise(sigma: dict, j: int, band, sample_rate: float) -> float:
-    """RMS (m/s^2) of the white sensor noise of ``zdd - a<j+1>`` (standard deviations ``sigma``) in ``band`` (Hz)."""
-    return float(np.hypot(sigma["zdd"], sigma[f"a{j + 1}"]) * np.sqrt(2 * (band[1] - band[0]) / sample_rate))
-
-
 def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma: Sequence[dict],
                     scatter: bool = False) -> tuple[ModeDamping, ...]:
     """Each storey mode's damping at small amplitude, with an honest error, or its refusal.
@@ -287,7 +201,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     base_linear, exact = _explains(runs, fit, sigma, model.d)
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
     seconds = sum(run.n_samples / run.sample_rate for run in runs)
-    windows = None if exact else _forced(runs, selection, sigma, list(selection.storey))
+    windows = None if exact else forced_windows(runs, selection, sigma, list(selection.storey))
     decays = [None if exact else _free_decays(runs, selection, sigma, i, scatter) for i in selection.storey]
     saids = [None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
              for k, i in enumerate(selection.storey)]
@@ -313,7 +227,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         # a trend read from fewer independent stretches than an answer needs is no evidence (Newey-West
         # errors over two stretches are themselves a guess)
         evidence = max(decay.evidence if decay is not None and decay.dof >= MIN_DOF else 0.0,
-                       max(said.evidence, abs(_frequency_trend(windows[k])[1])) if said is not None else 0.0)
+                       max(said.evidence, abs(frequency_trend(windows[k])[1])) if said is not None else 0.0)
         changes = evidence > needed
         if decay is not None and (changes or not linear):
             answer = replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
@@ -329,8 +243,10 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"{MIN_CONSTANT_SPAN:g}x is needed)"))
             out.append(_pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
         elif exact or (linear and evidence <= HINT_SIGMAS):
-            # a linear structure at these amplitudes: the linear fit's damping with its own error
-            out.append(_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), Source.LINEAR, False,
+            # a linear structure at these amplitudes: the linear fit's damping, its error the larger of the
+            # fit's own (white noise) and the windows' (what independent stretches of the record scatter)
+            std, dof = _segment_error(float(sd[model.n + i]), max(fit.dof, 1), None if exact else said)
+            out.append(_answer(float(zeta[i]), std, dof, Source.LINEAR, False,
                                0.0, 0.0, float(freq[i]), 0.0, said.amplitude_range if said else (0.0, 0.0),
                                float(zeta[i]), seconds * freq[i]))
         elif periodic:
@@ -346,8 +262,28 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                 f"damping ({100 * said.damping_ratio:.3g} %) is the damping at those amplitudes, not at small "
                 f"amplitude")))
         else:
-            out.append(said)
+            out.append(_softening(said, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
     return tuple(out)
+
+
+def _softening(said: ModeDamping, windows, equivalent: float, f0: float, cycles: float) -> ModeDamping:
+    """The windows' answer, or, when it is a constant damping but the mode's frequency falls with its
+    amplitude across the windows beyond :data:`~momentid.estimation.ringdown.SLOPE_SIGMAS` standard errors
+    (a joint that softens as it slips, and dissipates more as it does), their trend's value at zero
+    amplitude with the error of that extrapolation: the windows' mean is the damping at their amplitudes,
+    not at small amplitude."""
+    if said.amplitude_dependent or said.refusal or frequency_trend(windows)[1] >= -ringdown.SLOPE_SIGMAS:
+        return said
+    return _windows_say(windows, equivalent, f0, cycles, trend=True)
+
+
+def _segment_error(std: float, dof: int, said: ModeDamping | None) -> tuple[float, int]:
+    """The linear fit's standard error and degrees of freedom, or the windows' when larger: the fit's own
+    counts white noise only; the windows' random-effects error counts what independent stretches of the
+    record scatter beyond it (model error: a batch-means estimate of the whole record's error)."""
+    if said is None or said.dof < MIN_DOF or not np.isfinite(said.damping_ratio_std):
+        return std, dof
+    return (said.damping_ratio_std, said.dof) if said.damping_ratio_std > std else (std, dof)
 
 
 def _rig_changes(decays, saids, windows) -> str:
@@ -358,10 +294,10 @@ def _rig_changes(decays, saids, windows) -> str:
     for k, (decay, said) in enumerate(zip(decays, saids)):
         if decay is not None and decay.dof >= MIN_DOF and decay.evidence > STRONG_SIGMAS:
             return f"the rig's joints change with amplitude (mode {k + 1}'s free decays, {decay.evidence:.2g} sigma)"
-        t = abs(_frequency_trend(windows[k])[1]) if windows is not None else 0.0
+        t = abs(frequency_trend(windows[k])[1]) if windows is not None else 0.0
         if said is not None and t > STRONG_SIGMAS:
             return f"the rig changes with amplitude (mode {k + 1}'s frequency moves with it, {t:.2g} sigma)"
-        moves = _drift_words(windows[k], said.equivalent) if said is not None else ""
+        moves = drift_words(windows[k], said.equivalent) if said is not None else ""
         if moves:
             return f"the rig changes with amplitude (mode {k + 1}: {moves})"
     return ""
@@ -406,11 +342,6 @@ def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
     return exact or fit.scale <= LINEAR_MISFIT ** 2, exact
 
 
-#: A mode's response in its band must stand this many times above the sensors' noise there (RMS) before
-#: its damping is read: below, the 'mode' is the noise's own ripple, or a pole the fit put anywhere.
-MIN_SIGNAL_TO_NOISE = 3.0
-
-
 def weak_refusal(runs: Sequence[RunData], selection: ModeSelection, sigma: Sequence[dict], i: int) -> str:
     """Why mode ``i``'s damping cannot be read at all ('' when it can).
 
@@ -445,7 +376,7 @@ def weak_refusal(runs: Sequence[RunData], selection: ModeSelection, sigma: Seque
             continue
         env, _, _ = ringdown.envelope(run["zdd"] - run[f"a{j + 1}"], band, fs)
         rms = float(np.sqrt(np.mean(env ** 2) / 2))
-        noise = _band_noise(sigma[r], j, band, fs)
+        noise = band_noise(sigma[r], j, band, fs)
         if best is None or rms / max(noise, 1e-300) > best[0]:
             best = (rms / max(noise, 1e-300), rms, noise, band)
     if best is None:
@@ -490,31 +421,31 @@ def _unknown(equivalent: float, f0: float) -> ModeDamping:
 def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bool = False) -> ModeDamping:
     """The forced-response answer from the windows: their damping ratios' trend in amplitude when they
     show one or ``trend`` asks for it (its value at zero amplitude), else their random-effects mean;
-    refused when the mode's
-    frequency moves across the windows by more than :data:`DRIFT_LIMIT` of its half-power half-width (a
-    linear fit reads that spread as damping)."""
+    refused when the mode's frequency moves across the windows by more than
+    :data:`~momentid.estimation.windows.DRIFT_LIMIT` of its half-power half-width (a linear fit reads
+    that spread as damping)."""
     if len(windows) < 2:
         return _unknown(equivalent, f0)
     z, s, f, sf, amp = (np.array(x) for x in zip(*windows))
-    b, cov = _meta(z, s, np.column_stack([np.ones_like(amp), amp]))
+    b, cov = random_effects(z, s, np.column_stack([np.ones_like(amp), amp]))
     evidence = float(b[1] / np.sqrt(cov[1, 1])) if z.size > 3 and cov[1, 1] > 0 else 0.0     # growing only
     dependent = evidence > ringdown.SLOPE_SIGMAS or (trend and z.size > 3)
     exponent = 1.0 if dependent else 0.0
     if not dependent:
-        b, cov = _meta(z, s, np.ones((z.size, 1)))
+        b, cov = random_effects(z, s, np.ones((z.size, 1)))
         zeta0, var0 = float(b[0]), float(cov[0, 0])
     else:
         # the laws zeta0 + zeta1 A^p of the free decays (joint micro-slip: p = 1/2 to 1): their mean value
         # at zero amplitude, its variance their mean variance plus the variance between them (windows that
         # never reach small amplitudes leave the laws' extrapolations apart, and the answer as uncertain)
-        fits = [_meta(z, s, np.column_stack([np.ones_like(amp), amp ** p])) for p in ringdown.POWERS]
+        fits = [random_effects(z, s, np.column_stack([np.ones_like(amp), amp ** p])) for p in ringdown.POWERS]
         at_zero = np.array([float(bp[0]) for bp, _ in fits])
         zeta0 = float(np.mean(at_zero))
         var0 = float(np.mean([cp[0, 0] for _, cp in fits]) + (np.var(at_zero, ddof=1) if at_zero.size > 1 else 0.0))
     answer = _answer(zeta0, float(np.sqrt(max(var0, 0.0))), z.size - b.size, Source.FORCED, dependent,
                      float(b[1]) if dependent else 0.0, exponent, f0, 0.0,
                      tuple(np.percentile(amp, [10, 90])), equivalent, cycles)
-    slope, _ = _frequency_trend(windows)
+    slope, _ = frequency_trend(windows)
     refusal = _drift_refusal(windows, equivalent) or answer.refusal
     if not refusal and not dependent:
         # windows that read the same damping as the whole record, or their estimate is not one: a window
@@ -527,51 +458,13 @@ def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bo
     return replace(answer, evidence=evidence, frequency_slope=slope, refusal=refusal)
 
 
-def _frequency_trend(windows) -> tuple[float, float]:
-    """The windows' frequency trend in amplitude (Hz per m/s^2, random effects) and its t statistic."""
-    if len(windows) < 4:
-        return 0.0, 0.0
-    _, _, f, sf, amp = (np.array(x) for x in zip(*windows))
-    if np.ptp(amp) <= 0:
-        return 0.0, 0.0
-    b, cov = _meta(f, np.maximum(sf, 1e-12), np.column_stack([np.ones_like(amp), amp]))
-    sd = float(np.sqrt(max(cov[1, 1], 0.0)))
-    return float(b[1]), float(b[1] / sd) if sd > 0 else 0.0
-
-
 def _drift_refusal(windows, equivalent: float) -> str:
     """Why the windows' damping cannot be read from a forced response ('' when it can): the mode's
-    frequency moves with its amplitude across the windows by more than :data:`DRIFT_LIMIT` of its
-    half-power half-width (a linear fit reads that spread as damping)."""
-    moves = _drift_words(windows, equivalent)
+    frequency moves with its amplitude across the windows by more than
+    :data:`~momentid.estimation.windows.DRIFT_LIMIT` of its half-power half-width (a linear fit reads
+    that spread as damping)."""
+    moves = drift_words(windows, equivalent)
     return f"{moves}, and it never rings free: a forced response reads that spread as damping" if moves else ""
-
-
-def _drift_words(windows, equivalent: float) -> str:
-    """How far the mode's frequency moves with its amplitude across the windows, in words, when that is more
-    than :data:`DRIFT_LIMIT` of its half-power half-width ('' otherwise)."""
-    if len(windows) < 2:
-        return ""
-    z, _, f, sf, amp = (np.array(x) for x in zip(*windows))
-    spread = _drift(f, sf, amp) / float(np.median(f))
-    width = max(min(float(np.median(z)), equivalent), 1e-5)
-    if spread <= DRIFT_LIMIT * width:
-        return ""
-    return (f"the mode's frequency moves by {100 * spread:.2g} % ({spread / width:.2g} half-power half-widths) "
-            f"across the record, with its amplitude")
-
-
-def _drift(f: np.ndarray, sf: np.ndarray, amp: np.ndarray) -> float:
-    """How far (Hz) the windows' frequency moves with their amplitude over the amplitudes they span: the
-    random-effects trend's change from the quietest to the strongest window when the trend is beyond
-    :data:`~momentid.estimation.ringdown.SLOPE_SIGMAS` standard errors, else 0 (a linear rig's windows
-    scatter, they do not drift)."""
-    if f.size < 4:
-        return 0.0
-    b, cov = _meta(f, np.maximum(sf, 1e-12), np.column_stack([np.ones_like(amp), amp]))
-    if abs(b[1]) <= ringdown.SLOPE_SIGMAS * np.sqrt(cov[1, 1]):
-        return 0.0
-    return float(abs(b[1]) * np.ptp(amp))
 
 
 def _answer(z, sd, dof, source, dependent, slope, exponent, f0, f_slope, amplitudes, equivalent, cycles) -> ModeDamping:

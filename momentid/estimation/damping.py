@@ -394,7 +394,9 @@ def _free_decays(runs, selection, sigma, i: int, scatter: bool = False):
     """:class:`~momentid.estimation.ringdown.DecayFit` of mode ``i``'s free decays, or None (too few).
     ``scatter``: the noise levels are the data's own scatter, an upper bound that holds the rig's distortion;
     the table's netted from its motion is then at most its level in its quietest second (netting more would
-    take real forcing for noise, and a forced stretch for a free one)."""
+    take real forcing for noise, and a forced stretch for a free one), and so is each floor's (the sensors
+    taken alike: a ring-down after a strong sine stops stands 10-30x above its floor's true noise, and below
+    the scatter of the sine's distortion)."""
     model, theta = selection.model, selection.fit.theta
     freq, zeta, R = model.omega(theta) / (2 * np.pi), model.zeta(theta), model.residues(theta)
     j = int(np.argmax(np.abs(R[i])))
@@ -405,9 +407,14 @@ def _free_decays(runs, selection, sigma, i: int, scatter: bool = False):
         floor = ringdown.advance(offset[j], run[f"a{j + 1}"], fs) / gain[j]
         band = ringdown.band_for(freq[i], [freq[k] for k in selection.storey], fs)
         corr = int(round(ringdown.correlation_time(band, freq[i]) * fs))
+        table = min(sigma[r]["zdd"], quietest_level(run, "zdd")) if scatter else sigma[r]["zdd"]
+        relative = float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"]))
+        if scatter:
+            # the sensors taken alike (as the scatter estimate takes the table as noisy as the floors): the
+            # floor's noise at most the table's quiet level too, not the distortion of the strongest shaking
+            relative = min(relative, float(np.sqrt(2.0)) * table)
         rings += ringdown.ring_downs(run.name, run["zdd"], run["zdd"] - floor, fs, freq[i], zeta[i], R[i, j], band,
-                                     min(sigma[r]["zdd"], quietest_level(run, "zdd")) if scatter else sigma[r]["zdd"],
-                                     float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"])))
+                                     table, relative)
     if not rings or sum(rg.cycles for rg in rings) < ringdown.MIN_CYCLES:
         return None
     return ringdown.fit_decay(rings, corr)

@@ -208,8 +208,8 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     # with the noise read from the data's own scatter (it holds the rig's distortion) a linear fit that
     # explains the record proves nothing (on windows of the shipped rigs it answered 1-3 % for modes damped
     # 0.07-0.2 %); a rig that changes with amplitude in any mode gives no mode's damping at small amplitude
-    # from windows without a trend of their own
-    rig_changes = _rig_changes(decays, saids, windows) if scatter else ""
+    # from windows without a trend of their own (with or without a quiet lead-in)
+    rig_changes = "" if exact else _rig_changes(decays, saids, windows)
     out = []
     for k, i in enumerate(selection.storey):
         weak = "" if exact else weak_refusal(runs, selection, sigma, i)
@@ -255,14 +255,15 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
             # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
             # amplitude, with the error of that extrapolation
             out.append(_windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i], trend=True))
-        elif rig_changes and not said.amplitude_dependent and not said.refusal:
-            lo, hi = said.amplitude_range
-            out.append(replace(said, refusal=(
-                f"{rig_changes}, and this mode's windows ({lo:.2g}-{hi:.2g} m/s^2) show no trend of their own: their "
-                f"damping ({100 * said.damping_ratio:.3g} %) is the damping at those amplitudes, not at small "
-                f"amplitude")))
         else:
-            out.append(_softening(said, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
+            answer = _softening(said, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+            if rig_changes and not answer.amplitude_dependent and not answer.refusal:
+                lo, hi = answer.amplitude_range
+                answer = replace(answer, refusal=(
+                    f"{rig_changes}, and this mode's windows ({lo:.2g}-{hi:.2g} m/s^2) show no trend of their own: "
+                    f"their damping ({100 * answer.damping_ratio:.3g} %) is the damping at those amplitudes, not at "
+                    f"small amplitude"))
+            out.append(answer)
     return tuple(out)
 
 

@@ -310,7 +310,7 @@ def truth(case: Case) -> Truth:
 
 def simulate_case(case: Case):
     """The recorded experiment of ``case``: an :class:`~momentid.core.series.Experiment` of one run."""
-    from momentid.core.series import Experiment, RunData
+    from momentid.core.series import Experiment
     from momentid.core.structure import LabStatement
     from momentid.lab.simulation import simulate_run
 
@@ -319,8 +319,7 @@ def simulate_case(case: Case):
     run = simulate_run(sc, sc.runs[0], motion=m)
     if not case.lead_in:                       # cut out of the shaking: the record starts mid-motion
         start = int(round(case.cut * case.sample_rate))
-        run = RunData(name=run.name, added_mass=run.added_mass, time=run.time[start:] - run.time[start],
-                      channels=run.channels, values=run.values[start:])
+        run = run.window(start)
     run = replace(run, added_mass=np.zeros(case.storeys), meta={})
     return Experiment(runs=(run,), statement=LabStatement(storeys=case.storeys, masses=case.masses),
                       source=f"damping coverage case {case.index}")

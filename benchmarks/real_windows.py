@@ -32,15 +32,8 @@ AGREE_SIGMAS = 2.0
 
 def windows(run, length: float, step: float) -> list:
     """``(start (s), RunData)`` of the windows of ``run``; the last may be shorter (at least half a window)."""
-    from momentid.core.series import RunData
-
     fs, n = run.sample_rate, int(length * run.sample_rate)
-    out = []
-    for a in range(0, run.n_samples - n // 2, int(step * fs)):
-        s = slice(a, a + n)
-        out.append((a / fs, RunData(name=run.name, added_mass=run.added_mass, time=run.time[s] - run.time[s][0],
-                                    channels=run.channels, values=run.values[s])))
-    return out
+    return [(a / fs, run.window(a, a + n)) for a in range(0, run.n_samples - n // 2, int(step * fs))]
 
 
 def judge(window, whole) -> str:

@@ -128,14 +128,14 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rig", choices=("flexible_3storey", "stiff_1storey", "both"), default="both")
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the flexible_3storey folder")
-    parser.add_argument("--orders", default="6,8,10,12", help="SRIM model orders (comma-separated)")
+    parser.add_argument("--orders", default="6,8,10,12", type=_orders, help="SRIM model orders (comma-separated)")
     parser.add_argument("--no-srim", action="store_true", help="skip the mdof re-run")
     args = parser.parse_args(argv)
     ok = True
     if args.rig in ("flexible_3storey", "both"):
         ok &= flexible(args)
     if args.rig in ("stiff_1storey", "both"):
-        orders = None if args.no_srim or not _has_mdof() else [int(o) for o in args.orders.split(",")]
+        orders = None if args.no_srim or not _has_mdof() else args.orders
         table, stiff_ok, rerun_ok = stiff_table(orders)
         print("\nstiff 1-storey rig (mode 1):\n" + table)
         print(f"\ncriteria ({', '.join(ANSWER_TRIALS)}: mode 1 within {FREQUENCY_TOLERANCE:.0%} of the README's "
@@ -143,10 +143,21 @@ def main(argv=None) -> int:
               f"with a reason): {'met' if stiff_ok else 'NOT met'}")
         if orders:
             print(f"every trial's mode 1 within {FREQUENCY_TOLERANCE:.0%} of the SRIM re-run stable over orders "
-                  f"{args.orders} (the flexible rig's settings; its damping is the equivalent linear): "
+                  f"{','.join(map(str, orders))} (the flexible rig's settings; its damping is the equivalent linear): "
                   f"{'met' if rerun_ok else 'NOT met'}")
         ok &= stiff_ok
     return 0 if ok else 1
+
+
+def _orders(text: str) -> list[int]:
+    """``--orders``: comma-separated positive integers (SRIM model orders)."""
+    try:
+        orders = [int(o) for o in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated integers, e.g. 6,8,10,12") from None
+    if not orders or any(o <= 0 for o in orders):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected positive model orders, e.g. 6,8,10,12")
+    return orders
 
 
 def _has_mdof() -> bool:
@@ -168,8 +179,7 @@ def flexible(args) -> bool:
     results = dict(zip(runs, identify_per_run(experiment, [r.name for r in runs.values()])))
     rerun = {}
     if not args.no_srim and _has_mdof():
-        orders = [int(o) for o in args.orders.split(",")]
-        rerun = {name: srim_modes(runs[name], 3, orders, results[name].frequency) for name in runs}
+        rerun = {name: srim_modes(runs[name], 3, args.orders, results[name].frequency) for name in runs}
     print("| trial | mode | momentid f (Hz) | damping at small amplitude (%) | equivalent linear zeta (%) | "
           "subspace check zeta (%) | README SRIM f / zeta (%) | SRIM re-run f / zeta (%) | f diff (%) | "
           "equivalent / README | equivalent / re-run |")
@@ -197,7 +207,7 @@ def flexible(args) -> bool:
         for m in r.extra_modes:
             print(f"| {name} | extra | {m.frequency:.3f} +- {m.frequency_std:.3f} | | {100 * m.damping_ratio:.2f} +- "
                   f"{100 * m.damping_ratio_std:.2f} | seen by {', '.join(m.seen_by)} | | | | | |")
-    against = "the SRIM re-run stable over orders " + args.orders if rerun else "(no SRIM re-run)"
+    against = "the SRIM re-run stable over orders " + ",".join(map(str, args.orders)) if rerun else "(no SRIM re-run)"
     print(f"\nissue criteria (frequencies within {FREQUENCY_TOLERANCE:.0%} of the README's SRIM; equivalent linear "
           f"damping against {against}: mode 1 within a factor {DAMPING_FACTOR}, modes 2-3 within "
           f"{OTHER_DAMPING_FACTOR}): {'met' if ok else 'NOT met'}\n")

@@ -226,7 +226,9 @@ def test_windows_whose_frequency_falls_with_amplitude_answer_at_zero_amplitude(f
                for a in amp]
     said = dm._windows_say(windows, 0.004, 10.0, 400.0)
     assert not said.amplitude_dependent and said.is_answer, said
-    got = dm._softening(said, windows, 0.004, 10.0, 400.0)
+    from momentid.estimation.windows import frequency_trend
+
+    got = dm._softening(said, frequency_trend(windows)[1], windows, 0.004, 10.0, 400.0)
     if extrapolated:
         assert got.amplitude_dependent and got.damping_ratio_std > said.damping_ratio_std, got
     else:

@@ -143,3 +143,20 @@ def test_difference_form_on_accelerometer_only_runs(tmp_path):
     # The weak form of reconstructed signals is not exact: the identified masses land within a
     # few percent of the nominal ones (2e-3 relative was observed on a 2-storey rig).
     assert np.allclose(np.diag(result.M), scenario.structure.masses, rtol=0.05)
+
+
+def test_a_window_of_a_run_is_a_run_of_its_own():
+    """``RunData.window``: the samples asked for, the time from 0, the same channels and added masses, the
+    name given (or the run's); a stop past the end ends at the end."""
+    t = np.arange(10) * 0.01 + 3.0
+    run = mi.RunData(name="r", added_mass=np.array([0.5]), time=t, channels=("zdd", "a1"),
+                     values=np.column_stack([np.arange(10.0), -np.arange(10.0)]))
+    w = run.window(4, 7, name="r@0.04s")
+    assert w.name == "r@0.04s" and w.channels == run.channels and np.array_equal(w.added_mass, run.added_mass)
+    np.testing.assert_allclose(w.time, [0.0, 0.01, 0.02], atol=1e-12)     # round-off of 3.04 - 3.04 etc.
+    assert np.array_equal(w["zdd"], [4.0, 5.0, 6.0]) and np.array_equal(w["a1"], [-4.0, -5.0, -6.0])
+    tail = run.window(8, 99)
+    assert tail.name == "r" and tail.n_samples == 2 and tail.time[0] == 0.0
+    for start, stop in ((10, None), (-1, 5), (5, 5)):
+        with pytest.raises(mi.SensorDataError, match=rf"run 'r': window of samples {start}:{stop}; expected"):
+            run.window(start, stop)

@@ -78,12 +78,17 @@ def test_damping_is_right_or_refused_with_its_reason():
 # ----------------------------------------------------------------------------- windows without a lead-in
 
 def _window(run, start: int, seconds: float = 20.0):
-    from momentid.core.series import RunData
+    return run.window(start, start + int(seconds * run.sample_rate))
 
-    n = int(seconds * run.sample_rate)
-    s = slice(start, start + n)
-    return RunData(name=run.name, added_mass=run.added_mass, time=run.time[s] - run.time[s][0], channels=run.channels,
-                   values=run.values[s])
+
+def _agrees_or_is_refused(window, whole, where) -> None:
+    """One mode's damping of a window against the whole trial's: both answers agree within two standard
+    errors of their difference (a 95 % check), or the window's is refused with its reason."""
+    if window.is_answer and whole.is_answer:
+        gap = abs(window.damping_ratio - whole.damping_ratio)
+        assert gap <= 2 * np.hypot(window.damping_ratio_std, whole.damping_ratio_std), (where, window, whole)
+    else:
+        assert window.is_answer or window.refusal, (where, window)
 
 
 def _windows_agree_or_are_refused(experiment, results, names):
@@ -100,13 +105,8 @@ def _windows_agree_or_are_refused(experiment, results, names):
         window = dataclasses.replace(experiment, runs=(_window(run, start),))
         r = mi.identify(window)
         assert r.noise[0], name                              # where the noise level came from, said
-        whole = results[name]
-        for w, t in zip(r.damping, whole.damping):
-            if w.is_answer and t.is_answer:
-                gap = abs(w.damping_ratio - t.damping_ratio)
-                assert gap <= 2 * np.hypot(w.damping_ratio_std, t.damping_ratio_std), (name, w, t)
-            else:
-                assert w.is_answer or w.refusal, (name, w)
+        for w, t in zip(r.damping, results[name].damping):
+            _agrees_or_is_refused(w, t, name)
 
 
 def test_windows_of_the_stiff_rig_agree_or_are_refused():
@@ -139,12 +139,7 @@ def test_windows_cut_mid_shaking_agree_or_are_refused():
         window = _window(run, int(start * run.sample_rate), seconds=15.0)
         r = mi.identify(dataclasses.replace(experiment, runs=(window,)))
         assert "own scatter" in r.noise[0], r.noise
-        w, t = r.damping[0], results[name].damping[0]
-        if w.is_answer:
-            assert abs(w.damping_ratio - t.damping_ratio) <= 2 * np.hypot(w.damping_ratio_std, t.damping_ratio_std), \
-                (name, start, w, t)
-        else:
-            assert w.refusal, (name, start)
+        _agrees_or_is_refused(r.damping[0], results[name].damping[0], (name, start))
 
 
 def test_windows_holding_a_lead_in_and_the_start_of_a_sine_agree_or_are_refused():
@@ -162,8 +157,4 @@ def test_windows_holding_a_lead_in_and_the_start_of_a_sine_agree_or_are_refused(
     r = mi.identify(dataclasses.replace(experiment, runs=(_window(run, 0, seconds=20.0),)))
     assert "lead-in" in r.noise[0], r.noise
     for k, (w, t) in enumerate(zip(r.damping, whole.damping)):
-        if w.is_answer and t.is_answer:
-            assert abs(w.damping_ratio - t.damping_ratio) <= 2 * np.hypot(w.damping_ratio_std, t.damping_ratio_std), \
-                (k, w, t)
-        else:
-            assert w.is_answer or w.refusal, (k, w)
+        _agrees_or_is_refused(w, t, ("sine_1p0", k + 1))

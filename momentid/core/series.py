@@ -119,6 +119,34 @@ class RunData:
             return float("nan")
         return (self.n_samples - 1) / (self.time[-1] - self.time[0])
 
+    def window(self, start: int, stop: int | None = None, name: str | None = None) -> RunData:
+        """Samples ``start:stop`` as a run of their own, its time from 0 (a record cut out of this one).
+
+        Parameters
+        ----------
+        start, stop : int
+            Sample indices (``stop`` None: to the end; past the end: the end).
+        name : str, optional
+            The window's name (default: this run's).
+
+        Returns
+        -------
+        RunData
+            The same channels and added masses; ``meta`` (what an import recorded of the whole run) is not
+            carried.
+
+        Raises
+        ------
+        SensorDataError
+            ``start`` outside the run, or ``stop`` not after it.
+        """
+        if not 0 <= start < self.n_samples or (stop is not None and stop <= start):
+            raise SensorDataError(f"run {self.name!r}: window of samples {start}:{stop}; expected 0 <= start < stop, "
+                                  f"start below the run's {self.n_samples} samples")
+        s = slice(start, stop)
+        return RunData(name=self.name if name is None else name, added_mass=self.added_mass,
+                       time=self.time[s] - self.time[start], channels=self.channels, values=self.values[s])
+
     def has(self, channel: str) -> bool:
         """Whether the run holds channel ``channel`` (``"zdd"``, ``"a1"``, ...)."""
         return channel in self.channels

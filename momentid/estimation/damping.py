@@ -175,8 +175,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     """Each storey mode's damping at small amplitude, with an honest error, or its refusal.
 
     Per mode, in this order: the free decays when they show a damping that changes with amplitude;
-    else the linear fit when it explains the record to the noise level; else the free decays (a
-    constant damping); else the forced response (refused outright when the table's motion is periodic).
+    else the linear fit when it explains the record to the noise level (its error the larger of its own
+    and its windows'); else the free decays (a constant damping only over a fall of
+    :data:`MIN_CONSTANT_SPAN`; pooled with the windows when too uncertain alone); else the forced
+    response: refused outright when the table's motion is periodic, the windows' value at zero amplitude
+    when their frequency falls with amplitude, refused when they show no trend while another mode shows
+    the rig changing with amplitude.
 
     Parameters
     ----------
@@ -205,11 +209,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     decays = [None if exact else _free_decays(runs, selection, sigma, i, scatter) for i in selection.storey]
     saids = [None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
              for k, i in enumerate(selection.storey)]
+    trends = [0.0 if exact else frequency_trend(w)[1] for w in (windows or [None] * len(saids))]
     # with the noise read from the data's own scatter (it holds the rig's distortion) a linear fit that
     # explains the record proves nothing (on windows of the shipped rigs it answered 1-3 % for modes damped
     # 0.07-0.2 %); a rig that changes with amplitude in any mode gives no mode's damping at small amplitude
     # from windows without a trend of their own (with or without a quiet lead-in)
-    rig_changes = "" if exact else _rig_changes(decays, saids, windows)
+    rig_changes = "" if exact else _rig_changes(decays, saids, windows, trends)
     out = []
     for k, i in enumerate(selection.storey):
         weak = "" if exact else weak_refusal(runs, selection, sigma, i)
@@ -227,7 +232,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         # a trend read from fewer independent stretches than an answer needs is no evidence (Newey-West
         # errors over two stretches are themselves a guess)
         evidence = max(decay.evidence if decay is not None and decay.dof >= MIN_DOF else 0.0,
-                       max(said.evidence, abs(frequency_trend(windows[k])[1])) if said is not None else 0.0)
+                       max(said.evidence, abs(trends[k])) if said is not None else 0.0)
         changes = evidence > needed
         if decay is not None and (changes or not linear):
             answer = replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
@@ -245,7 +250,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         elif exact or (linear and evidence <= HINT_SIGMAS):
             # a linear structure at these amplitudes: the linear fit's damping, its error the larger of the
             # fit's own (white noise) and the windows' (what independent stretches of the record scatter)
-            std, dof = _segment_error(float(sd[model.n + i]), max(fit.dof, 1), None if exact else said)
+            std, dof = _segment_error(float(sd[model.n + i]), max(fit.dof, 1), said)
             out.append(_answer(float(zeta[i]), std, dof, Source.LINEAR, False,
                                0.0, 0.0, float(freq[i]), 0.0, said.amplitude_range if said else (0.0, 0.0),
                                float(zeta[i]), seconds * freq[i]))
@@ -256,7 +261,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
             # amplitude, with the error of that extrapolation
             out.append(_windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i], trend=True))
         else:
-            answer = _softening(said, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+            answer = _softening(said, trends[k], windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
             if rig_changes and not answer.amplitude_dependent and not answer.refusal:
                 lo, hi = answer.amplitude_range
                 answer = replace(answer, refusal=(
@@ -267,13 +272,15 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     return tuple(out)
 
 
-def _softening(said: ModeDamping, windows, equivalent: float, f0: float, cycles: float) -> ModeDamping:
+def _softening(said: ModeDamping, trend: float, windows, equivalent: float, f0: float, cycles: float
+               ) -> ModeDamping:
     """The windows' answer, or, when it is a constant damping but the mode's frequency falls with its
-    amplitude across the windows beyond :data:`~momentid.estimation.ringdown.SLOPE_SIGMAS` standard errors
+    amplitude across the windows (``trend``: the t statistic of :func:`~momentid.estimation.windows.frequency_trend`)
+    beyond :data:`~momentid.estimation.ringdown.SLOPE_SIGMAS` standard errors
     (a joint that softens as it slips, and dissipates more as it does), their trend's value at zero
     amplitude with the error of that extrapolation: the windows' mean is the damping at their amplitudes,
     not at small amplitude."""
-    if said.amplitude_dependent or said.refusal or frequency_trend(windows)[1] >= -ringdown.SLOPE_SIGMAS:
+    if said.amplitude_dependent or said.refusal or trend >= -ringdown.SLOPE_SIGMAS:
         return said
     return _windows_say(windows, equivalent, f0, cycles, trend=True)
 
@@ -287,15 +294,16 @@ def _segment_error(std: float, dof: int, said: ModeDamping | None) -> tuple[floa
     return (said.damping_ratio_std, said.dof) if said.damping_ratio_std > std else (std, dof)
 
 
-def _rig_changes(decays, saids, windows) -> str:
+def _rig_changes(decays, saids, windows, trends) -> str:
     """How the record shows the rig changing with amplitude in some mode ('' when none does): a free decay's
-    damping trend or a frequency moving across the windows, beyond :data:`STRONG_SIGMAS` standard errors
-    (the strength that makes a record the linear fit explains believed amplitude-dependent), or a frequency
-    that moves by more than its half-power width (:func:`_drift_words`)."""
+    damping trend or a frequency moving across the windows (``trends``: t statistics), beyond
+    :data:`STRONG_SIGMAS` standard errors (the strength that makes a record the linear fit explains
+    believed amplitude-dependent), or a frequency that moves by more than its half-power width
+    (:func:`~momentid.estimation.windows.drift_words`)."""
     for k, (decay, said) in enumerate(zip(decays, saids)):
         if decay is not None and decay.dof >= MIN_DOF and decay.evidence > STRONG_SIGMAS:
             return f"the rig's joints change with amplitude (mode {k + 1}'s free decays, {decay.evidence:.2g} sigma)"
-        t = abs(frequency_trend(windows[k])[1]) if windows is not None else 0.0
+        t = abs(trends[k])
         if said is not None and t > STRONG_SIGMAS:
             return f"the rig changes with amplitude (mode {k + 1}'s frequency moves with it, {t:.2g} sigma)"
         moves = drift_words(windows[k], said.equivalent) if said is not None else ""

@@ -61,12 +61,8 @@ class Window(NamedTuple):
 
 def _window_runs(run: RunData, length: int) -> list:
     """Consecutive windows of ``length`` samples as runs of their own (time from 0)."""
-    out = []
-    for a in range(0, run.n_samples - length + 1, length):
-        s = slice(a, a + length)
-        out.append(RunData(name=f"{run.name}@{a / run.sample_rate:.3g}s", added_mass=run.added_mass,
-                           time=run.time[s] - run.time[a], channels=run.channels, values=run.values[s]))
-    return out
+    return [run.window(a, a + length, name=f"{run.name}@{a / run.sample_rate:.3g}s")
+            for a in range(0, run.n_samples - length + 1, length)]
 
 
 def random_effects(z: np.ndarray, s: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -175,11 +175,14 @@ def forked_pool(workers: int, initializer: Callable | None = None, initargs: tup
     try:
         yield pool
     except BaseException:
-        # Interrupted: the tasks' results are not wanted; do not wait for them.
-        pool.shutdown(wait=False, cancel_futures=True)
+        # Interrupted: the tasks' results are not wanted; do not wait for them.  The workers are
+        # killed first, then the pool is shut down waiting for its manager thread, which sees them
+        # gone and ends at once: a manager thread left running would race the interpreter's exit
+        # (CPython 3.11's exit hook writes to its wake-up pipe as it closes: "Bad file descriptor").
         for child in multiprocessing.active_children():
             if child.pid not in before:
                 child.kill()
+        pool.shutdown(wait=True, cancel_futures=True)
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

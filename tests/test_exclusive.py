@@ -21,10 +21,11 @@ from bad_input.faults import held
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
-#: The default scenario lengthened to 60 s: a run long enough (several seconds on one worker) that
-#: a second command starts while the first is still writing.
+#: The default scenario lengthened to 180 s: a run long enough (about 10 s on one worker) that a second
+#: command starts while the first is still writing (at 60 s, about 3.5 s, the first finished first now
+#: and then: a second command takes 1-2 s to start).
 LONG = (ROOT / "momentid" / "lab" / "default_scenario.toml").read_text().replace(
-    "duration = 10.0 ", "duration = 60.0 ")
+    "duration = 10.0 ", "duration = 180.0 ")
 
 def _cli(capsys, *argv) -> tuple[int, str]:
     code = main([str(a) for a in argv])

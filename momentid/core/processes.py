@@ -147,6 +147,11 @@ def helpers_allowed() -> Iterator[bool]:
             release()
 
 
+#: Seconds an interrupted pool's manager thread is given to end (it ends within milliseconds once its
+#: workers are killed).
+MANAGER_GRACE_S = 5.0
+
+
 def _start(parent: int, initializer: Callable | None, initargs: tuple) -> None:
     _deeper()
     die_with_parent(parent)
@@ -175,14 +180,19 @@ def forked_pool(workers: int, initializer: Callable | None = None, initargs: tup
     try:
         yield pool
     except BaseException:
-        # Interrupted: the tasks' results are not wanted; do not wait for them.  The workers are
-        # killed first, then the pool is shut down waiting for its manager thread, which sees them
-        # gone and ends at once: a manager thread left running would race the interpreter's exit
-        # (CPython 3.11's exit hook writes to its wake-up pipe as it closes: "Bad file descriptor").
+        # Interrupted: the tasks' results are not wanted; do not wait for them.  The pool's manager
+        # thread, which sees the workers gone and ends, is given a few seconds to: one left running
+        # races the interpreter's exit (CPython 3.11's exit hook writes to its wake-up pipe as the
+        # thread closes it: "Exception ignored ... Bad file descriptor" after the command's last line).
+        # Shutting down with wait=True instead can deadlock (its queue's feeder blocks on a pipe that
+        # the killed workers no longer read).
+        manager = getattr(pool, "_executor_manager_thread", None)
+        pool.shutdown(wait=False, cancel_futures=True)
         for child in multiprocessing.active_children():
             if child.pid not in before:
                 child.kill()
-        pool.shutdown(wait=True, cancel_futures=True)
+        if manager is not None:
+            manager.join(timeout=MANAGER_GRACE_S)
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

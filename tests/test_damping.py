@@ -233,3 +233,43 @@ def test_windows_whose_frequency_falls_with_amplitude_answer_at_zero_amplitude(f
         assert got.amplitude_dependent and got.damping_ratio_std > said.damping_ratio_std, got
     else:
         assert got is said
+
+
+@pytest.mark.parametrize("damping_slope, answered", [(0.0005, True), (-0.0005, False)])
+def test_windows_refused_for_a_moving_frequency_answer_at_zero_amplitude_when_that_is_below_them(damping_slope,
+                                                                                              answered):
+    """Twelve windows at 0.5-3 m/s^2 whose frequency falls 1.2 % (four half-power half-widths of a 0.3 %
+    mode): their mean is refused, the spread read as damping.  The smear and a slipping joint's damping both
+    grow with amplitude, so their trend's value at zero amplitude answers when it lies below the mean
+    (0.2 % here, within its interval); one above the mean contradicts both and the refusal stands."""
+    from momentid.estimation import damping as dm
+    from momentid.estimation.windows import Window, frequency_trend
+
+    amp = np.linspace(0.5, 3.0, 12)
+    rng = np.random.default_rng(6)
+    zeta0 = 0.002 if damping_slope > 0 else 0.004
+    windows = [Window(zeta0 + damping_slope * a + rng.normal(0, 1e-4), 2e-4, 10.0 - 0.05 * a + rng.normal(0, 2e-3),
+                      3e-3, a) for a in amp]
+    said = dm._windows_say(windows, 0.003, 10.0, 400.0)
+    assert "moves by" in said.refusal, said
+    got = dm._softening(said, frequency_trend(windows)[1], windows, 0.003, 10.0, 400.0)
+    if answered:
+        assert got.is_answer and got.amplitude_dependent, got
+        assert got.interval[0] <= zeta0 <= got.interval[1], got
+    else:
+        assert got is said
+
+
+def test_a_periodic_table_answers_from_the_linear_fit_only_on_a_rig_that_shows_no_change():
+    """Rigs of the damping-coverage set (seed 29) whose tables force their modes only at harmonics.
+    Case 6 (a linear 2-storey, a quiet lead-in): the linear fit explains the record and no mode hints at
+    amplitude dependence, so both modes answer from it (its transients ring at the modes' own frequencies),
+    each interval holding the truth (mode 1 was refused before).  Case 104 (a 3-storey whose joints slip,
+    mode 1 at 2.3x its small-amplitude damping in the fit): mode 2's frequency falls with amplitude at 3.2
+    standard errors, so mode 1, held at one amplitude by the table, stays refused."""
+    from benchmarks import damping_coverage as dc
+
+    linear = dc.evaluate(dc.draw_case(6, 29))["modes"]
+    assert all(m["answer"] and m["covered"] and m["source"] == "linear fit" for m in linear), linear
+    slipping = dc.evaluate(dc.draw_case(104, 29))["modes"]
+    assert not slipping[0]["answer"], slipping[0]

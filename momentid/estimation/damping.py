@@ -177,10 +177,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     Per mode, in this order: the free decays when they show a damping that changes with amplitude;
     else the linear fit when it explains the record to the noise level (its error the larger of its own
     and its windows'); else the free decays (a constant damping only over a fall of
-    :data:`MIN_CONSTANT_SPAN`; pooled with the windows when too uncertain alone); else the forced
-    response: refused outright when the table's motion is periodic, the windows' value at zero amplitude
-    when their frequency falls with amplitude, refused when they show no trend while another mode shows
-    the rig changing with amplitude.
+    :data:`MIN_CONSTANT_SPAN`; pooled with the windows when too uncertain alone); else, when the table's
+    motion is periodic, the linear fit if it explains the record to a noise level read where the table is
+    quiet and no mode hints at the rig changing with amplitude, refused otherwise; else the forced
+    response: the windows' value at zero amplitude when their frequency falls with amplitude (even one
+    that moves beyond the half-power width, when that value lies below the windows' mean), refused when
+    they show no trend while another mode shows the rig changing with amplitude.
 
     Parameters
     ----------
@@ -248,14 +250,19 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"{MIN_CONSTANT_SPAN:g}x is needed)"))
             out.append(_pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
         elif exact or (linear and evidence <= HINT_SIGMAS):
-            # a linear structure at these amplitudes: the linear fit's damping, its error the larger of the
-            # fit's own (white noise) and the windows' (what independent stretches of the record scatter)
-            std, dof = _segment_error(float(sd[model.n + i]), max(fit.dof, 1), said)
-            out.append(_answer(float(zeta[i]), std, dof, Source.LINEAR, False,
-                               0.0, 0.0, float(freq[i]), 0.0, said.amplitude_range if said else (0.0, 0.0),
-                               float(zeta[i]), seconds * freq[i]))
-        elif periodic:
+            # a linear structure at these amplitudes: the linear fit's damping
+            out.append(_linear_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), said,
+                                      float(freq[i]), seconds * freq[i]))
+        elif periodic and not (base_linear and not scatter and _rig_quiet(decays, saids, trends)):
             out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
+        elif periodic:
+            # the table holds the mode at one amplitude, so no trend of its own can show; but the linear fit
+            # explains the record to a noise level read where the table is quiet (noise read from the
+            # scatter holds the rig's distortion: on a window of the flexible rig's sine test it answered
+            # 0.27 % for a mode damped 0.09 %) and no mode shows a hint of the rig changing: the fit's
+            # damping (read from the transients, where the mode rings at its own frequency)
+            out.append(_linear_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), said,
+                                      float(freq[i]), seconds * freq[i]))
         elif linear:
             # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
             # amplitude, with the error of that extrapolation
@@ -279,10 +286,32 @@ def _softening(said: ModeDamping, trend: float, windows, equivalent: float, f0: 
     beyond :data:`~momentid.estimation.ringdown.SLOPE_SIGMAS` standard errors
     (a joint that softens as it slips, and dissipates more as it does), their trend's value at zero
     amplitude with the error of that extrapolation: the windows' mean is the damping at their amplitudes,
-    not at small amplitude."""
-    if said.amplitude_dependent or said.refusal or trend >= -ringdown.SLOPE_SIGMAS:
+    not at small amplitude.  Windows refused because the frequency moves beyond the half-power width
+    answer so too, when the extrapolation comes out below their mean."""
+    if trend >= -ringdown.SLOPE_SIGMAS:
         return said
-    return _windows_say(windows, equivalent, f0, cycles, trend=True)
+    drifts = _drift_refusal(windows, equivalent)
+    if not drifts:
+        return said if said.amplitude_dependent or said.refusal else _windows_say(windows, equivalent, f0, cycles,
+                                                                                  trend=True)
+    at_zero = _windows_say(windows, equivalent, f0, cycles, trend=True, smear=False)
+    z, s = (np.array(x) for x in list(zip(*windows))[:2])
+    mean = float(random_effects(z, s, np.ones((z.size, 1)))[0][0])
+    if at_zero.refusal or not at_zero.amplitude_dependent or at_zero.damping_ratio > mean:
+        # a frequency that moves beyond the half-power width smears the windows' damping upward, and a
+        # slipping joint adds damping as it softens: both vanish at zero amplitude, so the extrapolation
+        # must come out below the windows' mean; one above it contradicts both, and the refusal stands
+        return said
+    return at_zero
+
+
+def _linear_answer(zeta: float, std: float, dof: int, said: ModeDamping | None, f0: float, cycles: float
+                   ) -> ModeDamping:
+    """The linear fit's damping, its error the larger of the fit's own (white noise) and the windows'
+    (what independent stretches of the record scatter: :func:`_segment_error`)."""
+    std, dof = _segment_error(std, dof, said)
+    return _answer(zeta, std, dof, Source.LINEAR, False, 0.0, 0.0, f0, 0.0,
+                   said.amplitude_range if said else (0.0, 0.0), zeta, cycles)
 
 
 def _segment_error(std: float, dof: int, said: ModeDamping | None) -> tuple[float, int]:
@@ -292,6 +321,17 @@ def _segment_error(std: float, dof: int, said: ModeDamping | None) -> tuple[floa
     if said is None or said.dof < MIN_DOF or not np.isfinite(said.damping_ratio_std):
         return std, dof
     return (said.damping_ratio_std, said.dof) if said.damping_ratio_std > std else (std, dof)
+
+
+def _rig_quiet(decays, saids, trends) -> bool:
+    """No mode of the record shows a hint of the rig changing with amplitude: no free decay's damping
+    trend, windows' damping trend or frequency trend (``trends``: t statistics) beyond :data:`HINT_SIGMAS`."""
+    for decay, said, t in zip(decays, saids, trends):
+        if decay is not None and decay.dof >= MIN_DOF and abs(decay.evidence) > HINT_SIGMAS:
+            return False
+        if said is not None and max(abs(said.evidence), abs(t)) > HINT_SIGMAS:
+            return False
+    return True
 
 
 def _rig_changes(decays, saids, windows, trends) -> str:
@@ -434,10 +474,12 @@ def _unknown(equivalent: float, f0: float) -> ModeDamping:
     return _answer(equivalent, np.inf, 1, Source.FORCED, False, 0.0, 0.0, f0, 0.0, (0.0, 0.0), equivalent, 0.0)
 
 
-def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bool = False) -> ModeDamping:
+def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bool = False,
+                 smear: bool = True) -> ModeDamping:
     """The forced-response answer from the windows: their damping ratios' trend in amplitude when they
     show one or ``trend`` asks for it (its value at zero amplitude), else their random-effects mean;
-    refused when the mode's frequency moves across the windows by more than
+    refused (unless ``smear`` is False: a value at zero amplitude, where the spread vanishes) when the
+    mode's frequency moves across the windows by more than
     :data:`~momentid.estimation.windows.DRIFT_LIMIT` of its half-power half-width (a linear fit reads
     that spread as damping)."""
     if len(windows) < 2:
@@ -462,7 +504,7 @@ def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bo
                      float(b[1]) if dependent else 0.0, exponent, f0, 0.0,
                      tuple(np.percentile(amp, [10, 90])), equivalent, cycles)
     slope, _ = frequency_trend(windows)
-    refusal = _drift_refusal(windows, equivalent) or answer.refusal
+    refusal = (_drift_refusal(windows, equivalent) if smear else "") or answer.refusal
     if not refusal and not dependent:
         # windows that read the same damping as the whole record, or their estimate is not one: a window
         # too short for the mode, or edges the windows' transients cannot hold

@@ -11,7 +11,8 @@ and clock offsets; the residual is every trial's floor accelerations against the
 scaled by its own signal.
 
 - **momentid**: :func:`momentid.twin.fit.fit_twin` (scipy's trust-region least squares; the Jacobian's
-  physical columns are forward differences rolled out in one batched ``mujoco.rollout`` per trial, the
+  physical columns are forward differences, each trial replayed as the linear twin's own MuJoCo step map
+  (:mod:`momentid.lab.linear_replay`: the rollout's readings to round-off, in compiled code), the
   sensors' columns exact; at most :data:`momentid.twin.fit.MAX_NFEV` evaluations).
 - **mujoco.sysid**: :func:`mujoco.sysid.optimize` (its default ``"mujoco"`` backend,
   ``mujoco.minimize.least_squares``: Levenberg-Marquardt, every Jacobian column a forward difference,
@@ -64,7 +65,7 @@ def sysid_fit(train, start, substeps=None, max_iters: int = 100):
         out = np.full((sum(sizes), len(models)), twin_fit._INVALID)
         if valid:
             compiled = twin_fit._compiled_by_step(valid, train, substeps)
-            runs = [twin_fit._simulate(valid, t, False, substeps, compiled[t.dt]) for t in train]
+            runs = [twin_fit._simulate(valid, t, False, substeps, compiled[t.dt], linear=False) for t in train]
             column = 0
             for k, m in enumerate(models):
                 if not ok[k]:

@@ -86,7 +86,7 @@ def substeps_for(dt: float) -> int:
 
 
 def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, substeps: int = TIMESTEP_PER_SAMPLE,
-             threads: int | None = None) -> np.ndarray:
+             threads: int | None = None, linear: bool = False) -> np.ndarray:
     """Floor absolute accelerations of compiled twins driven by a recorded table acceleration.
 
     Parameters
@@ -99,6 +99,10 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
         Sample interval (s).
     threads : int, optional
         Rollout threads (default: :data:`ROLLOUT_THREADS`, else the machine's cores; at most one per model).
+    linear : bool
+        The models are linear twins (no mechanism): replayed as MuJoCo's own step map
+        (:mod:`momentid.lab.linear_replay`, the same readings to round-off, ~100x faster); a model that
+        is not linear raises :class:`~momentid.errors.ModelError`.
 
     Returns
     -------
@@ -117,6 +121,11 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
     n = len(zdd)
     jerk = np.repeat(np.diff(zdd) / dt, substeps)
     jerk = np.append(jerk, 0.0)                       # one step more: the last sample's sensors
+    if linear:
+        from momentid.lab import linear_replay
+
+        out = linear_replay.simulate(models, jerk, float(zdd[0]), index, substeps)
+        return _finite(out)
     nthread = max(1, min(threads or ROLLOUT_THREADS or os.cpu_count() or 1, len(models)))
     datas = [mujoco.MjData(first) for _ in range(nthread)]
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -137,6 +146,11 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
         rows = sensors[:, ::substeps][:, :, index]
         out[:, start // substeps:start // substeps + rows.shape[1]] = rows
         state = st[:, -1]
+    return _finite(out)
+
+
+def _finite(out: np.ndarray) -> np.ndarray:
+    """``out``, unless a simulation diverged (:class:`~momentid.errors.SimulationError`)."""
     if not np.all(np.isfinite(out)):
         raise SimulationError("the twin's simulation diverged (non-finite accelerations): expected a smaller "
                               "timestep or physical parameters")

@@ -8,7 +8,8 @@ acceleration, read by the sensors, and the residual of each trial is scaled by t
 that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
 parameter set explains them all).  The optimiser is scipy's trust-region least squares; the Jacobian's
 physical columns are forward differences, all compiled once and re-simulated in one batched rollout per
-trial (:func:`~momentid.lab.resim.simulate`); the sensors' columns are exact (no re-simulation).
+trial (:func:`~momentid.lab.resim.simulate`; a linear twin as MuJoCo's own step map,
+:mod:`momentid.lab.linear_replay`); the sensors' columns are exact (no re-simulation).
 
 Every NRMSE is :func:`~momentid.twin.replay.nrmse` over the floor channels after the trial's
 quiet lead-in.  A trial's low-energy tail (after :data:`FIT_ENERGY` of its floor signal's energy) is not
@@ -28,7 +29,7 @@ import scipy.optimize
 
 from momentid.errors import IdentificationError
 from momentid.lab import resim
-from momentid.lab.sensors import gain_and_delay
+from momentid.lab.sensors import gain_and_delay, padded_length
 from momentid.mechanisms import joint_friction as jf
 from momentid.mechanisms import registry
 from momentid.twin.fitted_rig import (FIT_ENERGY, REFERENCE_DRIFT, FittedRig, Trial, friction_records, friction_start,
@@ -249,17 +250,20 @@ def _steps(substeps: int | None, dt: float) -> int:
 
 
 def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=None,
-              threads: int | None = None) -> np.ndarray:
+              threads: int | None = None, linear: bool | None = None) -> np.ndarray:
     """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
     floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
-    its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step."""
+    its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step.
+    ``linear``: replay as linear twins (:mod:`momentid.lab.linear_replay`; default: when no model has a
+    mechanism), else by ``mujoco.rollout``."""
     substeps = _steps(substeps, tr.dt)
     stop = len(tr.zdd) if whole else tr.fit_stop
     first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
     compiled = resim.compile_models([m.rig() for m in models], tr.dt / substeps) if compiled is None else compiled
     out = np.empty((len(compiled), stop, tr.a.shape[1]))
     out[:, :first] = tr.zdd[None, :first, None]
-    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps, threads=threads)
+    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps, threads=threads,
+                                    linear=not any(m.friction for m in models) if linear is None else linear)
     return out
 
 
@@ -297,10 +301,11 @@ def sensor_jacobian(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
     """
     d, stop = a.shape[1], a.shape[0]
     n = a.shape[0]
-    w = 2 * np.pi * np.fft.rfftfreq(2 * n, tr.dt)[:, None]
-    spectrum = np.fft.rfft(a, 2 * n, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
-    read = np.fft.irfft(spectrum, 2 * n, axis=0)[:n]                 # gain_and_delay(a, gain, offset, dt)
-    rate = np.fft.irfft(1j * w * spectrum, 2 * n, axis=0)[:n]        # its time derivative
+    length = padded_length(n)
+    w = 2 * np.pi * np.fft.rfftfreq(length, tr.dt)[:, None]
+    spectrum = np.fft.rfft(a, length, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
+    read = np.fft.irfft(spectrum, length, axis=0)[:n]                # gain_and_delay(a, gain, offset, dt)
+    rate = np.fft.irfft(1j * w * spectrum, length, axis=0)[:n]       # its time derivative
     rows = stop - tr.start
     J = np.zeros((rows, d, 2 * d))
     for j in range(d):

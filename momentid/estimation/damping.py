@@ -217,6 +217,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     # 0.07-0.2 %); a rig that changes with amplitude in any mode gives no mode's damping at small amplitude
     # from windows without a trend of their own (with or without a quiet lead-in)
     rig_changes = "" if exact else _rig_changes(decays, saids, windows, trends)
+    # a periodic table holds a mode at one amplitude (no trend of its own can show), yet the linear fit may
+    # answer it (read from the transients, where the mode rings at its own frequency) when it explains the
+    # record to a noise level read where the table is quiet (noise read from the scatter holds the rig's
+    # distortion: on a window of the flexible rig's sine test it answered 0.27 % for a mode damped 0.09 %)
+    # and no mode shows a hint of the rig changing
+    periodic_linear = base_linear and not scatter and (exact or _rig_quiet(decays, saids, trends))
     out = []
     for k, i in enumerate(selection.storey):
         weak = "" if exact else weak_refusal(runs, selection, sigma, i)
@@ -249,20 +255,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"grows with amplitude, so the damping at small amplitude is not read (at least "
                     f"{MIN_CONSTANT_SPAN:g}x is needed)"))
             out.append(_pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i]))
-        elif exact or (linear and evidence <= HINT_SIGMAS):
+        elif exact or (linear and evidence <= HINT_SIGMAS) or (periodic and periodic_linear):
             # a linear structure at these amplitudes: the linear fit's damping
             out.append(_linear_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), said,
                                       float(freq[i]), seconds * freq[i]))
-        elif periodic and not (base_linear and not scatter and _rig_quiet(decays, saids, trends)):
-            out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
         elif periodic:
-            # the table holds the mode at one amplitude, so no trend of its own can show; but the linear fit
-            # explains the record to a noise level read where the table is quiet (noise read from the
-            # scatter holds the rig's distortion: on a window of the flexible rig's sine test it answered
-            # 0.27 % for a mode damped 0.09 %) and no mode shows a hint of the rig changing: the fit's
-            # damping (read from the transients, where the mode rings at its own frequency)
-            out.append(_linear_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), said,
-                                      float(freq[i]), seconds * freq[i]))
+            out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
         elif linear:
             # a hint of amplitude dependence (three standard errors, not four): the windows' value at zero
             # amplitude, with the error of that extrapolation

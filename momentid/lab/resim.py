@@ -101,7 +101,7 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
         Rollout threads (default: :data:`ROLLOUT_THREADS`, else the machine's cores; at most one per model).
     linear : bool
         The models are linear twins (no mechanism): replayed as MuJoCo's own step map
-        (:mod:`momentid.lab.linear_replay`, the same readings to round-off, ~100x faster); a model that
+        (:mod:`momentid.lab.linear_replay`: the same readings to round-off, about 50x faster); a model that
         is not linear raises :class:`~momentid.errors.ModelError`.
 
     Returns

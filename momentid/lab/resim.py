@@ -17,9 +17,11 @@ samples, as ideal sensors read them (the sensors' gains and clock offsets are ap
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import contextlib
+from collections.abc import Iterable, Sequence
 import math
 import os
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -28,8 +30,11 @@ from numpy.typing import ArrayLike
 
 from momentid.core import counters
 from momentid.errors import ModelError, SimulationError
+from momentid import mechanisms as registry
+from momentid.lab import native_forces
 from momentid.lab import rig as lab_rig
 from momentid.lab.rig_model import RigModel
+from momentid.lab.tendons import pair_coefficient
 
 __all__ = ["build_spec", "compile_models", "simulate", "modal_damping", "TIMESTEP_PER_SAMPLE", "substeps_for",
            "STOREY_HEIGHT", "BASE_MASS"]
@@ -63,17 +68,48 @@ def modal_damping(masses: ArrayLike, K: np.ndarray, zeta: ArrayLike) -> np.ndarr
 def build_spec(rig: RigModel, timestep: float, name: str = "rig_twin") -> mujoco.MjSpec:
     """The MJCF of ``rig`` as the re-simulation runs it (:func:`momentid.lab.rig.build_spec`: integrator
     ``implicitfast`` at ``timestep`` (s), the table and floor accelerometers only), whose written MJCF keeps
-    the bodies' masses (stock MuJoCo needs them)."""
-    spec = lab_rig.build_spec(rig, timestep=timestep, name=name, integrator=mujoco.mjtIntegrator.mjINT_IMPLICITFAST,
+    the bodies' masses (stock MuJoCo needs them).  A rig with a force whose state MuJoCo integrates
+    (Bouc-Wen's hysteretic drift) runs RK4: under implicitfast the state, stepped by explicit Euler, lags
+    the drift by a step, and the force on that lag is a negative damping of ``(1 - alpha) k dt``, several
+    times a lightly damped storey's own (the twin diverged)."""
+    stateful = any(registry.get(m.type).has_state(dict(m.parameters)) for m in rig.mechanisms)
+    integrator = mujoco.mjtIntegrator.mjINT_RK4 if stateful else mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec = lab_rig.build_spec(rig, timestep=timestep, name=name, integrator=integrator,
                               sensors=("zdd", "a"))
     spec.compiler.saveinertial = True
     return spec
 
 
+class _Storeys(NamedTuple):
+    storey_stiffness: list
+
+
 def compile_models(rigs: Iterable[RigModel], timestep: float) -> list[mujoco.MjModel]:
     """Compiled ``mujoco.MjModel`` of each :class:`~momentid.lab.rig_model.RigModel` (all of one layout: the
-    same tendons and mechanisms' places), by :func:`build_spec`."""
-    return [lab_rig.compile_model(build_spec(r, timestep)) for r in rigs]
+    same tendons and mechanisms' places), by :func:`build_spec`; a rig's callback forces (Bouc-Wen's, with
+    its state) loaded as the native callbacks' program (:mod:`~momentid.lab.native_forces`), a kind that
+    takes a share of its storey's stiffness taking it from the rig's ``K``.
+
+    Raises
+    ------
+    ModelError
+        A callback force with no native law (the re-simulation runs no Python in MuJoCo's step).
+    """
+    out = []
+    for r in rigs:
+        model = lab_rig.compile_model(build_spec(r, timestep))
+        if any(registry.get(m.type).callback for m in r.mechanisms):
+            storeys = _Storeys([pair_coefficient(r.K, s - 1, s) for s in range(1, r.storeys + 1)])
+            if not native_forces.load_program(model, r.mechanisms, storeys):
+                raise ModelError(f"mechanisms {[m.type for m in r.mechanisms]}: a callback force without a native "
+                                 f"law (numba) cannot be re-simulated; expected kinds whose laws compile")
+        out.append(model)
+    return out
+
+
+def _programs(models: Sequence[mujoco.MjModel]) -> bool:
+    """Whether any of ``models`` carries native callback forces."""
+    return any(m.nnumeric and m.numeric(0).name == native_forces.PROGRAM for m in models)
 
 
 def substeps_for(dt: float) -> int:
@@ -140,12 +176,15 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
     out = np.empty((len(models), n, d))
     steps = len(jerk)
     chunk = substeps * max(1, _CHUNK_STEPS // substeps)
-    for start in range(0, steps, chunk):
-        stop = min(steps, start + chunk)
-        st, sensors = _rollout.rollout(models, datas, state, jerk[None, start:stop, None])
-        rows = sensors[:, ::substeps][:, :, index]
-        out[:, start // substeps:start // substeps + rows.shape[1]] = rows
-        state = st[:, -1]
+    control = np.zeros((1, steps, first.nu))           # the table's jerk; a force's state actuator takes none
+    control[0, :, 0] = jerk
+    with native_forces.installed() if _programs(models) else contextlib.nullcontext():
+        for start in range(0, steps, chunk):
+            stop = min(steps, start + chunk)
+            st, sensors = _rollout.rollout(models, datas, state, control[:, start:stop])
+            rows = sensors[:, ::substeps][:, :, index]
+            out[:, start // substeps:start // substeps + rows.shape[1]] = rows
+            state = st[:, -1]
     return _finite(out)
 
 

@@ -12,7 +12,8 @@ storey tendon keeps ``k x``; the callback adds ``(1 - alpha) k (z - x)``.  ``z``
 simulator integrates it as a MuJoCo state (:meth:`~momentid.mechanisms.base.MechanismKind.has_state`),
 so every RK4 stage sees its own trial value.
 
-Truth only: hidden scenarios carry it to test the diagnosis's open search.
+Hidden scenarios carry it to test the diagnosis's open search, and a real rig's twin fits it
+(``real_rig``: :meth:`BoucWen.twin_parameters`; re-simulated with its compiled law and state).
 """
 
 from __future__ import annotations
@@ -26,7 +27,11 @@ from momentid.mechanisms.base import MechanismKind, Param, Signal, Target
 from momentid.mechanisms.native import NativeLaw
 from momentid.mechanisms.registry import register
 
-__all__ = ["BoucWen", "bouc_wen_rate", "bouc_wen_state"]
+__all__ = ["BoucWen", "bouc_wen_rate", "bouc_wen_state", "TWIN_ALPHA"]
+
+#: A real rig's twin starts its Bouc-Wen storeys with this share of the stiffness elastic (the rest
+#: hysteretic): at 1, the hysteresis would vanish and with it the fit's gradient in its other parameters.
+TWIN_ALPHA = 0.9
 
 
 def bouc_wen_rate(z: Signal, velocity: Signal, yield_drift: Signal, exponent: Signal, beta: float) -> Signal:
@@ -80,6 +85,7 @@ class BoucWen(MechanismKind):
               Param("beta", "1", "share of the loop's shape term in |x'| (gamma = 1 - beta)", low=0.0, high=1.0,
                     example=0.5))
     truth_only = True
+    real_rig = True
     callback = True
     needs_stiffness = True
     summary = "alpha k x + (1 - alpha) k z across a storey, z: Bouc-Wen hysteretic drift (yield drift x_y)"
@@ -100,3 +106,11 @@ class BoucWen(MechanismKind):
     def native_law(self) -> NativeLaw:
         """The compiled force and state rate."""
         return NativeLaw(_native_force, _native_rate)
+
+    def twin_parameters(self, stiffness: float, damping: float, drift: float, velocity: float) -> dict:
+        """A storey of a real rig's twin: from a tenth of the stiffness hysteretic (``alpha`` 0.9), yielding
+        at the training trials' peak drift with a rounded yield (exponent 2, ``beta`` 0.5); ``alpha`` within
+        0-1, the yield drift within 0.02-20 times the peak drift, the exponent within 1-10 (below the yield the
+        storey keeps its stiffness: the linear twin's modes at small amplitude)."""
+        return {"alpha": (1.0, TWIN_ALPHA, 0.0, 1.0), "yield_drift": (drift, drift, 0.02 * drift, 20.0 * drift),
+                "exponent": (1.0, 2.0, 1.0, 10.0), "beta": (1.0, 0.5, 0.0, 1.0)}

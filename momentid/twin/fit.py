@@ -2,10 +2,10 @@
 
 The twin (:class:`~momentid.twin.fitted_rig.FittedRig`: stated floor masses, a full stiffness matrix, modal
 damping, records of the registry's real-rig kinds in chosen storeys (``joint_friction``, ``cubic_spring``,
-``quadratic_damping``: each MJCF-only, no Python in the loop), one gain and clock offset per floor
-sensor) is fitted by output error: every training trial is re-simulated through MuJoCo under its recorded table
-acceleration, read by the sensors, and the residual of each trial is scaled by that trial's signal so
-that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
+``quadratic_damping``: MJCF-only; ``bouc_wen``: its compiled law; no Python in the loop), one gain and clock
+offset per floor sensor) is fitted by output error: every training trial is re-simulated through MuJoCo
+under its recorded table acceleration, read by the sensors, and the residual of each trial is scaled by
+that trial's signal so that the fit minimises the sum of the trials' squared NRMSE (every amplitude counts alike; one
 parameter set explains them all).  The optimiser is scipy's trust-region least squares; the Jacobian's
 physical columns are forward differences, all compiled once and re-simulated in one batched rollout per
 trial (:func:`~momentid.lab.resim.simulate`; a linear twin as MuJoCo's own step map,

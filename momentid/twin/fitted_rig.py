@@ -46,8 +46,8 @@ class FittedRig:
     damping_ratio : ndarray, shape (d,)
         Modal viscous damping ratios (1) on the modes of (M, K), ascending frequency.
     friction : tuple of Mechanism
-        Records of real-rig kinds (``joint_friction``, ``cubic_spring``, ``quadratic_damping``; at most one
-        of a kind per storey; the field keeps its first kind's name); empty: the linear twin.
+        Records of real-rig kinds (``joint_friction``, ``cubic_spring``, ``quadratic_damping``, ``bouc_wen``; at
+        most one of a kind per storey; the field keeps its first kind's name); empty: the linear twin.
     gain, offset : ndarray, shape (d,)
         Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
     """

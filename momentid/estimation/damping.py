@@ -264,12 +264,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"grows with amplitude, so the damping at small amplitude is not read (at least "
                     f"{MIN_CONSTANT_SPAN:g}x is needed)"))
             answer = _pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
-            out.append(whole.instead(answer, i, k, _imprecise(answer), periodic, windows))
+            out.append(whole.instead(answer, i, k, periodic, windows))
         elif exact or (linear and evidence <= HINT_SIGMAS) or (periodic and periodic_linear):
             # a linear structure at these amplitudes: the linear fit's damping
             answer = _linear_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), said,
                                     float(freq[i]), seconds * freq[i])
-            out.append(whole.instead(answer, i, k, _imprecise(answer), periodic, windows))
+            out.append(whole.instead(answer, i, k, periodic, windows))
         elif periodic:
             out.append(replace(_unknown(float(zeta[i]), float(freq[i])), refusal=periodic))
         elif linear:
@@ -284,7 +284,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"{rig_changes}, and this mode's windows ({lo:.2g}-{hi:.2g} m/s^2) show no trend of their own: "
                     f"their damping ({100 * answer.damping_ratio:.3g} %) is the damping at those amplitudes, not at "
                     f"small amplitude"))
-            out.append(whole.instead(answer, i, k, _imprecise(answer), periodic, windows))
+            out.append(whole.instead(answer, i, k, periodic, windows))
     return tuple(out)
 
 
@@ -316,13 +316,12 @@ def _softening(said: ModeDamping, trend: float, windows, equivalent: float, f0: 
 
 class _WholeRecord:
     """The whole record's linear fit, its error the larger of its own and the delete-a-block jackknife's
-    (computed once, when first needed), for an answer refused only as too uncertain: a lightly damped mode's
-    damping is read from the record as a whole.  Only when the fit explains the record to its noise level
-    (:data:`LINEAR_MISFIT`; a window of the flexible rig's sine test, at 2.4x, read 0.58 % for 0.26 %), is
-    more certain than the refused estimate, agrees with it within :data:`POOL_SIGMAS` (a stiff rig's window,
-    noise from its scatter: 2.8 % against two decays' 0.25 +- 0.20 %) and that shows no amplitude law (on
-    both rigs' windows the fit read 2x such); never where a mode hints at the rig changing (``allowed``), a
-    table is periodic or a frequency moves beyond the half-power width (the fit reads these as damping)."""
+    (computed once, when needed), for an answer refused only as too uncertain.  Only when the fit explains the
+    record to its noise level (:data:`LINEAR_MISFIT`; a window of the flexible rig's sine test, at 2.4x, read
+    0.58 % for 0.26 %), is more certain than the refused estimate, agrees with it within :data:`POOL_SIGMAS`
+    (a stiff rig's window, noise from its scatter: 2.8 % against two decays' 0.25 +- 0.20 %) and that shows
+    no amplitude law (on both rigs' windows the fit read 2x such); never where a mode hints at the rig
+    changing (``allowed``), a table is periodic or a frequency moves beyond the half-power width."""
 
     def __init__(self, runs, selection, sigma, allowed: bool):
         self.runs, self.selection, self.sigma, self.allowed = runs, selection, sigma, allowed
@@ -331,12 +330,13 @@ class _WholeRecord:
     def jackknife(self):
         return block_jackknife(self.runs, self.selection, self.sigma)
 
-    def instead(self, answer: ModeDamping, i: int, k: int, imprecise: bool, periodic: str, windows) -> ModeDamping:
+    def instead(self, answer: ModeDamping, i: int, k: int, periodic: str, windows) -> ModeDamping:
+        """``answer`` (mode ``i``, the ``k``-th storey mode), or the whole record's in its place."""
         model, fit = self.selection.model, self.selection.fit
         z, f0 = float(model.zeta(fit.theta)[i]), float(model.omega(fit.theta)[i] / (2 * np.pi))
-        if not (self.allowed and imprecise and not answer.amplitude_dependent and fit.scale <= LINEAR_MISFIT ** 2
-                ) or periodic or (
-                windows is not None and _drift_refusal(windows[k], z)) or self.jackknife is None:
+        eligible = (self.allowed and _imprecise(answer) and not answer.amplitude_dependent and not periodic
+                    and fit.scale <= LINEAR_MISFIT ** 2 and not (windows is not None and _drift_refusal(windows[k], z)))
+        if not eligible or self.jackknife is None:
             return answer
         std = max(float(np.sqrt(max(fit.covariance[model.n + i, model.n + i], 0.0))),
                   float(self.jackknife.damping_ratio_std[i]))

@@ -22,7 +22,7 @@ from momentid.core.series import RunData
 from momentid.errors import MomentidError
 from momentid.estimation.eiv import spectra
 from momentid.estimation.modal import refine
-from momentid.estimation.windows import WINDOW_FREQUENCY_SPAN
+from momentid.estimation.windows import refit_bounds
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
@@ -77,10 +77,8 @@ def block_jackknife(runs: Sequence[RunData], selection: ModeSelection, sigma: Se
         None when fewer than three refits succeed (no spread to read).
     """
     model, fit = selection.model, selection.fit
-    w0 = model.omega(fit.theta)
-    f1 = float(np.min(w0[list(selection.storey)]) / (2 * np.pi))
-    bounds = {i: (w0[i] / (2 * np.pi) * (1 - WINDOW_FREQUENCY_SPAN), w0[i] / (2 * np.pi) * (1 + WINDOW_FREQUENCY_SPAN))
-              for i in range(model.n)}
+    f1 = float(np.min(model.omega(fit.theta)[list(selection.storey)]) / (2 * np.pi))
+    bounds = refit_bounds(model, fit.theta)
     starts = np.cumsum([0] + [run.n_samples for run in runs])
     edges = np.linspace(0, starts[-1], blocks + 1).round().astype(int)
     refits = []

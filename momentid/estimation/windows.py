@@ -20,13 +20,13 @@ from momentid.errors import MomentidError
 from momentid.estimation import ringdown
 from momentid.estimation.eiv import spectra
 from momentid.estimation.modal import refine
-from momentid.estimation.modal_model import MAX_ABS_DAMPING
+from momentid.estimation.modal_model import MAX_ABS_DAMPING, ModalModel
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
 
-__all__ = ["Window", "forced_windows", "random_effects", "frequency_trend", "drift_words", "drift", "band_noise",
-           "WINDOW_CYCLES", "MIN_WINDOWS", "DRIFT_LIMIT", "WINDOW_FREQUENCY_SPAN", "BOUND_SLACK",
+__all__ = ["Window", "forced_windows", "refit_bounds", "random_effects", "frequency_trend", "drift_words", "drift",
+           "band_noise", "WINDOW_CYCLES", "MIN_WINDOWS", "DRIFT_LIMIT", "WINDOW_FREQUENCY_SPAN", "BOUND_SLACK",
            "MIN_SIGNAL_TO_NOISE"]
 
 #: Windows of the forced-response estimate hold this many cycles of mode 1 ...
@@ -124,9 +124,7 @@ def forced_windows(runs: Sequence[RunData], selection: ModeSelection, sigma: Seq
     d = model.d
     f1 = float(np.min(model.omega(fit.theta)[storey_index]) / (2 * np.pi))
     out = [[] for _ in storey_index]
-    w0 = model.omega(fit.theta)
-    bounds = {i: (w0[i] / (2 * np.pi) * (1 - WINDOW_FREQUENCY_SPAN), w0[i] / (2 * np.pi) * (1 + WINDOW_FREQUENCY_SPAN))
-              for i in range(model.n)}
+    bounds = refit_bounds(model, fit.theta)
     for r, run in enumerate(runs):
         length = int(min(WINDOW_CYCLES / f1, run.n_samples / run.sample_rate / MIN_WINDOWS) * run.sample_rate)
         theta = fit.theta.copy()
@@ -155,6 +153,25 @@ def forced_windows(runs: Sequence[RunData], selection: ModeSelection, sigma: Seq
                 if amplitude >= MIN_SIGNAL_TO_NOISE * noise:
                     out[k].append(Window(z, s, float(w[i]), float(w[i] * sd[i]), amplitude))
     return out
+
+
+def refit_bounds(model: ModalModel, theta: np.ndarray) -> dict[int, tuple[float, float]]:
+    """Per mode of ``model``, the frequency range (Hz) a refit of part of a record may move it in:
+    :data:`WINDOW_FREQUENCY_SPAN` either side of the whole record's (``theta``).
+
+    Parameters
+    ----------
+    model : ModalModel
+    theta : ndarray, shape (p,)
+        The whole record's fit.
+
+    Returns
+    -------
+    dict of int to (float, float)
+        ``refine``'s ``frequency_bounds``.
+    """
+    f0 = model.omega(theta) / (2 * np.pi)
+    return {i: (f0[i] * (1 - WINDOW_FREQUENCY_SPAN), f0[i] * (1 + WINDOW_FREQUENCY_SPAN)) for i in range(model.n)}
 
 
 def _held(f: float, z: float, f_bounds: tuple[float, float]) -> bool:

@@ -11,6 +11,7 @@ from momentid.core.structure import Mechanism
 from momentid.diagnosis.twin.folds import linear_start
 from momentid.errors import ModelError
 from momentid.lab import linear_replay, resim
+from momentid.lab.sensors import gain_and_delay
 from momentid.twin import fit as twin_fit
 
 from conftest import DATA
@@ -46,3 +47,31 @@ def test_a_twin_with_a_mechanism_is_not_replayed_as_linear(kind, parameters):
         linear_replay.check_linear(model)
     linear_replay.check_linear(resim.compile_models([twin_fit.FittedRig(twin.masses, twin.stiffness,
                                                                         twin.damping_ratio).rig()], 1.0 / 240)[0])
+
+
+def test_one_map_per_sample_is_the_step_map_repeated():
+    """A control held over each sample's substeps replays one lifted map per sample; a control that varies
+    inside a sample steps every substep.  A change after the last reading varies the last sample only
+    where it is never read, so both paths must read the same to round-off."""
+    experiment = mi.import_folder(DATA / "mini_shake_table" / "stiff_1storey")
+    twin = linear_start(experiment, "el_centro_1")
+    tr = twin_fit.trial(experiment.run("northridge_1"), experiment.storeys)
+    substeps = 3
+    model = resim.compile_models([twin.rig()], tr.dt / substeps)[0]
+    held = np.repeat(np.diff(tr.zdd, append=tr.zdd[-1]) / tr.dt, substeps)
+    varied = held.copy()
+    varied[-1] += 1.0                     # after the last sample's reading: never read
+    rows = np.arange(model.nsensordata)
+    lifted = linear_replay.simulate([model], held, float(tr.zdd[0]), rows, substeps)
+    stepped = linear_replay.simulate([model], varied, float(tr.zdd[0]), rows, substeps)
+    assert lifted.shape == stepped.shape == (1, tr.zdd.size, rows.size)
+    assert np.max(np.abs(lifted - stepped)) <= ROUND_OFF * np.sqrt(np.mean(stepped ** 2))
+
+
+def test_sensors_read_a_batch_as_each_simulation_alone():
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((4, 500, 3))
+    gain, offset = np.array([1.01, 0.98, 1.0]), np.array([0.002, -0.001, 0.0])
+    batch = gain_and_delay(a, gain, offset, 0.01)
+    alone = np.stack([gain_and_delay(x, gain, offset, 0.01) for x in a])
+    assert np.array_equal(batch, alone)   # the same transforms, one call: bit for bit

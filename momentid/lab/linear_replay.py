@@ -120,12 +120,37 @@ def simulate(models: Sequence[mujoco.MjModel], jerk: np.ndarray, act0: float, ro
     jerk = np.ascontiguousarray(jerk, float)
     n_out = -(-jerk.size // substeps)
     out = np.empty((len(maps), n_out, len(rows)))
+    held = _held(jerk, substeps)
     for k, (A, B, C, D, y0) in enumerate(maps):
         x0 = np.zeros(A.shape[0])
         x0[act] = act0
-        _run(A, np.ascontiguousarray(B[:, 0]), np.ascontiguousarray(C[rows]), np.ascontiguousarray(D[rows, 0]),
-             np.ascontiguousarray(y0[rows]), x0, jerk, substeps, out[k])
+        b, control, steps = np.ascontiguousarray(B[:, 0]), jerk, substeps
+        if held is not None:                 # one map per sample: substeps times fewer multiplies
+            A, b, control, steps = *_lifted(A, b, substeps), held, 1
+        _run(A, b, np.ascontiguousarray(C[rows]), np.ascontiguousarray(D[rows, 0]), np.ascontiguousarray(y0[rows]),
+             x0, control, steps, out[k])
     return out
+
+
+def _held(jerk: np.ndarray, substeps: int) -> np.ndarray | None:
+    """The control per sample when it is held over each sample's ``substeps`` (more than one) steps (as
+    :func:`momentid.lab.resim.simulate` drives the table: one jerk per sample interval), else None."""
+    n_out = -(-jerk.size // substeps)
+    if substeps < 2 or not jerk.size:
+        return None
+    padded = np.concatenate([jerk, np.full(n_out * substeps - jerk.size, jerk[-1])])
+    blocks = padded.reshape(n_out, substeps)
+    return np.ascontiguousarray(blocks[:, 0]) if np.array_equal(blocks, blocks[:, :1].repeat(substeps, 1)) else None
+
+
+def _lifted(A: np.ndarray, b: np.ndarray, substeps: int) -> tuple[np.ndarray, np.ndarray]:
+    """The step map over ``substeps`` steps under a held control: ``x <- A^s x + (A^(s-1) + ... + 1) b u``
+    (the same map as stepping ``substeps`` times, to round-off; one multiply per sample, not per step)."""
+    lifted, gain = np.eye(A.shape[0]), np.zeros_like(b)
+    for _ in range(substeps):
+        gain = A @ gain + b
+        lifted = A @ lifted
+    return np.ascontiguousarray(lifted), np.ascontiguousarray(gain)
 
 
 @numba.njit(cache=True, nogil=True)

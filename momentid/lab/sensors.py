@@ -129,8 +129,9 @@ def gain_and_delay(a: np.ndarray, gain: ArrayLike, offset: ArrayLike, dt: float,
 
     Parameters
     ----------
-    a : ndarray, shape (n, d)
-        Accelerations (m/s^2).
+    a : ndarray, shape (..., n, d)
+        Accelerations (m/s^2); leading axes are a batch (several simulations read by the same sensors:
+        one transform for all of them).
     gain, offset : array_like, shape (d,)
         Gain (1) and clock offset (s, positive: lags) of each channel.
     dt : float
@@ -140,16 +141,16 @@ def gain_and_delay(a: np.ndarray, gain: ArrayLike, offset: ArrayLike, dt: float,
 
     Returns
     -------
-    ndarray, shape (n, d)
+    ndarray, shape (..., n, d)
         The readings (m/s^2).
     """
-    n = a.shape[0]
+    n = a.shape[-2]
     length = padded_length(n)
-    spectrum = np.fft.rfft(a, length, axis=0)
-    w_bins = 2 * np.pi * np.fft.rfftfreq(length, dt)
+    spectrum = scipy.fft.rfft(a, length, axis=-2)
+    w_bins = 2 * np.pi * scipy.fft.rfftfreq(length, dt)
     gain, offset = np.asarray(gain, float)[None, :], np.asarray(offset, float)[None, :]
     spectrum *= np.exp(1j * w_bins[:, None] * offset) / gain if undo else gain * np.exp(-1j * w_bins[:, None] * offset)
-    return np.fft.irfft(spectrum, length, axis=0)[:n]
+    return scipy.fft.irfft(spectrum, length, axis=-2)[..., :n, :]
 
 
 def padded_length(n: int) -> int:

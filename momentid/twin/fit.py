@@ -25,7 +25,9 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+import scipy.fft
 import scipy.optimize
+from threadpoolctl import threadpool_limits
 
 from momentid.errors import IdentificationError
 from momentid.lab import resim
@@ -275,9 +277,12 @@ def _compiled_by_step(models, trials, substeps: int | None) -> dict:
 
 
 def _residual(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
+    """The fit's residual on ``tr`` of floor accelerations ``a`` (stop, d) read by ``model``'s sensors;
+    ``a`` of shape (k, stop, d), k simulations read by the same sensors: (k, rows) in one transform."""
     read = gain_and_delay(a, model.gain, model.offset, tr.dt)
-    stop = a.shape[0]
-    return ((tr.a[tr.start:stop] - read[tr.start:stop]) / tr.norm).ravel()
+    stop = a.shape[-2]
+    out = (tr.a[tr.start:stop] - read[..., tr.start:stop, :]) / tr.norm
+    return out.reshape(*a.shape[:-2], -1)
 
 
 def sensor_jacobian(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
@@ -302,10 +307,10 @@ def sensor_jacobian(model: FittedRig, a: np.ndarray, tr: Trial) -> np.ndarray:
     d, stop = a.shape[1], a.shape[0]
     n = a.shape[0]
     length = padded_length(n)
-    w = 2 * np.pi * np.fft.rfftfreq(length, tr.dt)[:, None]
-    spectrum = np.fft.rfft(a, length, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
-    read = np.fft.irfft(spectrum, length, axis=0)[:n]                # gain_and_delay(a, gain, offset, dt)
-    rate = np.fft.irfft(1j * w * spectrum, length, axis=0)[:n]       # its time derivative
+    w = 2 * np.pi * scipy.fft.rfftfreq(length, tr.dt)[:, None]
+    spectrum = scipy.fft.rfft(a, length, axis=0) * np.asarray(model.gain)[None, :] * np.exp(-1j * w * model.offset)
+    read = scipy.fft.irfft(spectrum, length, axis=0)[:n]                # gain_and_delay(a, gain, offset, dt)
+    rate = scipy.fft.irfft(1j * w * spectrum, length, axis=0)[:n]       # its time derivative
     rows = stop - tr.start
     J = np.zeros((rows, d, 2 * d))
     for j in range(d):
@@ -329,26 +334,34 @@ class _Problem:
         self.nfev += 1
         return self.residual(theta)
 
-    def sims(self, theta):
+    def _point(self, theta):
+        """The simulations (per trial) and the residual at ``theta``, each trial on its own thread
+        (computed once per point)."""
         key = theta.tobytes()
         if key != self.cache_key:
             model = self.layout.unpack(theta)
             if _valid(model):
                 compiled = _compiled_by_step([model], self.trials, self.substeps)
-                self.cache = each(lambda t: _simulate([model], t, False, self.substeps, compiled[t.dt], threads=1)[0],
-                                  self.trials)
+
+                def one(t):
+                    a = _simulate([model], t, False, self.substeps, compiled[t.dt], threads=1)[0]
+                    return a, _residual(model, a, t)
+
+                sims, residuals = zip(*each(one, self.trials))
+                self.cache = list(sims), np.concatenate(residuals)
             else:
-                self.cache = None
+                self.cache = None, np.full(sum(self.sizes), _INVALID)
             self.cache_key = key
             self.nsim += 1
         return self.cache
 
+    def sims(self, theta):
+        """The floor accelerations (per trial) at ``theta``, or None where the model is not valid."""
+        return self._point(theta)[0]
+
     def residual(self, theta):
-        sims = self.sims(theta)
-        if sims is None:
-            return np.full(sum(self.sizes), _INVALID)
-        model = self.layout.unpack(theta)
-        return np.concatenate([_residual(model, a, t) for a, t in zip(sims, self.trials)])
+        """The fit's residual at ``theta`` (every trial's rows, in order)."""
+        return self._point(theta)[1].copy()
 
     def jacobian(self, theta):
         if self.nfev >= self.max_nfev and self.last_jacobian is not None:
@@ -380,19 +393,25 @@ class _Problem:
         ok = [_valid(m) for m in phys]
         valid = [m for m, v in zip(phys, ok) if v]
         compiled = _compiled_by_step(valid, self.trials, self.substeps) if valid else {}
-        runs = [_simulate(valid, t, False, self.substeps, compiled[t.dt]) if valid else None for t in self.trials]
         model = self.layout.unpack(theta)
-        row = 0
-        for k, t in enumerate(self.trials):
-            size = self.sizes[k]
-            column = 0
-            for i in range(self.layout.n_phys):
-                if not ok[i]:
-                    continue
-                J[row:row + size, i] = (_residual(phys[i], runs[k][column], t) - base[row:row + size]) / steps[i]
-                column += 1
-            J[row:row + size, self.layout.n_phys:] = sensor_jacobian(model, sims[k], t)
-            row += size
+        columns = np.flatnonzero(ok)
+        rows = np.cumsum([0, *self.sizes])
+
+        def block(k):                  # trial k's rows: the perturbed models read by the point's own sensors
+            t, rows_k = self.trials[k], slice(rows[k], rows[k + 1])
+            if columns.size:
+                # linear twins replay in compiled loops that release the GIL: the trials run side by side;
+                # a mechanism's rollouts spread their models over MuJoCo's threads instead
+                run = _simulate(valid, t, False, self.substeps, compiled[t.dt], threads=1 if linear else None)
+                J[rows_k, columns] = ((_residual(model, run, t) - base[rows_k]) / steps[columns, None]).T
+            J[rows_k, self.layout.n_phys:] = sensor_jacobian(model, sims[k], t)
+
+        linear = not any(m.friction for m in valid)
+        if linear:
+            each(block, range(len(self.trials)))
+        else:
+            for k in range(len(self.trials)):
+                block(k)
         self.nsim += 1
         return J
 
@@ -423,8 +442,11 @@ def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None 
     problem = _Problem(layout, trials, substeps, max_nfev)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
-    result = scipy.optimize.least_squares(problem.evaluate, theta0, jac=problem.jacobian, bounds=(lo, hi),
-                                          method="trf", x_scale="jac", max_nfev=max_nfev, ftol=1e-6, xtol=1e-8)
+    # one BLAS thread: the trials replay on threads of their own, and BLAS threads spinning after the
+    # trust region's SVD took their cores (the shipped rig's refit: 1.3-1.7 s with them, 1.0 s without)
+    with threadpool_limits(limits=1, user_api="blas"):
+        result = scipy.optimize.least_squares(problem.evaluate, theta0, jac=problem.jacobian, bounds=(lo, hi),
+                                              method="trf", x_scale="jac", max_nfev=max_nfev, ftol=1e-6, xtol=1e-8)
     model = layout.unpack(result.x)
     return FitResult(model=model, trials=tuple(t.name for t in trials),
                      nrmse=dict(zip([t.name for t in trials], each(lambda t: nrmse(model, t, substeps), trials))),

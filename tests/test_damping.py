@@ -53,6 +53,26 @@ def test_a_free_decay_gives_its_damping_at_small_amplitude_within_its_interval(z
     assert fit.zeta0_std < 0.35 * fit.zeta0
 
 
+def test_a_constant_damping_is_read_at_small_amplitude_only_from_decays_that_ring_down_to_the_noise():
+    # A 0.4 %-damped decay from 3 m/s^2 at 22 Hz rings down to an IMU's noise within 14 s; cut after 4 s
+    # (a window's end) it stops near 0.3 m/s^2, and a constant damping there says nothing below it.
+    from momentid.estimation.decays import NEAR_REST, constant_refusal
+
+    t, x = _decay(0.004, 0.0, 1.0, 3.0, 22.0, 14.0, 0.005)
+    table = np.random.default_rng(1).normal(0, 0.005, t.size)
+    band = ringdown.band_for(22.0, [22.0], FS)
+    corr = int(ringdown.correlation_time(band, 22.0) * FS)
+    fits = {}
+    for name, n in (("whole", t.size), ("cut", int(4 * FS))):
+        rings = ringdown.ring_downs(name, table[:n], x[:n], FS, 22.0, 0.004, 1.0, band, 0.005, 0.005)
+        fits[name] = ringdown.fit_decay(rings, corr)
+        assert not fits[name].amplitude_dependent and fits[name].span > 3
+    # ended by the noise cut (MIN_SNR, the envelope smoothed) against far above it
+    assert fits["whole"].rest <= NEAR_REST * ringdown.MIN_SNR < fits["cut"].rest
+    assert constant_refusal(fits["whole"]) == ""
+    assert "stop" in constant_refusal(fits["cut"]) and "not read" in constant_refusal(fits["cut"])
+
+
 def test_a_steadily_forced_mode_holds_no_ring_down():
     # White table noise driving a 0.3 %-damped mode steadily: the table supplies what the mode
     # dissipates at every instant, so no stretch rings free.
@@ -125,7 +145,7 @@ def test_a_mode_in_the_noise_or_at_the_nyquist_limit_gives_no_damping():
     # 20 s at 100 Hz, 0.01 m/s^2 of white noise on table and floor: a 15 Hz response of 0.1 m/s^2 amplitude
     # stands ~20x above the noise in its +-10 % band; one of 0.002 m/s^2 stands below it (the threshold is
     # 3x: these sit an order of magnitude either side, so the noise's draw cannot flip them)
-    from momentid.estimation.damping import weak_refusal
+    from momentid.estimation.decays import weak_refusal
 
     rng = np.random.default_rng(3)
     t = np.arange(2000) / 100.0

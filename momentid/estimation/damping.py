@@ -46,10 +46,10 @@ import scipy.stats
 
 from momentid.core.series import RunData
 from momentid.estimation import ringdown
+from momentid.estimation.decays import constant_refusal, free_decays, weak_refusal
 from momentid.estimation.jackknife import block_jackknife
-from momentid.estimation.noise import quietest_level
 from momentid.estimation.periodic import periodic_refusal
-from momentid.estimation.windows import (MIN_SIGNAL_TO_NOISE, WINDOW_CYCLES, band_noise, drift_words,
+from momentid.estimation.windows import (WINDOW_CYCLES, drift_words,
                                          forced_windows, frequency_trend, random_effects)
 
 if TYPE_CHECKING:
@@ -75,11 +75,6 @@ HINT_SIGMAS = 3.0
 #: A damping ratio whose standard error exceeds this share of itself is not an answer (its 95 % interval
 #: then reaches zero: the data do not tell the damping from none).
 MAX_RELATIVE_STD = 0.5
-#: A constant damping read from free decays is the damping at small amplitude only when they fall by at
-#: least this factor with no sign of a trend: a shorter fall cannot tell a constant damping from one that
-#: grows with amplitude as a joint's micro-slip makes it (both shipped rigs damp 2-3x more at 2-4 m/s^2
-#: than near 0.2 m/s^2, and a decay from 4.3 to 2.5 m/s^2 shows no trend of its own).
-MIN_CONSTANT_SPAN = 3.0
 #: Fewest degrees of freedom (independent stretches less the parameters) of an answer's error.
 MIN_DOF = 2
 #: The windows' pooled damping and the whole record's may differ by this many of the windows' standard
@@ -182,9 +177,10 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     Per mode, in this order: the free decays when they show a damping that changes with amplitude;
     else the linear fit when it explains the record to the noise level (its error the larger of its own
     and its windows'); else the free decays (a constant damping only over a fall of
-    :data:`MIN_CONSTANT_SPAN`; pooled with the windows when too uncertain alone); else, when the table's
-    motion is periodic, the linear fit if it explains the record to a noise level read where the table is
-    quiet and no mode hints at the rig changing with amplitude, refused otherwise; else the forced
+    :data:`~momentid.estimation.decays.MIN_CONSTANT_SPAN` that rings down to the noise; pooled with the
+    windows when too uncertain alone); else, when the table's motion is periodic, the linear fit if it
+    explains the record to a noise level read where the table is quiet and no mode hints at the rig
+    changing with amplitude, refused otherwise; else the forced
     response: the windows' value at zero amplitude when their frequency falls with amplitude (even one
     that moves beyond the half-power width, when that value lies below the windows' mean), refused when
     they show no trend while another mode shows the rig changing with amplitude.  An answer refused only as
@@ -215,7 +211,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     sd = np.sqrt(np.clip(np.diag(fit.covariance), 0, None))
     seconds = sum(run.n_samples / run.sample_rate for run in runs)
     windows = None if exact else forced_windows(runs, selection, sigma, list(selection.storey))
-    decays = [None if exact else _free_decays(runs, selection, sigma, i, scatter) for i in selection.storey]
+    decays = [None if exact else free_decays(runs, selection, sigma, i, scatter) for i in selection.storey]
     saids = [None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
              for k, i in enumerate(selection.storey)]
     trends = [0.0 if exact else frequency_trend(w)[1] for w in (windows or [None] * len(saids))]
@@ -256,13 +252,8 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                                      decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
                                      decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
                              evidence=decay.evidence)
-            if not answer.refusal and not decay.amplitude_dependent and decay.span < MIN_CONSTANT_SPAN:
-                lo, hi = decay.amplitude_range
-                answer = replace(answer, refusal=(
-                    f"the free decays fall only {decay.span:.2g}x (at {lo:.2g}-{hi:.2g} m/s^2) and show no trend: "
-                    f"too short a fall to tell a constant damping ({100 * decay.zeta0:.3g} % there) from one that "
-                    f"grows with amplitude, so the damping at small amplitude is not read (at least "
-                    f"{MIN_CONSTANT_SPAN:g}x is needed)"))
+            if not answer.refusal:
+                answer = replace(answer, refusal=constant_refusal(decay))
             answer = _pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
             out.append(whole.instead(answer, i, k, periodic, windows))
         elif exact or (linear and evidence <= HINT_SIGMAS) or (periodic and periodic_linear):
@@ -439,84 +430,6 @@ def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:
     noise = np.mean([np.mean([sg[f"a{j + 1}"] ** 2 for j in range(d)]) for sg in sigma])
     exact = fit.scale * noise <= NOISE_FREE * floors
     return exact or fit.scale <= LINEAR_MISFIT ** 2, exact
-
-
-def weak_refusal(runs: Sequence[RunData], selection: ModeSelection, sigma: Sequence[dict], i: int) -> str:
-    """Why mode ``i``'s damping cannot be read at all ('' when it can).
-
-    In no run does its relative acceleration on its strongest floor, band-passed around it, stand
-    :data:`MIN_SIGNAL_TO_NOISE` times above the white sensor noise in that band, or the mode sits at
-    the sampling's Nyquist limit.
-
-    Parameters
-    ----------
-    runs : sequence of RunData
-        The runs of ``selection`` (``zdd``, ``a1..ad``, m/s^2), each with its ``sample_rate`` (Hz).
-    selection : ModeSelection
-        The linear modal fit: ``model.omega`` and ``model.residues`` at ``fit.theta``, ``storey``.
-    sigma : sequence of dict
-        Per run, the white noise standard deviation (m/s^2) of ``zdd`` and each ``a<j>``.
-    i : int
-        The mode's index in the model.
-
-    Returns
-    -------
-    str
-        The refusal in words, or ``''``.
-    """
-    model, theta = selection.model, selection.fit.theta
-    freq, R = model.omega(theta) / (2 * np.pi), model.residues(theta)
-    j = int(np.argmax(np.abs(R[i])))
-    best = None
-    for r, run in enumerate(runs):
-        fs = run.sample_rate
-        band = ringdown.band_for(freq[i], [freq[k] for k in selection.storey], fs)
-        if not band[0] < band[1] or not freq[i] < 0.49 * fs:
-            continue
-        env, _, _ = ringdown.envelope(run["zdd"] - run[f"a{j + 1}"], band, fs)
-        rms = float(np.sqrt(np.mean(env ** 2) / 2))
-        noise = band_noise(sigma[r], j, band, fs)
-        if best is None or rms / max(noise, 1e-300) > best[0]:
-            best = (rms / max(noise, 1e-300), rms, noise, band)
-    if best is None:
-        return (f"the mode at {freq[i]:.4g} Hz lies at the sampling's Nyquist limit: it is not a mode the "
-                f"sensors can resolve")
-    ratio, rms, noise, band = best
-    if ratio >= MIN_SIGNAL_TO_NOISE:
-        return ""
-    return (f"the mode at {freq[i]:.4g} Hz stands barely above the sensor noise: its response in "
-            f"{band[0]:.3g}-{band[1]:.3g} Hz is {rms:.2g} m/s^2 RMS, {ratio:.2g}x the noise there ({noise:.2g} m/s^2; "
-            f"at least {MIN_SIGNAL_TO_NOISE:g}x is needed to read a damping)")
-
-
-def _free_decays(runs, selection, sigma, i: int, scatter: bool = False):
-    """:class:`~momentid.estimation.ringdown.DecayFit` of mode ``i``'s free decays, or None (too few).
-    ``scatter``: the noise levels are the data's own scatter, an upper bound that holds the rig's distortion;
-    the table's netted from its motion is then at most its level in its quietest second (netting more would
-    take real forcing for noise, and a forced stretch for a free one), and so is each floor's (the sensors
-    taken alike: a ring-down after a strong sine stops stands 10-30x above its floor's true noise, and below
-    the scatter of the sine's distortion)."""
-    model, theta = selection.model, selection.fit.theta
-    freq, zeta, R = model.omega(theta) / (2 * np.pi), model.zeta(theta), model.residues(theta)
-    j = int(np.argmax(np.abs(R[i])))
-    rings, corr = [], 1
-    for r, run in enumerate(runs):
-        fs = run.sample_rate
-        gain, offset = model.sensors(theta, r)
-        floor = ringdown.advance(offset[j], run[f"a{j + 1}"], fs) / gain[j]
-        band = ringdown.band_for(freq[i], [freq[k] for k in selection.storey], fs)
-        corr = int(round(ringdown.correlation_time(band, freq[i]) * fs))
-        table = min(sigma[r]["zdd"], quietest_level(run, "zdd")) if scatter else sigma[r]["zdd"]
-        relative = float(np.hypot(sigma[r]["zdd"], sigma[r][f"a{j + 1}"]))
-        if scatter:
-            # the sensors taken alike (as the scatter estimate takes the table as noisy as the floors): the
-            # floor's noise at most the table's quiet level too, not the distortion of the strongest shaking
-            relative = min(relative, float(np.sqrt(2.0)) * table)
-        rings += ringdown.ring_downs(run.name, run["zdd"], run["zdd"] - floor, fs, freq[i], zeta[i], R[i, j], band,
-                                     table, relative)
-    if not rings or sum(rg.cycles for rg in rings) < ringdown.MIN_CYCLES:
-        return None
-    return ringdown.fit_decay(rings, corr)
 
 
 def _unknown(equivalent: float, f0: float) -> ModeDamping:

@@ -83,6 +83,9 @@ class RingDown:
     supplied : ndarray, shape (m,)
         The damping ratio the table's remaining forcing supplies back on average (its power near the mode
         over the mode's response power, times ``pi / (8 h)``): below :data:`FREE_FORCING` x the mode's.
+    noise : float
+        The sensors' noise in the envelope (m/s^2, its RMS in the band): the decay is cut where the
+        envelope falls to :data:`MIN_SNR` times it.
     """
 
     run: str
@@ -93,6 +96,7 @@ class RingDown:
     frequency: np.ndarray
     sample_rate: float
     supplied: np.ndarray | None = None
+    noise: float = 0.0
 
     @property
     def seconds(self) -> tuple[float, float]:
@@ -131,6 +135,10 @@ class DecayFit:
         Cycles of free decay fitted.
     span : float
         How far the envelopes fall: their largest value over their smallest.
+    rest : float
+        How near the sensors' noise the quietest decay came: its smallest envelope over the noise in it
+        (about :data:`MIN_SNR` when a decay rang until the noise cut it, more when the record's end or
+        the table's forcing cut it first; inf when the noise is not known).
     """
 
     zeta0: float
@@ -147,6 +155,7 @@ class DecayFit:
     amplitude_range: tuple
     cycles: float
     span: float = np.inf
+    rest: float = np.inf
 
 
 def advance(tau: float, x: np.ndarray, sample_rate: float) -> np.ndarray:
@@ -245,7 +254,8 @@ def ring_downs(run_name: str, table: np.ndarray, relative: np.ndarray, sample_ra
         env = np.sqrt(np.maximum(E[a:b] ** 2 - noise_r, 1e-300))
         if np.log(env[0] / env[-1]) < MIN_FALL:          # a steady response to a line, not a decay
             continue
-        out.append(RingDown(run_name, a, b, env, phase[a:b] - phase[a], inst[a:b], fs, supplied[a:b]))
+        out.append(RingDown(run_name, a, b, env, phase[a:b] - phase[a], inst[a:b], fs, supplied[a:b],
+                            float(np.sqrt(noise_r))))
     return out
 
 
@@ -365,4 +375,5 @@ def fit_decay(rings: Iterable[RingDown], correlation_samples: int, slope_sigmas:
         frequency_slope=float(coef[1]),
         frequency_slope_std=float(np.sqrt(max(fcov[1, 1], 0.0))),
         amplitude_range=tuple(float(x) for x in np.percentile(E, [10, 90])),
-        cycles=float(sum(r.cycles for r in rings)), span=float(np.max(E) / max(float(np.min(E)), 1e-300)))
+        cycles=float(sum(r.cycles for r in rings)), span=float(np.max(E) / max(float(np.min(E)), 1e-300)),
+        rest=min((float(np.min(r.envelope)) / r.noise if r.noise > 0 else np.inf) for r in rings))

@@ -158,3 +158,22 @@ def test_windows_holding_a_lead_in_and_the_start_of_a_sine_agree_or_are_refused(
     assert "lead-in" in r.noise[0], r.noise
     for k, (w, t) in enumerate(zip(r.damping, whole.damping)):
         _agrees_or_is_refused(w, t, ("sine_1p0", k + 1))
+
+
+def test_windows_whose_decays_stop_short_of_the_noise_agree_or_are_refused():
+    """20 s windows of the flexible rig whose free decays the window's end or the table's forcing cut at
+    2-23x the noise cut: Northridge from 50 s read 0.199 +- 0.026 % (mode 2) and 0.225 +- 0.007 % (mode 3)
+    and Sine 1.0 from 30 s read 0.40 +- 0.05 % (mode 2), constant over their 3-5x falls, where the
+    trials' decays, ringing down to the noise, read 0.142, 0.123 and 0.094 %.  Each now agrees within two
+    standard errors of the difference, or is refused."""
+    import dataclasses
+
+    from test_real_identify import SRIM, real_per_run
+
+    experiment, results = real_per_run()
+    whole = dict(zip(SRIM, results))
+    for name, start in (("northridge", 50.0), ("sine_1p0", 30.0)):
+        run = experiment.run(name)
+        r = mi.identify(dataclasses.replace(experiment, runs=(_window(run, int(start * run.sample_rate)),)))
+        for k, (w, t) in enumerate(zip(r.damping, whole[name].damping)):
+            _agrees_or_is_refused(w, t, (name, start, k + 1))

@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 
 from momentid import mechanisms as registry
-from momentid.core.structure import Mechanism, Structure
+from momentid.core.structure import Mechanism
 
 __all__ = ["PROGRAM", "HEADER", "ENABLED", "program_size", "add_program", "available", "load_program", "installed",
            "state_actuator", "applies", "threadable", "plain"]
@@ -291,9 +291,10 @@ def available() -> bool:
     return ENABLED and _callbacks() is not None
 
 
-def load_program(model: mujoco.MjModel, mechanisms: Iterable[Mechanism], structure: Structure | None = None) -> bool:
-    """Fill ``model``'s program with the callback forces of ``mechanisms`` (``structure``: the storey
-    stiffnesses a ``needs_stiffness`` kind takes its fraction of).  False, the model untouched, when the
+def load_program(model: mujoco.MjModel, mechanisms: Iterable[Mechanism],
+                 storey_stiffness: Sequence[float] | None = None) -> bool:
+    """Fill ``model``'s program with the callback forces of ``mechanisms`` (``storey_stiffness``: N/m per
+    storey, which a ``needs_stiffness`` kind takes its fraction of).  False, the model untouched, when the
     native callbacks cannot apply them (not :func:`available`, a kind without a native law, a model
     without its program): the caller then runs the Python callback."""
     from momentid.mechanisms.native import compiled
@@ -312,9 +313,9 @@ def load_program(model: mujoco.MjModel, mechanisms: Iterable[Mechanism], structu
         place = kind.place(m.location)
         lower, upper = place.nodes
         p = dict(m.parameters)
-        if kind.needs_stiffness and structure is None:
+        if kind.needs_stiffness and storey_stiffness is None:
             return False
-        k = structure.storey_stiffness[upper - 1] if kind.needs_stiffness else None
+        k = float(storey_stiffness[upper - 1]) if kind.needs_stiffness else None
         force, rate = compiled(kind.native_law())
         adr = act = -1
         if kind.has_state(p):

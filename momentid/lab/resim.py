@@ -21,7 +21,6 @@ import contextlib
 from collections.abc import Iterable, Sequence
 import math
 import os
-from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -80,10 +79,6 @@ def build_spec(rig: RigModel, timestep: float, name: str = "rig_twin") -> mujoco
     return spec
 
 
-class _Storeys(NamedTuple):
-    storey_stiffness: list
-
-
 def compile_models(rigs: Iterable[RigModel], timestep: float) -> list[mujoco.MjModel]:
     """Compiled ``mujoco.MjModel`` of each :class:`~momentid.lab.rig_model.RigModel` (all of one layout: the
     same tendons and mechanisms' places), by :func:`build_spec`; a rig's callback forces (Bouc-Wen's, with
@@ -99,7 +94,7 @@ def compile_models(rigs: Iterable[RigModel], timestep: float) -> list[mujoco.MjM
     for r in rigs:
         model = lab_rig.compile_model(build_spec(r, timestep))
         if any(registry.get(m.type).callback for m in r.mechanisms):
-            storeys = _Storeys([pair_coefficient(r.K, s - 1, s) for s in range(1, r.storeys + 1)])
+            storeys = [pair_coefficient(r.K, s - 1, s) for s in range(1, r.storeys + 1)]
             if not native_forces.load_program(model, r.mechanisms, storeys):
                 raise ModelError(f"mechanisms {[m.type for m in r.mechanisms]}: a callback force without a native "
                                  f"law (numba) cannot be re-simulated; expected kinds whose laws compile")

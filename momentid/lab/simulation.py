@@ -196,7 +196,8 @@ def _roll(model: mujoco.MjModel, state: np.ndarray, jerk: np.ndarray, every: int
     chunk = every * max(1, _CHUNK_STEPS // every)
     callback = act_dyn = None
     if rig.needs_callback(mechanisms):
-        native = native_forces.load_program(model, mechanisms, structure)
+        native = native_forces.load_program(model, mechanisms,
+                                            structure.storey_stiffness if structure is not None else None)
         callback = None if native else CallbackForces(model, mechanisms, structure)
         act_dyn = callback.state_rate if callback is not None and callback.rates else None
     # the table's jerk drives actuator 0; state actuators (forces with memory) take no control

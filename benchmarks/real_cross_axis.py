@@ -22,7 +22,9 @@ the training trials (:func:`momentid.diagnosis.twin.folds.linear_start` of the q
 :func:`momentid.twin.fit.fit_twin`), and the same twin driven by ``zdd + sum_k g_k c_k``, the table's five
 other channels ``c_k`` entering as base acceleration through gains ``g_k`` fitted by least squares on the
 training trials' misfits (the twin is linear: each channel's response is one replay), replayed on the
-held-out trial.  Writes ``benchmarks/results/real_cross_axis.md`` and ``.json``.
+held-out trial; and the same on the fold's inner held-out trial from the other training trials (the
+evidence the twin's physics are chosen by, :func:`momentid.diagnosis.twin.folds.inner_hold_out`).  Writes
+``benchmarks/results/real_cross_axis.md`` and ``.json``.
 """
 
 from __future__ import annotations
@@ -150,7 +152,7 @@ def folds(rig: str) -> list[dict]:
 
     import momentid as mi
     from benchmarks.real_folds import RIGS as FOLDS
-    from momentid.diagnosis.twin.folds import linear_start
+    from momentid.diagnosis.twin.folds import inner_hold_out, linear_start
     from momentid.twin import fit as twin_fit
     from momentid.twin.replay import nrmse
 
@@ -160,9 +162,8 @@ def folds(rig: str) -> list[dict]:
     names = [n for n in TRAINING[rig] if n in {r.name for r in experiment.runs}]
     trials = {n: twin_fit.trial(experiment.run(n), experiment.storeys) for n in names}
     channels = {n: _channels(files, experiment, trials[n], n) for n in names}
-    rows = []
-    for held in FOLDS[rig]:
-        training = [n for n in names if n != held and channels[n] is not None]
+    def scored(training, held):
+        """(linear refit's NRMSE on ``held``, with the channels as base inputs, gains) from ``training``."""
         quiet = min(training, key=lambda n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))))
         refit = twin_fit.fit_twin([trials[n] for n in training], linear_start(experiment, quiet)).model
 
@@ -172,26 +173,35 @@ def folds(rig: str) -> list[dict]:
             responses = [twin_fit.predict(refit, replace(tr, zdd=c))[tr.start:].ravel() for c in channels[n]]
             return base, np.column_stack(responses), tr.a[tr.start:]
 
-        P = {n: parts(n) for n in training + [held]}
+        P = {n: parts(n) for n in [*training, held]}
         gains, *_ = np.linalg.lstsq(np.vstack([P[n][1] for n in training]),
                                     np.concatenate([(P[n][2] - P[n][0]).ravel() for n in training]), rcond=None)
         base, R, a = P[held]
-        with_inputs = base + (R @ gains).reshape(base.shape)
+        return float(nrmse(a, base)), float(nrmse(a, base + (R @ gains).reshape(base.shape))), gains
+
+    rows = []
+    for held in FOLDS[rig]:
+        training = [n for n in names if n != held and channels[n] is not None]
+        inner = inner_hold_out(trials, training)             # the selection's own evidence, as for the physics
+        inner_linear, inner_with, _ = scored([n for n in training if n != inner], inner)
+        linear, with_inputs, gains = scored(training, held)
         rows.append({"rig": rig, "held_out": held, "training": training, "gains": dict(zip(OTHERS, gains.tolist())),
-                     "linear_refit": float(nrmse(a, base)), "with_table_channels": float(nrmse(a, with_inputs))})
+                     "linear_refit": linear, "with_table_channels": with_inputs, "inner_held_out": inner,
+                     "inner_ratio": inner_with / inner_linear})
     return rows
 
 
 def folds_table(rows: list[dict]) -> list[str]:
     lines = ["| rig | held out | linear refit | the same twin, the table's other channels as base inputs | ratio | "
-             f"gains ({', '.join(OTHERS)}) |", "|---|---|---|---|---|---|"]
+             f"inner held-out: ratio | gains ({', '.join(OTHERS)}) |", "|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['rig']} | {r['held_out']} | {100 * r['linear_refit']:.1f} % | "
                      f"{100 * r['with_table_channels']:.1f} % | {r['with_table_channels'] / r['linear_refit']:.2f} | "
+                     f"{r['inner_held_out']}: {r['inner_ratio']:.2f} | "
                      f"{', '.join(f'{v:.3g}' for v in r['gains'].values())} |")
     for rig in dict.fromkeys(r["rig"] for r in rows):
         ratios = [r["with_table_channels"] / r["linear_refit"] for r in rows if r["rig"] == rig]
-        lines.append(f"| {rig} | mean | | | {np.mean(ratios):.2f} | |")
+        lines.append(f"| {rig} | mean | | | {np.mean(ratios):.2f} | | |")
     return lines
 
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from momentid.core.series import RunData
-from momentid.estimation.jackknife import BLOCKS, block_jackknife
+from momentid.estimation.jackknife import BLOCKS, block_edges, block_jackknife
 from momentid.estimation.linear import discretize, outputs, simulate_linear
 from momentid.estimation.modal_select import select_modes
-from momentid.estimation.noise import estimate_noise
+from momentid.estimation.noise import estimate_noise, quiet_lead_in
 
 FS = 120.0
 MASS = 0.5
@@ -61,3 +61,22 @@ def test_a_record_whose_damping_changes_partway_gives_an_error_the_fit_does_not_
     # the two halves damp at 0.2 % and 0.8 %: leaving a block of either half out moves the whole record's
     # ratio by much more than white noise would (the fit's own error, scaled by its misfit, sees 2-3x less)
     assert jk.damping_ratio_std[i] > 2 * own, (own, jk.damping_ratio_std)
+
+
+def test_a_quiet_lead_in_is_in_every_refit():
+    """A record that rests for 40 % of its length before the table moves: blocks of equal time would leave
+    out lead-in alone in three of eight refits (no information left out, yet a degree of freedom counted);
+    the blocks hold equal shaking, the lead-in before the first edge, in every run."""
+    u, a = _response(0.003, 18.0, 1)
+    rest = np.zeros(int(12.0 * FS))
+    runs = []
+    for k, (uu, aa) in enumerate(((np.concatenate([rest, u]), np.concatenate([rest, a])), (u[:1200], a[:1200]))):
+        values = np.column_stack([uu, aa]) + SIGMA * np.random.default_rng(k).standard_normal((uu.size, 2))
+        runs.append(RunData(f"shake{k}", np.zeros(1), np.arange(uu.size) / FS, ("zdd", "a1"), values))
+    lead = quiet_lead_in(runs[0])
+    assert 0.8 * rest.size < lead <= rest.size                # the lead-in is found (it ends before the shaking)
+    edges = block_edges(runs)
+    shaking = (runs[0].n_samples - lead) + runs[1].n_samples     # the second run shakes from its first sample
+    assert edges[0] == lead and edges[-1] == runs[0].n_samples + runs[1].n_samples
+    # every block the same amount of shaking, to the sample (the edges are rounded)
+    assert np.all(np.abs(np.diff(edges) - shaking / BLOCKS) <= 1.0), np.diff(edges)

@@ -4,10 +4,11 @@ The linear fit's own standard error counts white sensor noise only.  The forced 
 (:mod:`momentid.estimation.windows`) measure what independent stretches scatter beyond it, but each window
 is short: for a lightly damped mode their mean is far less certain than the whole record's fit, and the
 windows refuse what the record determines.  Here the whole record is refitted :data:`BLOCKS` times, each
-time without one of :data:`BLOCKS` equal consecutive blocks (the stretches before and after the gap become
-runs of their own, each with its own transient; the record's sensor gains and clock offsets held); the
-spread of those refits is the jackknife's variance of the whole record's damping ratios (Efron's delete-a-
-group jackknife), model error and the record's non-stationarity included.
+time without one of :data:`BLOCKS` consecutive blocks of equal shaking (a quiet lead-in is in every refit;
+the stretches before and after the gap become runs of their own, each with its own transient; the
+record's sensor gains and clock offsets held); the spread of those refits is the jackknife's variance of
+the whole record's damping ratios (Efron's delete-a-group jackknife), model error and the record's
+non-stationarity included.
 """
 
 from __future__ import annotations
@@ -22,12 +23,13 @@ from momentid.core.series import RunData
 from momentid.errors import MomentidError
 from momentid.estimation.eiv import spectra
 from momentid.estimation.modal import refine
+from momentid.estimation.noise import quiet_lead_in
 from momentid.estimation.windows import refit_bounds
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
 
-__all__ = ["Jackknife", "block_jackknife", "BLOCKS", "MIN_PIECE_CYCLES"]
+__all__ = ["Jackknife", "block_jackknife", "block_edges", "BLOCKS", "MIN_PIECE_CYCLES"]
 
 #: Blocks the record is cut into (each refit leaves one out): the jackknife's error then has BLOCKS - 1
 #: degrees of freedom.
@@ -80,7 +82,7 @@ def block_jackknife(runs: Sequence[RunData], selection: ModeSelection, sigma: Se
     f1 = float(np.min(model.omega(fit.theta)[list(selection.storey)]) / (2 * np.pi))
     bounds = refit_bounds(model, fit.theta)
     starts = np.cumsum([0] + [run.n_samples for run in runs])
-    edges = np.linspace(0, starts[-1], blocks + 1).round().astype(int)
+    edges = block_edges(runs, blocks)
     refits = []
     for a, b in zip(edges[:-1], edges[1:]):
         pieces = _pieces(runs, starts, a, b, f1)
@@ -102,6 +104,35 @@ def block_jackknife(runs: Sequence[RunData], selection: ModeSelection, sigma: Se
     k = z.shape[0]
     std = np.sqrt((k - 1) / k * np.sum((z - z.mean(axis=0)) ** 2, axis=0))
     return Jackknife(damping_ratio_std=std, refits=z, dof=k - 1)
+
+
+def block_edges(runs: Sequence[RunData], blocks: int = BLOCKS) -> np.ndarray:
+    """Edges of the jackknife's blocks: ``blocks`` consecutive blocks of equal shaking.
+
+    Each run's quiet lead-in (:func:`~momentid.estimation.noise.quiet_lead_in`) lies before the first
+    edge and stays in every refit: a block of sensor noise alone would change no refit, yet count as a
+    degree of freedom of the error.
+
+    Parameters
+    ----------
+    runs : sequence of RunData
+        The record's runs, end to end.
+    blocks : int
+        Blocks.
+
+    Returns
+    -------
+    ndarray of int, shape (blocks + 1,)
+        Sample indices counted over the runs end to end; the last is the record's length.
+    """
+    starts = np.cumsum([0] + [run.n_samples for run in runs])
+    quiet = np.array([quiet_lead_in(run) for run in runs])
+    shaking = np.cumsum([0] + [run.n_samples - q for run, q in zip(runs, quiet)])
+    at = np.linspace(0, shaking[-1], blocks + 1).round().astype(int)
+    r = np.clip(np.searchsorted(shaking, at, side="right") - 1, 0, len(runs) - 1)
+    edges = starts[r] + quiet[r] + (at - shaking[r])
+    edges[-1] = starts[-1]
+    return edges
 
 
 def _pieces(runs: Sequence[RunData], starts: np.ndarray, a: int, b: int, f1: float) -> list:

@@ -49,8 +49,7 @@ from momentid.estimation import ringdown
 from momentid.estimation.decays import constant_refusal, free_decays, weak_refusal
 from momentid.estimation.jackknife import block_jackknife
 from momentid.estimation.periodic import periodic_refusal
-from momentid.estimation.windows import (WINDOW_CYCLES, drift_words,
-                                         forced_windows, frequency_trend, random_effects)
+from momentid.estimation.windows import WINDOW_CYCLES, drift_words, forced_windows, frequency_trend, random_effects
 
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection

@@ -135,12 +135,11 @@ def simulate(models: Sequence[mujoco.MjModel], jerk: np.ndarray, act0: float, ro
 def _held(jerk: np.ndarray, substeps: int) -> np.ndarray | None:
     """The control per sample when it is held over each sample's ``substeps`` (more than one) steps (as
     :func:`momentid.lab.resim.simulate` drives the table: one jerk per sample interval), else None."""
-    n_out = -(-jerk.size // substeps)
     if substeps < 2 or not jerk.size:
         return None
-    padded = np.concatenate([jerk, np.full(n_out * substeps - jerk.size, jerk[-1])])
-    blocks = padded.reshape(n_out, substeps)
-    return np.ascontiguousarray(blocks[:, 0]) if np.array_equal(blocks, blocks[:, :1].repeat(substeps, 1)) else None
+    n_out = -(-jerk.size // substeps)
+    blocks = np.concatenate([jerk, np.full(n_out * substeps - jerk.size, jerk[-1])]).reshape(n_out, substeps)
+    return np.ascontiguousarray(blocks[:, 0]) if np.all(blocks == blocks[:, :1]) else None
 
 
 def _lifted(A: np.ndarray, b: np.ndarray, substeps: int) -> tuple[np.ndarray, np.ndarray]:

@@ -396,17 +396,17 @@ class _Problem:
         model = self.layout.unpack(theta)
         columns = np.flatnonzero(ok)
         rows = np.cumsum([0, *self.sizes])
+        # linear twins replay in compiled loops that release the GIL: the trials run side by side; a
+        # mechanism's rollouts spread their models over MuJoCo's threads instead
+        linear = not any(m.friction for m in valid)
 
         def block(k):                  # trial k's rows: the perturbed models read by the point's own sensors
             t, rows_k = self.trials[k], slice(rows[k], rows[k + 1])
             if columns.size:
-                # linear twins replay in compiled loops that release the GIL: the trials run side by side;
-                # a mechanism's rollouts spread their models over MuJoCo's threads instead
                 run = _simulate(valid, t, False, self.substeps, compiled[t.dt], threads=1 if linear else None)
                 J[rows_k, columns] = ((_residual(model, run, t) - base[rows_k]) / steps[columns, None]).T
             J[rows_k, self.layout.n_phys:] = sensor_jacobian(model, sims[k], t)
 
-        linear = not any(m.friction for m in valid)
         if linear:
             each(block, range(len(self.trials)))
         else:

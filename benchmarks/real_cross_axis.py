@@ -2,8 +2,9 @@
 
     python -m benchmarks.real_cross_axis [--rig stiff_1storey|flexible_3storey|both] [--out DIR]
 
-momentid's twin is a shear building driven by the table's X acceleration alone.  The table's IMU also
-records its Y and Z accelerations and its three angular rates, which the twin never sees.  Per trial of
+momentid's linear twin is a shear building driven by the table's shaking axis alone.  The table's IMU also
+records its cross and vertical accelerations and its three angular rates (imported as
+:data:`~momentid.core.series.TABLE_MOTION`).  Per trial of
 each shipped rig (``data/mini_shake_table``), the trial's own linear twin is fitted
 (:func:`momentid.twin.fit.fit_twin` from the modal identification of the rig's first trial), and its top
 floor's misfit is taken in the band of +-:data:`BAND` around the mode that holds most of it.  The
@@ -20,61 +21,36 @@ printed beside it.
 Then the folds of :mod:`benchmarks.real_folds`, each trial held out in turn: the linear twin refitted on
 the training trials (:func:`momentid.diagnosis.twin.folds.linear_start` of the quietest, then
 :func:`momentid.twin.fit.fit_twin`), and the same twin driven by ``zdd + sum_k g_k c_k``, the table's five
-other channels ``c_k`` entering as base acceleration through gains ``g_k`` fitted by least squares on the
-training trials' misfits (the twin is linear: each channel's response is one replay), replayed on the
-held-out trial; and the same on the fold's inner held-out trial from the other training trials (the
-evidence the twin's physics are chosen by, :func:`momentid.diagnosis.twin.folds.inner_hold_out`).  Writes
+other motions ``c_k`` entering as base acceleration through gains ``g_k`` fitted with the twin on the
+training trials (:attr:`momentid.twin.fit.FittedRig.table_motion`, the candidate ``table_motion`` of
+``momentid diagnose``), replayed on the held-out trial; and the same on the fold's inner held-out trial
+from the other training trials (the evidence the twin's physics are chosen by,
+:func:`momentid.diagnosis.twin.folds.inner_hold_out`).  Writes
 ``benchmarks/results/real_cross_axis.md`` and ``.json``.
 """
 
 from __future__ import annotations
 
 import argparse
-import gzip
-import io
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import scipy.signal
 
 from benchmarks.common import RESULTS, ROOT, save
+from momentid.core.series import TABLE_MOTION
 
 RIGS = ("stiff_1storey", "flexible_3storey")
 #: Half-width of the band around the mode (relative).
 BAND = 0.15
 #: Welch segment (samples): about 2 s at 120 Hz.
 SEGMENT = 256
-#: The table IMU's channels besides its X acceleration.
-OTHERS = ("Acc_Y", "Acc_Z", "Gyr_X", "Gyr_Y", "Gyr_Z")
+#: The table IMU's motions besides its shaking axis, as the import names them.
+OTHERS = TABLE_MOTION
 #: Per rig, the trials the folds train on (``momentid diagnose``'s rig-state check leaves the flexible
 #: rig's ``bonus_event`` out; the stiff rig's ``northridge_2`` trains and is never held out).
 TRAINING = {"stiff_1storey": ("el_centro_1", "el_centro_2", "northridge_1", "northridge_2", "sine_1", "sine_2"),
             "flexible_3storey": ("northridge", "sine_1p0", "sine_1p5", "sine_2p0")}
-
-
-def raw_columns(path: Path) -> dict:
-    """An Xsens DOT export's numeric columns by name, the row written before the device measures dropped."""
-    opener = gzip.open if path.suffix == ".gz" else open
-    with opener(path, "rt") as f:
-        lines = f.read().splitlines()
-    h = next(i for i, line in enumerate(lines) if line.startswith("PacketCounter"))
-    names = [c.strip() for c in lines[h].split(",")]
-    data = np.genfromtxt(io.StringIO("\n".join(lines[h + 1:])), delimiter=",", usecols=range(len(names)))
-    columns = {name: data[:, j] for j, name in enumerate(names)}
-    if np.all(data[0, [names.index(c) for c in ("Acc_X", "Acc_Y", "Acc_Z")]] == 0.0):
-        columns = {name: v[1:] for name, v in columns.items()}
-    return columns
-
-
-def aligned(raw: dict, table: np.ndarray, search: int = 50) -> dict | None:
-    """``raw``'s columns cut to the imported table record (matched on the X acceleration), or None."""
-    x, n = raw["Acc_X"], table.size
-    best = max(range(min(search, x.size - n) + 1),
-               key=lambda k: np.corrcoef(np.nan_to_num(x[k:k + n]), table)[0, 1], default=None)
-    if best is None or np.corrcoef(np.nan_to_num(x[best:best + n]), table)[0, 1] < 0.999:
-        return None
-    return {name: v[best:best + n] for name, v in raw.items()}
 
 
 def predictable_share(y: np.ndarray, regressors: list, fs: float, band: tuple) -> float:
@@ -99,17 +75,13 @@ def evaluate(rig: str) -> list[dict]:
     from momentid.errors import MomentidError
     from momentid.twin import fit as twin_fit
 
-    folder = ROOT / "data" / "mini_shake_table" / rig
-    experiment = mi.import_folder(folder)
-    files = {r["name"]: folder / r["table"] for r in tomllib.loads((folder / "experiment.toml").read_text())["runs"]}
+    experiment = mi.import_folder(ROOT / "data" / "mini_shake_table" / rig)
     start = linear_start(experiment, experiment.runs[0].name)
     rows = []
     for run in experiment.runs:
         tr = twin_fit.trial(run, experiment.storeys)
-        raw = aligned(raw_columns(files[run.name]), np.asarray(run["zdd"]))
-        if raw is None or any(not np.all(np.isfinite(raw[c][tr.start:])) for c in OTHERS):
-            rows.append({"rig": rig, "trial": run.name, "skipped": "the table file's other channels do not line up "
-                                                                    "with the import or hold gaps"})
+        if tr.motion_channels != OTHERS:
+            rows.append({"rig": rig, "trial": run.name, "skipped": "the import has not the table's other motions"})
             continue
         try:
             own = twin_fit.fit_twin([tr], start)
@@ -123,7 +95,7 @@ def evaluate(rig: str) -> list[dict]:
         peak = float(f[np.argmax(power)])
         mode = float(modes[np.argmin(np.abs(modes - peak))])
         band = ((1 - BAND) * mode, (1 + BAND) * mode)
-        others = [raw[c][tr.start:] for c in OTHERS]
+        others = list(tr.motion[tr.start:].T)
         share = predictable_share(misfit, others, fs, band)
         null = predictable_share(misfit, [o[::-1] for o in others], fs, band)
         single = {c: predictable_share(misfit, [o], fs, band) for c, o in zip(OTHERS, others)}
@@ -137,51 +109,32 @@ def evaluate(rig: str) -> list[dict]:
     return rows
 
 
-def _channels(files: dict, experiment, tr, name: str) -> list | None:
-    """The table's other channels of trial ``name`` on its samples, each less its mean over the lead-in."""
-    raw = aligned(raw_columns(files[name]), np.asarray(experiment.run(name)["zdd"]))
-    if raw is None:
-        return None
-    return [np.nan_to_num(raw[c] - np.nanmean(raw[c][:tr.start + 1])) for c in OTHERS]
-
-
 def folds(rig: str) -> list[dict]:
-    """Per held-out trial of :data:`benchmarks.real_folds.RIGS`: the linear refit's held-out NRMSE, and with
-    the table's other channels as base inputs (gains from the training trials)."""
+    """Per held-out trial of :data:`benchmarks.real_folds.RIGS`: the linear refit's held-out NRMSE, and the
+    same twin driven by the table's other motions too (their gains fitted with it on the training trials,
+    :attr:`momentid.twin.fit.FittedRig.table_motion`), and the same on the fold's inner held-out trial."""
     from dataclasses import replace
 
     import momentid as mi
     from benchmarks.real_folds import RIGS as FOLDS
     from momentid.diagnosis.twin.folds import inner_hold_out, linear_start
     from momentid.twin import fit as twin_fit
-    from momentid.twin.replay import nrmse
 
-    folder = ROOT / "data" / "mini_shake_table" / rig
-    experiment = mi.import_folder(folder)
-    files = {r["name"]: folder / r["table"] for r in tomllib.loads((folder / "experiment.toml").read_text())["runs"]}
+    experiment = mi.import_folder(ROOT / "data" / "mini_shake_table" / rig)
     names = [n for n in TRAINING[rig] if n in {r.name for r in experiment.runs}]
     trials = {n: twin_fit.trial(experiment.run(n), experiment.storeys) for n in names}
-    channels = {n: _channels(files, experiment, trials[n], n) for n in names}
+
     def scored(training, held):
-        """(linear refit's NRMSE on ``held``, with the channels as base inputs, gains) from ``training``."""
+        """(linear refit's NRMSE on ``held``, the same driven by the table's motions too, their gains)."""
         quiet = min(training, key=lambda n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))))
-        refit = twin_fit.fit_twin([trials[n] for n in training], linear_start(experiment, quiet)).model
-
-        def parts(n):
-            tr = trials[n]
-            base = twin_fit.predict(refit, tr)[tr.start:]
-            responses = [twin_fit.predict(refit, replace(tr, zdd=c))[tr.start:].ravel() for c in channels[n]]
-            return base, np.column_stack(responses), tr.a[tr.start:]
-
-        P = {n: parts(n) for n in [*training, held]}
-        gains, *_ = np.linalg.lstsq(np.vstack([P[n][1] for n in training]),
-                                    np.concatenate([(P[n][2] - P[n][0]).ravel() for n in training]), rcond=None)
-        base, R, a = P[held]
-        return float(nrmse(a, base)), float(nrmse(a, base + (R @ gains).reshape(base.shape))), gains
+        train = [trials[n] for n in training]
+        refit = twin_fit.fit_twin(train, linear_start(experiment, quiet)).model
+        moved = twin_fit.fit_twin(train, replace(refit, table_motion=OTHERS)).model
+        return twin_fit.nrmse(refit, trials[held]), twin_fit.nrmse(moved, trials[held]), moved.table_gains
 
     rows = []
     for held in FOLDS[rig]:
-        training = [n for n in names if n != held and channels[n] is not None]
+        training = [n for n in names if n != held]
         inner = inner_hold_out(trials, training)             # the selection's own evidence, as for the physics
         inner_linear, inner_with, _ = scored([n for n in training if n != inner], inner)
         linear, with_inputs, gains = scored(training, held)

@@ -217,6 +217,7 @@ def test_generated_lab_folders_import_or_fail_in_one_line(profile, tmp_path):
     def check(example):
         experiment = _lab(tmp_path, example, next(count))
         for run in experiment.runs:
-            assert np.all(np.isfinite(run.values)) and run.values.shape == (run.time.size, 4)
+            assert np.all(np.isfinite(run.values)) and run.values.shape == (run.time.size, len(run.channels))
+            assert run.channels[:4] == ("zdd", "a1", "a2", "a3")
 
     assert _run(profile, faults, check, FOLDERS[profile]) > 0

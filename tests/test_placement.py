@@ -37,8 +37,11 @@ def shipped():
 
 
 def relabelled(run: RunData, perm) -> RunData:
-    """``run`` with column k of (zdd, a1..ad) taken from listed column perm[k]."""
-    return dataclasses.replace(run, values=run.values[:, list(perm)])
+    """``run`` with column k of (zdd, a1..ad) taken from listed column perm[k] (the table sensor's other
+    motions, after them, left as they are)."""
+    values = run.values.copy()
+    values[:, :len(perm)] = run.values[:, list(perm)]
+    return dataclasses.replace(run, values=values)
 
 
 def undo(perm) -> tuple[int, ...]:

@@ -34,6 +34,7 @@ rerun_chunk = pytest.importorskip("rerun.chunk")
 FOLDER = data_file("mini_shake_table", "flexible_3storey")
 SENSORS = ("Ground Floor", "1st Floor", "2nd Floor", "3rd Floor (Top floor)")
 CHANNELS = ("zdd", "a1", "a2", "a3")
+TABLE_MOTION = ("table_ay", "table_az", "table_wx", "table_wy", "table_wz")
 SYNCHRONISED = ("northridge", "sine_1p0", "sine_1p5", "sine_2p0")
 #: The trial doctored below: synchronised and the shortest of those (7308 rows per file).
 TRIAL = "(Sine 1.5)"
@@ -103,7 +104,7 @@ def test_every_shipped_trial_imports_on_one_time_base(shipped):
                                              storey_heights=(0.1524,) * 3)
     for run in shipped.runs:
         records = [read_xsens_dot(p) for p in run.meta["source_files"]]
-        assert run.channels == CHANNELS and run.time[0] == 0.0
+        assert run.channels == CHANNELS + TABLE_MOTION and run.time[0] == 0.0
         # The device clock steps 8333 us: the run's grid is that step, to float64 round-off of ~160 s.
         assert np.allclose(np.diff(run.time), records[0].step, rtol=1e-9, atol=0)
         assert np.all(np.isfinite(run.values))
@@ -113,6 +114,24 @@ def test_every_shipped_trial_imports_on_one_time_base(shipped):
         # (one on a shared clock; up to 25 where a device ran 21 samples longer, bonus_event).
         assert run.n_samples >= min(r.acc.shape[0] for r in records) - 25
         assert run.added_mass.tolist() == [0.0, 0.0, 0.0]
+
+
+def test_the_table_sensors_other_motions_are_its_file_s_other_columns(shipped):
+    """The table's cross and vertical accelerations and its three angular rates come from the table's own
+    file: on the run's samples, each is the file's column less its mean, the rates in rad/s."""
+    run = shipped.run("northridge")
+    table = read_xsens_dot(run.meta["source_files"][0])
+    report = sensor(run, "zdd")
+    assert (report["axis"], report["gravity_axis"]) == ("X", "Z")
+    start = int(round(-report["start"] / table.step))       # the table's samples the common span skips
+    span = slice(start, start + run.n_samples)
+    expected = {"table_ay": table.acc[span, 1], "table_az": table.acc[span, 2], "table_wx": table.rates[span, 0],
+                "table_wy": table.rates[span, 1], "table_wz": table.rates[span, 2]}
+    for channel, x in expected.items():
+        # the same samples less their mean, to float64 round-off
+        assert np.allclose(run[channel], x - x.mean(), rtol=0, atol=1e-12), channel
+    # the DOT writes deg/s: a table at rest turns far below 1 rad/s, and its rates are not all zero
+    assert 0 < np.max(np.abs(run["table_wy"])) < 1.0
 
 
 def test_synchronised_trials_keep_the_shared_clock(shipped):

@@ -5,7 +5,11 @@ Channel names follow one vocabulary everywhere (recordings, CSV import,
 identification): ``zdd`` base absolute acceleration (m/s^2), ``z``/``zd``
 base displacement/velocity (m, m/s), ``a1..ad`` floor absolute accelerations
 (m/s^2), ``q1..qd`` floor displacements relative to the base (m), ``v1..vd``
-floor velocities relative to the base (m/s); floor 1 is the lowest.
+floor velocities relative to the base (m/s); floor 1 is the lowest.  An imported
+table sensor's other motions (:data:`TABLE_MOTION`): ``table_ay``, ``table_az`` its
+acceleration across the shaking axis and along gravity (m/s^2), ``table_wx``,
+``table_wy``, ``table_wz`` its angular rates about the shaking, cross and gravity
+axes (rad/s), each less its mean.
 """
 
 from __future__ import annotations
@@ -20,10 +24,13 @@ import numpy as np
 from momentid.errors import SensorDataError
 from momentid.core.structure import LabStatement, Structure
 
-__all__ = ["RunData", "Experiment", "UNITS", "channel_unit", "json_safe", "run_name_problem"]
+__all__ = ["RunData", "Experiment", "UNITS", "TABLE_MOTION", "channel_unit", "json_safe", "run_name_problem"]
 
 #: SI unit of each channel group.
-UNITS = {"zdd": "m/s^2", "z": "m", "zd": "m/s", "a": "m/s^2", "q": "m", "v": "m/s"}
+UNITS = {"zdd": "m/s^2", "z": "m", "zd": "m/s", "a": "m/s^2", "q": "m", "v": "m/s",
+         "table_ay": "m/s^2", "table_az": "m/s^2", "table_wx": "rad/s", "table_wy": "rad/s", "table_wz": "rad/s"}
+#: The table sensor's motions besides the shaking axis, in this order.
+TABLE_MOTION = ("table_ay", "table_az", "table_wx", "table_wy", "table_wz")
 
 
 def json_safe(obj: Any) -> Any:

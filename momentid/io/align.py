@@ -34,6 +34,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 from scipy import signal
 
+from momentid.core.series import TABLE_MOTION
 from momentid.errors import SensorDataError
 from momentid.io.formats import SensorRecord
 
@@ -190,6 +191,10 @@ class AlignedRun:
         :data:`MIN_ALIGN_CORRELATION`) away from a periodic ambiguity: how many samples (sub-sample) its
         data lag the position its stamps give (:func:`momentid.io.delays.common_delays` reads them
         across runs).
+    motion : dict
+        The table sensor's other motions on the same samples (:data:`TABLE_MOTION` names, mean removed): its
+        acceleration across the shaking axis and along gravity (m/s^2), and, when its export has them, its
+        angular rates about the shaking, the cross and the gravity axis (rad/s).
     """
 
     time: np.ndarray
@@ -197,6 +202,7 @@ class AlignedRun:
     reports: tuple[SensorReport, ...]
     notes: tuple[str, ...]
     stamp_delays: dict = field(default_factory=dict)
+    motion: dict = field(default_factory=dict)
 
 
 def _filled(x: np.ndarray) -> np.ndarray:
@@ -368,7 +374,7 @@ def _on_table_rate(rec: SensorRecord, table: SensorRecord) -> SensorRecord:
             acc[gone[near] | gone[near - 1], j] = np.nan
     note = (f"its stamps give a sample interval of {rec.step * 1e6:.1f} us against the table's "
             f"{table.step * 1e6:.1f} us ({rate * 1e6:+.0f} ppm): resampled onto the table's clock by its stamps")
-    return replace(rec, time=grid, step=table.step, acc=acc, notes=rec.notes + (note,))
+    return replace(rec, time=grid, step=table.step, acc=acc, notes=rec.notes + (note,), rates=None)
 
 
 def _correct_drift(records: list, axes: list, links: list, step: float) -> tuple[list, list]:
@@ -538,7 +544,7 @@ def _dedrift(rec: SensorRecord, rate: float, start: int, centre: float) -> Senso
     source = k + rate * (k - centre)
     acc = np.column_stack([np.interp(source, k, rec.acc[:, j], left=np.nan, right=np.nan)
                            for j in range(rec.acc.shape[1])])
-    return replace(rec, acc=acc)
+    return replace(rec, acc=acc, rates=None)
 
 
 def _assemble(records: list[SensorRecord], channels: tuple[str, ...], axes: list, links: list[_Link],
@@ -577,4 +583,17 @@ def _assemble(records: list[SensorRecord], channels: tuple[str, ...], axes: list
             missing=missing,
             notes=tuple(extra)))
     time = np.arange(hi - lo) * step
-    return AlignedRun(time=time, values=values, reports=tuple(reports), notes=tuple(notes))
+    motion = _table_motion(records[0], axes[0], slice(lo - starts[0], hi - starts[0]))
+    return AlignedRun(time=time, values=values, reports=tuple(reports), notes=tuple(notes), motion=motion)
+
+
+def _table_motion(table: SensorRecord, axes: tuple, span: slice) -> dict:
+    """The table sensor's :data:`TABLE_MOTION` over ``span`` of its samples, each less its mean: the
+    accelerations across the shaking axis and along gravity, then (when read) the angular rates about the
+    shaking, cross and gravity axes (the sensor's own signs: the twin fits a gain to each)."""
+    g, j, _ = axes
+    cross = next(k for k in range(table.acc.shape[1]) if k not in (g, j))
+    columns = [table.acc[span, cross], table.acc[span, g]]
+    if table.rates is not None:
+        columns += [table.rates[span, j], table.rates[span, cross], table.rates[span, g]]
+    return {name: x - np.nanmean(x) for name, x in zip(TABLE_MOTION, columns)}

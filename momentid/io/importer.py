@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from momentid.core.series import UNITS, Experiment, RunData, run_name_problem
+from momentid.core.series import TABLE_MOTION, UNITS, Experiment, RunData, run_name_problem
 from momentid.core.structure import LabStatement, Structure
 from momentid.errors import ScenarioError, SensorDataError
 from momentid.io.align import SensorReport, align_sensors
@@ -198,6 +198,7 @@ class _Sources:
 
     runs: dict = dataclasses.field(default_factory=dict)
     delays: dict = dataclasses.field(default_factory=dict)
+    motion: tuple = ()
 
 
 def _read_runs(desc: _Description, storeys: int, sources: _Sources):
@@ -218,10 +219,12 @@ def _read_runs(desc: _Description, storeys: int, sources: _Sources):
             _not_copied(record, spec.name, "table" if k == 0 else f"floor {k}", seen)
         sources.runs[spec.name] = (spec, records, channels, align_sensors(records, channels))
     sources.delays = common_delays([s[3] for s in sources.runs.values()], list(sources.runs))
+    # the table's other motions that every run's table sensor gives (one set of channels for all runs)
+    sources.motion = tuple(c for c in TABLE_MOTION if all(c in s[3].motion for s in sources.runs.values()))
     for spec, records, _, aligned in sources.runs.values():
         if sources.delays:
             aligned = align_sensors(records, channels, sources.delays)
-        yield _aligned_run(spec, fmt, channels, aligned)
+        yield _aligned_run(spec, fmt, channels, aligned, sources.motion)
 
 
 def _not_copied(record, run: str, role: str, seen: dict) -> None:
@@ -237,8 +240,9 @@ def _not_copied(record, run: str, role: str, seen: dict) -> None:
                               f"run's name?)")
 
 
-def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) -> RunData:
-    """The run of sensor files aligned as ``aligned``, checked (clipping, resonances near Nyquist)."""
+def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned, motion: tuple = ()) -> RunData:
+    """The run of sensor files aligned as ``aligned``, checked (clipping, resonances near Nyquist), with the
+    table sensor's other motions ``motion`` (of :data:`~momentid.core.series.TABLE_MOTION`) that it has."""
     for j, (ch, f) in enumerate(zip(channels, spec.files)):  # before the placement check reads the shapes
         check_clipping(f"{f}: run {spec.name!r}", ch, aligned.values[:, j])
     notes = list(aligned.notes)
@@ -250,8 +254,10 @@ def _aligned_run(spec: _RunSpec, fmt: ExportFormat, channels: tuple, aligned) ->
                      f"(a mode beyond it folds back)")
     meta = {"format": fmt.name, "source_files": [str(f) for f in spec.files],
             "sensors": [r.to_dict() for r in aligned.reports], "notes": notes}
-    return RunData(name=spec.name, added_mass=np.array(spec.added_mass), time=aligned.time, channels=channels,
-                   values=aligned.values, meta=meta)
+    extra = tuple(c for c in motion if c in aligned.motion)
+    values = np.column_stack([aligned.values, *(aligned.motion[c] for c in extra)])
+    return RunData(name=spec.name, added_mass=np.array(spec.added_mass), time=aligned.time,
+                   channels=(*channels, *extra), values=values, meta=meta)
 
 
 def import_folder(path: str | os.PathLike, *, relabel: bool = True) -> Experiment:
@@ -368,15 +374,20 @@ def _realigned(sources: _Sources, fmt: ExportFormat, moved: dict) -> dict:
         final[name] = (spec, records, channels, first)
     delays = common_delays([f[3] for f in final.values()], list(final))
     again = {n for n in final if n in moved or delays != sources.delays}
-    return {name: _aligned_run(spec, fmt, channels, align_sensors(records, channels, delays) if delays else first)
+    return {name: _aligned_run(spec, fmt, channels, align_sensors(records, channels, delays) if delays else first,
+                               sources.motion)
             for name, (spec, records, channels, first) in final.items() if name in again}
 
 
 def _not_repeated(runs: list[RunData], run: RunData, file: Path) -> None:
-    """Two runs with identical data are the same trial listed twice (copied files): refused, as the
-    copy would count as independent evidence and as held-out data for its own fit."""
+    """Two runs with identical data (the table's shaking and the floors': the table sensor's other motions
+    aside) are the same trial listed twice (copied files): refused, as the copy would count as independent
+    evidence and as held-out data for its own fit."""
+    def core(r: RunData) -> np.ndarray:
+        return r.values[:, [j for j, c in enumerate(r.channels) if c not in TABLE_MOTION]]
+
     for other in runs:
-        if other.values.shape == run.values.shape and np.array_equal(other.values, run.values, equal_nan=True):
+        if other.values.shape == run.values.shape and np.array_equal(core(other), core(run), equal_nan=True):
             raise SensorDataError(f"{file}: run {run.name!r} holds the same data as run {other.name!r}; expected "
                                   f"each trial once (the same trial listed twice?)")
 

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from momentid.core.series import Experiment, RunData
+from momentid.core.series import TABLE_MOTION, Experiment, RunData
 from momentid.io.operating_shapes import Resonance, RunSpectra, mac, run_spectra
 
 __all__ = ["Fault", "Finding", "check_placement", "corrected", "placement_warnings", "GAIN_RANGE",
@@ -495,7 +495,8 @@ def _with_peers(finding: Finding, runs: list[_Run], perms: dict, d: int) -> Find
 
 def corrected(run: RunData, finding: Finding) -> RunData:
     """``run`` with ``finding``'s fix applied to ``zdd, a1..ad`` (and to its per-sensor reports and
-    source files), the finding's message added to ``meta["notes"]``."""
+    source files), the finding's message added to ``meta["notes"]``; the table's other motions
+    (:data:`~momentid.core.series.TABLE_MOTION`) dropped when another sensor becomes the table's."""
     d = run.added_mass.shape[0]
     channels = _channels(run, d)
     index = [run.channels.index(c) for c in channels]
@@ -511,7 +512,12 @@ def corrected(run: RunData, finding: Finding) -> RunData:
         values[:, index[j]] = -values[:, index[j]]
     fix = "relabelled" if finding.permutation is not None else "sign flipped"
     meta["notes"] = [*meta.get("notes", ()), f"{finding.message}: {fix}"]
-    return replace(run, values=values, meta=meta)
+    keep = list(range(len(run.channels)))
+    if finding.permutation is not None and finding.permutation[0] != 0:   # another sensor is the table's
+        keep = [j for j, c in enumerate(run.channels) if c not in TABLE_MOTION]
+        if len(keep) < len(run.channels):
+            meta["notes"].append("the listed table sensor's other motions dropped: it is not the table's")
+    return replace(run, channels=tuple(run.channels[j] for j in keep), values=values[:, keep], meta=meta)
 
 
 def placement_warnings(experiment: Experiment) -> tuple[str, ...]:

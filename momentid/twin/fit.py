@@ -40,7 +40,7 @@ from momentid.twin.replay import nrmse as replay_nrmse
 
 __all__ = ["FittedRig", "friction_records", "Trial", "FitResult", "trial", "fit_twin", "predict", "nrmse",
            "sensor_jacobian", "FIT_ENERGY", "friction_start", "mechanism_start", "storey_levels", "twin_modes",
-           "joint_tendon_stiffness", "workers", "each"]
+           "joint_tendon_stiffness", "workers", "each", "motion_scale"]
 
 #: Seconds of a trial's quiet lead-in simulated before its shaking starts (the rest is the floors at rest).
 LEAD_IN_MARGIN = 1.0
@@ -56,14 +56,6 @@ DAMPING_BOUNDS = (-0.01, 0.1)
 GAIN_BOUNDS = (-0.2, 0.2)
 OFFSET_BOUNDS = (-0.02, 0.02)
 _INVALID = 10.0     # residual of a parameter set whose stiffness is not positive definite
-
-
-
-
-
-
-
-
 
 
 @dataclass(frozen=True)
@@ -144,8 +136,6 @@ class _ParamCodec:
         return dict(p)
 
 
-
-
 def _codec(kind_name: str, level):
     if kind_name == "joint_friction":
         return _JointCodec()
@@ -155,12 +145,14 @@ def _codec(kind_name: str, level):
 
 class _Layout:
     """The parameter vector: K's upper triangle (N/m), damping ratios, each mechanism record's numbers
-    (:class:`_JointCodec`, :class:`_ParamCodec`), then log-gains and clock offsets of the sensors.
+    (:class:`_JointCodec`, :class:`_ParamCodec`), then log-gains and clock offsets of the sensors, then the
+    gains of the table's other motions the twin is driven by (``motion_scale``: their typical sizes).
     ``shared`` (records of one kind): one block of numbers for every record, a joint in each storey as
     stiff as the first's times the ratio of their storeys' stiffness in the template (one law, fewer
     parameters)."""
 
-    def __init__(self, template: FittedRig, shared: bool = False, levels: dict | None = None):
+    def __init__(self, template: FittedRig, shared: bool = False, levels: dict | None = None,
+                 motion_scale: np.ndarray | None = None):
         self.template = template
         self.d = template.storeys
         self.records = tuple(template.friction)
@@ -182,13 +174,16 @@ class _Layout:
         self.scale = np.concatenate([np.maximum(K[self.iu], 0.01 * K.max()), np.full(self.d, 0.01),
                                      np.ravel(np.concatenate(own)) if own else np.zeros(0), np.full(self.d, 0.01),
                                      np.full(self.d, 1e-3)])
-        assert self.scale.size == self.n_phys + 2 * self.d
+        # the table motions' gains last: each one's typical size makes its motion as large as the shaking
+        self.k = len(template.table_motion)
+        self.scale = np.concatenate([self.scale, np.ones(self.k) if motion_scale is None else motion_scale])
+        assert self.scale.size == self.n_phys + 2 * self.d + self.k
 
     def pack(self, model: FittedRig) -> np.ndarray:
         parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
         for codec, m in zip(self.codecs, model.friction):
             parts.append(codec.pack(dict(m.parameters)))
-        parts += [np.log(model.gain), model.offset]
+        parts += [np.log(model.gain), model.offset, model.table_gains]
         return np.concatenate([np.ravel(np.asarray(p, float)) for p in parts])
 
     def unpack(self, theta) -> FittedRig:
@@ -206,7 +201,8 @@ class _Layout:
             params = [self.codecs[0].share(params[0], w) for w in self.weights]
         records = tuple(replace(m, parameters=tuple(p.items())) for m, p in zip(self.records, params))
         return replace(self.template, stiffness=K, damping_ratio=zeta, friction=records,
-                       gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]))
+                       gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]),
+                       table_gains=np.asarray(theta[i + 2 * d:i + 2 * d + self.k]))
 
     def bounds(self):
         k = len(self.iu[0])
@@ -216,8 +212,8 @@ class _Layout:
             low, high = codec.bounds()
             lo += list(low)
             hi += list(high)
-        lo += [GAIN_BOUNDS[0]] * self.d + [OFFSET_BOUNDS[0]] * self.d
-        hi += [GAIN_BOUNDS[1]] * self.d + [OFFSET_BOUNDS[1]] * self.d
+        lo += [GAIN_BOUNDS[0]] * self.d + [OFFSET_BOUNDS[0]] * self.d + [-np.inf] * self.k
+        hi += [GAIN_BOUNDS[1]] * self.d + [OFFSET_BOUNDS[1]] * self.d + [np.inf] * self.k
         return np.array(lo), np.array(hi)
 
 
@@ -227,8 +223,6 @@ def _valid(model: FittedRig) -> bool:
         return False
     return all(dict(m.parameters)["stiffness"] < joint_tendon_stiffness(K, m) for m in model.friction
                if m.type == "joint_friction")
-
-
 
 
 def workers() -> int:
@@ -253,7 +247,8 @@ def _steps(substeps: int | None, dt: float) -> int:
 
 def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=None,
               threads: int | None = None, linear: bool | None = None) -> np.ndarray:
-    """Floor accelerations (len(models), stop, d) of ``models`` on ``tr``; the quiet lead-in, where the
+    """Floor accelerations (len(models), stop, d) of ``models`` (one table drive,
+    :meth:`~momentid.twin.fitted_rig.FittedRig.drive`) on ``tr``; the quiet lead-in, where the
     floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
     its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step.
     ``linear``: replay as linear twins (:mod:`momentid.lab.linear_replay`; default: when no model has a
@@ -262,9 +257,12 @@ def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=Non
     stop = len(tr.zdd) if whole else tr.fit_stop
     first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
     compiled = resim.compile_models([m.rig() for m in models], tr.dt / substeps) if compiled is None else compiled
+    drive = models[0].drive(tr)
+    if any(not np.array_equal(m.table_gains, models[0].table_gains) for m in models[1:]):
+        raise ValueError("models simulated together share the table's drive: expected the same table gains")
     out = np.empty((len(compiled), stop, tr.a.shape[1]))
-    out[:, :first] = tr.zdd[None, :first, None]
-    out[:, first:] = resim.simulate(compiled, tr.zdd[first:stop], tr.dt, substeps, threads=threads,
+    out[:, :first] = drive[None, :first, None]
+    out[:, first:] = resim.simulate(compiled, drive[first:stop], tr.dt, substeps, threads=threads,
                                     linear=not any(m.friction for m in models) if linear is None else linear)
     return out
 
@@ -394,6 +392,7 @@ class _Problem:
         valid = [m for m, v in zip(phys, ok) if v]
         compiled = _compiled_by_step(valid, self.trials, self.substeps) if valid else {}
         model = self.layout.unpack(theta)
+        point = _compiled_by_step([model], self.trials, self.substeps) if model.table_motion else {}
         columns = np.flatnonzero(ok)
         rows = np.cumsum([0, *self.sizes])
         # linear twins replay in compiled loops that release the GIL: the trials run side by side; a
@@ -405,7 +404,13 @@ class _Problem:
             if columns.size:
                 run = _simulate(valid, t, False, self.substeps, compiled[t.dt], threads=1 if linear else None)
                 J[rows_k, columns] = ((_residual(model, run, t) - base[rows_k]) / steps[columns, None]).T
-            J[rows_k, self.layout.n_phys:] = sensor_jacobian(model, sims[k], t)
+            sensors = self.layout.n_phys + 2 * self.layout.d
+            J[rows_k, self.layout.n_phys:sensors] = sensor_jacobian(model, sims[k], t)
+            for j, channel in enumerate(model.table_motion):    # the point's model, one motion's drive nudged
+                h = DIFF_STEP * self.layout.scale[sensors + j]
+                nudged = replace(t, zdd=t.zdd + h * t.motion[:, t.motion_channels.index(channel)])
+                run = _simulate([model], nudged, False, self.substeps, point[t.dt], threads=1)
+                J[rows_k, sensors + j] = (_residual(model, run, t)[0] - base[rows_k]) / h
 
         if linear:
             each(block, range(len(self.trials)))
@@ -438,7 +443,7 @@ def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None 
     if not _valid(start):
         raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
                                   f"or a joint stiffer than its storey: {start.to_dict()}")
-    layout = _Layout(start, shared, storey_levels(start, trials))
+    layout = _Layout(start, shared, storey_levels(start, trials), motion_scale(start, trials))
     problem = _Problem(layout, trials, substeps, max_nfev)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)
@@ -453,6 +458,30 @@ def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None 
                      cost=float(2 * result.cost), nfev=int(problem.nsim))
 
 
+def motion_scale(model: FittedRig, trials: Sequence[Trial]) -> np.ndarray:
+    """Per table motion of ``model`` (:attr:`~momentid.twin.fitted_rig.FittedRig.table_motion`), the gain that
+    makes it as large (RMS over the ``trials``' shaking) as the table's shaking axis: the typical size of
+    its gain, shape (k,).
+
+    Raises
+    ------
+    IdentificationError
+        A trial lacks one of the motions, or a motion never moves.
+    """
+    for t in trials:
+        model.drive(t)                                    # raises for a trial without the motions
+    shaking = np.sqrt(np.mean(np.concatenate([t.zdd[t.start:] for t in trials]) ** 2))
+    out = []
+    for channel in model.table_motion:
+        x = np.concatenate([t.motion[t.start:, t.motion_channels.index(channel)] for t in trials])
+        rms = float(np.sqrt(np.mean(x ** 2)))
+        if not rms > 0:
+            raise IdentificationError(f"trials {[t.name for t in trials]}: the table's {channel} never moves; "
+                                      f"expected a measured motion to drive the twin by")
+        out.append(shaking / rms)
+    return np.array(out)
+
+
 def predict(model: FittedRig, tr: Trial, substeps: int | None = None) -> np.ndarray:
     """``model``'s floor accelerations (n, d) on the whole of ``tr``, as its sensors read them."""
     a = _simulate([model], tr, True, substeps)[0]
@@ -462,9 +491,5 @@ def predict(model: FittedRig, tr: Trial, substeps: int | None = None) -> np.ndar
 def nrmse(model: FittedRig, tr: Trial, substeps: int | None = None) -> float:
     """Held-out NRMSE of ``model`` on the whole of ``tr`` (floor channels, after the lead-in)."""
     return float(replay_nrmse(tr.a[tr.start:], predict(model, tr, substeps)[tr.start:]))
-
-
-
-
 
 

@@ -11,9 +11,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from momentid.core.series import RunData
+from momentid.core.series import TABLE_MOTION, RunData
 from momentid.core.structure import Mechanism
-from momentid.errors import MomentidError
+from momentid.errors import IdentificationError, MomentidError
 from momentid.estimation.noise import quiet_lead_in
 from momentid.lab import resim
 from momentid.lab.rig_model import RigModel
@@ -50,6 +50,11 @@ class FittedRig:
         most one of a kind per storey; the field keeps its first kind's name); empty: the linear twin.
     gain, offset : ndarray, shape (d,)
         Floor sensors' gains (1) and clock offsets (s, positive: the sensor lags the table's).
+    table_motion : tuple of str
+        The table sensor's other motions (:data:`~momentid.core.series.TABLE_MOTION` names) the twin is also
+        driven by (:meth:`drive`); empty: the table's shaking axis alone.
+    table_gains : ndarray, shape (len(table_motion),)
+        Each motion's gain into the table acceleration the twin feels (1 for an acceleration, m/s for a rate).
     """
 
     masses: np.ndarray
@@ -58,6 +63,8 @@ class FittedRig:
     friction: tuple = ()
     gain: np.ndarray = field(default=None)
     offset: np.ndarray = field(default=None)
+    table_motion: tuple = ()
+    table_gains: np.ndarray = field(default=None)
 
     def __post_init__(self):
         d = len(self.masses)
@@ -65,6 +72,29 @@ class FittedRig:
             object.__setattr__(self, "gain", np.ones(d))
         if self.offset is None:
             object.__setattr__(self, "offset", np.zeros(d))
+        if self.table_gains is None or (len(self.table_gains) == 0 and self.table_motion):   # a new motion: no gain
+            object.__setattr__(self, "table_gains", np.zeros(len(self.table_motion)))
+        if len(self.table_gains) != len(self.table_motion):
+            raise ValueError(f"table gains {list(self.table_gains)} for motions {list(self.table_motion)}: "
+                             f"expected one gain per motion")
+
+    def drive(self, tr: Trial) -> np.ndarray:
+        """The table acceleration (m/s^2, shape (n,)) the twin feels on ``tr``: the recorded shaking axis plus
+        :attr:`table_gains` times the trial's :attr:`table_motion`.
+
+        Raises
+        ------
+        IdentificationError
+            ``tr`` lacks a motion the twin is driven by.
+        """
+        if not self.table_motion:
+            return tr.zdd
+        missing = [c for c in self.table_motion if c not in tr.motion_channels]
+        if missing:
+            raise IdentificationError(f"trial {tr.name!r}: no {', '.join(missing)} (the table sensor's other "
+                                      f"motions); expected them, as the twin is driven by them")
+        index = [tr.motion_channels.index(c) for c in self.table_motion]
+        return tr.zdd + tr.motion[:, index] @ np.asarray(self.table_gains, float)
 
     @property
     def storeys(self) -> int:
@@ -88,13 +118,14 @@ class FittedRig:
 
     def to_dict(self) -> dict:
         """The rig as a JSON-ready dict: masses (kg), K (N/m), damping ratios, each mechanism record with its place,
-        the sensors' gains and clock offsets (s).
+        the sensors' gains and clock offsets (s), the table motions' gains.
         """
         return {"masses_kg": np.asarray(self.masses).tolist(), "stiffness_n_per_m": np.asarray(self.stiffness).tolist(),
                 "damping_ratio": np.asarray(self.damping_ratio).tolist(),
                 "friction": [{"type": m.type, **registry.get(m.type).place(m.location).location,
                               **dict(m.parameters)} for m in self.friction],
-                "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist()}
+                "sensor_gain": np.asarray(self.gain).tolist(), "sensor_offset_s": np.asarray(self.offset).tolist(),
+                "table_motion_gains": dict(zip(self.table_motion, np.asarray(self.table_gains, float).tolist()))}
 
 
 def friction_records(storeys: Iterable[int], params: Iterable[dict]) -> tuple[Mechanism, ...]:
@@ -118,6 +149,10 @@ class Trial:
         Samples re-simulated while fitting (:data:`FIT_ENERGY`).
     norm : float
         ``sqrt(sum |a - mean|^2)`` after ``start`` (the NRMSE's denominator).
+    motion : ndarray, shape (n, k)
+        The table sensor's other motions (m/s^2, rad/s), each less its mean over the quiet lead-in.
+    motion_channels : tuple of str, length k
+        Their names (:data:`~momentid.core.series.TABLE_MOTION`).
     """
 
     name: str
@@ -127,17 +162,26 @@ class Trial:
     start: int
     fit_stop: int
     norm: float
+    motion: np.ndarray = field(default=None)
+    motion_channels: tuple = ()
+
+    def __post_init__(self):
+        if self.motion is None:
+            object.__setattr__(self, "motion", np.zeros((len(self.zdd), 0)))
 
 
 def trial(run: RunData, d: int) -> Trial:
-    """A :class:`Trial` from a run with ``zdd`` and ``a1..ad`` (m/s^2)."""
+    """A :class:`Trial` from a run with ``zdd`` and ``a1..ad`` (m/s^2), and the table's other motions it has."""
     a = run.group("a", d)
     start = quiet_lead_in(run)
     active = a[start:]
     energy = np.cumsum(np.sum(a ** 2, axis=1))
     stop = int(min(len(a), np.searchsorted(energy, FIT_ENERGY * energy[-1]) + 1))
+    names = tuple(c for c in TABLE_MOTION if c in run.channels)
+    motion = np.column_stack([np.asarray(run[c], float) for c in names]) if names else np.zeros((len(a), 0))
+    motion = np.nan_to_num(motion - np.nanmean(motion[:start + 1], axis=0))
     return Trial(run.name, np.asarray(run["zdd"], float), a, 1.0 / run.sample_rate, start, max(stop, start + 2),
-                 float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2))))
+                 float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2))), motion, names)
 
 
 def storey_levels(model: FittedRig, trials: Sequence[Trial]) -> dict[int, tuple[float, float, float, float]]:

@@ -41,7 +41,7 @@ from momentid.estimation.noise import estimate_noise
 from momentid.estimation.scaled import AmplitudeTrend, amplitude_trend as trend_of, identify_modal
 from momentid.mechanisms import registry
 
-__all__ = ["Fold", "Candidate", "candidates", "select", "inner_hold_out", "hold_out", "linear_start",
+__all__ = ["Fold", "Candidate", "candidates", "table_motion", "select", "inner_hold_out", "hold_out", "linear_start",
            "amplitude_trend", "FRICTION_STARTS"]
 
 #: Starts of the augmented fit (stiffness lost at the reference drift as a share of the storey's,
@@ -55,6 +55,9 @@ AUGMENTED_NFEV = 10
 #: The kind fitted when the training trials are too few to choose (two: an inner fit needs two of its
 #: own): joint friction, whose softening and damping both grow with the drift.
 UNCHOSEN = "joint_friction"
+#: The candidate name of the table's other motions as the twin's inputs, and its words.
+TABLE_MOTION = "table_motion"
+MOTION_WORDS = "the table's other motions as inputs (its sway and rocking under the structure)"
 #: Seed of the sensor noise added to a simulated trial before it is identified.
 NOISE_SEED = 7
 
@@ -114,35 +117,52 @@ def linear_start(experiment: Experiment, names: str | Sequence[str]) -> twin_fit
 class Candidate:
     """One physics the augmented twin may carry: a real-rig kind (:func:`~momentid.mechanisms.registry.real_rig_kinds`)
     in every storey, each storey with its own parameters or one law ``shared`` by all; ``kind`` None: the
-    linear twin (no physics)."""
+    linear twin (no physics).  ``motion``: the twin is also driven by the table sensor's other motions
+    (:attr:`~momentid.twin.fitted_rig.FittedRig.table_motion`, a gain each): a table that rocks or sways
+    under the structure."""
 
     kind: str | None
     shared: bool = False
+    motion: bool = False
+
+    @property
+    def linear(self) -> bool:
+        """The linear twin as it is: no physics and the table's shaking axis alone."""
+        return self.kind is None and not self.motion
 
     @property
     def name(self) -> str:
-        """The candidate's name in reports (``"linear"``, ``"joint_friction_shared"``, ...)."""
+        """The candidate's name in reports (``"linear"``, ``"joint_friction_shared"``, ``"table_motion"``,
+        ``"bouc_wen+table_motion"``, ...)."""
         if self.kind is None:
-            return "linear"
-        return self.kind + ("_shared" if self.shared else "")
+            return TABLE_MOTION if self.motion else "linear"
+        return self.kind + ("_shared" if self.shared else "") + (f"+{TABLE_MOTION}" if self.motion else "")
 
     def words(self, storeys: int) -> str:
         """The candidate in words for a rig of ``storeys`` storeys."""
         if self.kind is None:
-            return "no physics (the linear twin)"
+            return MOTION_WORDS if self.motion else "no physics (the linear twin)"
         where = "storey 1" if storeys == 1 else ("every storey, one law shared" if self.shared
                                                   else "every storey, each its own")
-        return f"{self.kind.replace('_', ' ')} at {where}"
+        return f"{self.kind.replace('_', ' ')} at {where}" + (f", with {MOTION_WORDS}" if self.motion else "")
 
 
-def candidates(storeys: int) -> tuple:
-    """The linear twin, then every real-rig kind per storey and (more than one storey) shared."""
-    out = [Candidate(None)]
+def candidates(storeys: int, motion: bool = False) -> tuple:
+    """The linear twin; with ``motion`` the twin driven by the table's other motions too; then every real-rig
+    kind per storey and (more than one storey) shared, each driven by them when ``motion``."""
+    out = [Candidate(None)] + ([Candidate(None, motion=True)] if motion else [])
     for kind in registry.real_rig_kinds():
-        out.append(Candidate(kind.name))
+        out.append(Candidate(kind.name, motion=motion))
         if storeys > 1:
-            out.append(Candidate(kind.name, shared=True))
+            out.append(Candidate(kind.name, shared=True, motion=motion))
     return tuple(out)
+
+
+def table_motion(trials: Sequence[twin_fit.Trial]) -> tuple:
+    """The table sensor's other motions every one of ``trials`` records (channel names, in order)."""
+    trials = list(trials)
+    return tuple(c for c in (trials[0].motion_channels if trials else ())
+                 if all(c in t.motion_channels for t in trials))
 
 
 def inner_hold_out(trials: dict[str, twin_fit.Trial], training: Sequence[str]) -> str:
@@ -169,7 +189,9 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
            pool: Callable[[Callable[[Any], Any], list], list] | None = None) -> tuple:
     """The physics the training trials alone choose: every :func:`candidates` fitted on the training trials
     but :func:`inner_hold_out`, replayed on that one; the lowest NRMSE wins (the linear twin when no
-    physics predicts it better).
+    physics predicts it better).  When ``trials`` record the table's other motions (:func:`table_motion`),
+    the linear twin driven by them is a candidate too, and when it beats the linear twin there every
+    physics candidate is driven by them as well.
 
     Returns
     -------
@@ -179,22 +201,30 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
     """
     training = list(training)
     d = trials[training[0]].a.shape[1]
-    cands = candidates(d)
     if len(training) < 3:            # an inner fit needs two trials: no evidence to choose by
         return Candidate(UNCHOSEN), "", {}
     inner = inner_hold_out(trials, training)
     train = [trials[n] for n in training if n != inner]
     linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
+    score = {"linear": twin_fit.nrmse(linear.model, trials[inner], substeps)}
+    # the twin's inputs first: the table's other motions drive every physics candidate when they alone
+    # predict the inner held-out trial better than the shaking axis alone
+    base, motion = linear, table_motion(trials.values())
+    if motion:
+        moved = twin_fit.fit_twin(train, replace(linear.model, table_motion=motion), substeps=substeps,
+                                  max_nfev=max_nfev)
+        score[TABLE_MOTION] = twin_fit.nrmse(moved.model, trials[inner], substeps)
+        base = moved if score[TABLE_MOTION] < score["linear"] else linear
+    cands = [c for c in candidates(d, base is not linear) if c.kind is not None]
 
     def fit(candidate):
-        if candidate.kind is None:
-            return linear
         fits = [twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, shared=candidate.shared)
-                for guess in _augmented_start(linear.model, candidate, starts, train)]
+                for guess in _augmented_start(base.model, candidate, starts, train)]
         return min(fits, key=lambda f: f.cost)
 
     fits = (pool or twin_fit.each)(fit, cands)
-    score = {c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(cands, fits)}
+    score.update({c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(cands, fits)})
+    cands = [Candidate(None)] + ([Candidate(None, motion=True)] if motion else []) + cands
     table = {n: {"inner_nrmse": v, "ratio_to_linear": v / score["linear"]} for n, v in score.items()}
     best = min(cands, key=lambda c: score[c.name])
     return best, inner, table
@@ -244,10 +274,14 @@ def hold_out(experiment: Experiment, held: str, training: Sequence[str], *, subs
     # the selection (its inner fits one after another) runs beside the linear refit (threads: MuJoCo
     # releases the GIL); then the held-out trial's own fit beside the chosen physics' fits
     linear, (chosen, inner, table) = twin_fit.each(lambda job: job(), [linear_fit, choose])
+    base = linear
+    if chosen.motion:              # the linear twin driven by the table's other motions, then its physics
+        moved = replace(linear.model, table_motion=table_motion(trials.values()))
+        base = twin_fit.fit_twin(train, moved, substeps=substeps, max_nfev=max_nfev)
     if chosen.kind is None:
-        fits = [own_fit(linear.model), linear]
+        fits = [own_fit(linear.model), base]
     else:
-        guesses = _augmented_start(linear.model, chosen, starts, train)
+        guesses = _augmented_start(base.model, chosen, starts, train)
         jobs = [lambda: own_fit(linear.model)] + [
             lambda guess=guess: twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev,
                                                   shared=chosen.shared) for guess in guesses]
@@ -259,7 +293,7 @@ def hold_out(experiment: Experiment, held: str, training: Sequence[str], *, subs
     refit = twin_fit.nrmse(linear.model, tr, substeps)
     return Fold(held_out=held, training=tuple(training),
                 nrmse_linear_refit=refit,
-                nrmse_after=refit if chosen.kind is None else twin_fit.nrmse(augmented.model, tr, substeps),
+                nrmse_after=refit if chosen.linear else twin_fit.nrmse(augmented.model, tr, substeps),
                 nrmse_linear_own=own.nrmse[held], noise_nrmse=noise, linear=linear, augmented=augmented, own=own,
                 seconds=time.perf_counter() - began, cpu_seconds=time.process_time() - cpu,
                 chosen=chosen, inner_held_out=inner, selection=table)

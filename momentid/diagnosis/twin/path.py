@@ -174,7 +174,7 @@ def _verdict(before: float, fold) -> Verdict:
     noise = fold.noise_nrmse
     if min(before, fold.nrmse_linear_refit) <= EXCESS * noise:
         return Verdict.NONE
-    if fold.chosen is not None and fold.chosen.kind is None:
+    if fold.chosen is not None and fold.chosen.linear:
         # the training trials chose no physics: linear within its trials when the refit is as good as the
         # held-out trial's own linear fit allows, else a mismatch no candidate explains
         return Verdict.NONE if fold.nrmse_linear_refit <= LINEAR_ROOM * fold.nrmse_linear_own else Verdict.UNEXPLAINED

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from momentid.core.series import channel_unit
 from momentid.diagnosis.result import Diagnosis, Evidence
 from momentid.diagnosis.thresholds import EXCESS, EXPLAINED, LINEAR_ROOM, removed_share
 from momentid.diagnosis.verdict import Verdict
@@ -142,7 +143,7 @@ def _selection_lines(diag: Diagnosis) -> list[str]:
     d = fold.linear.model.storeys
     from momentid.diagnosis.twin.folds import candidates
 
-    words = {c.name: c.words(d) for c in candidates(d)}
+    words = {c.name: c.words(d) for c in candidates(d) + candidates(d, motion=True)}
     ranked = sorted(table, key=lambda n: table[n]["inner_nrmse"])
     parts = "; ".join(f"{words.get(n, n)} {table[n]['ratio_to_linear']:.2f} x" for n in ranked if n != "linear")
     return [f"Physics chosen on the training trials alone (each candidate fitted on the others, NRMSE on "
@@ -164,11 +165,23 @@ def _mechanism_lines(diag: Diagnosis, share: float) -> list[str]:
                      + ("" if lost is None else
                         f" Stiffness lost to slip: {lost:.3g} N/m at 1 mm, "
                         f"{named.parameters['stiffness_lost_at_5mm_n_per_m']:.3g} N/m at 5 mm of drift."))
+    lines += _motion_lines(diag.evidence.fold.augmented.model) if diag.verdict is Verdict.MECHANISM else []
     if after > EXCESS * noise:
         lines.append(f"WARNING: {_physics_words(diag)} explains only part of the mismatch: the held-out NRMSE is still "
                      f"{100 * after:.2f} % ({after / noise:.1f} x noise); the rest is largest at the "
                      f"{diag.location['words']}.")
     return lines
+
+
+def _motion_lines(model) -> list[str]:
+    """The gains by which the table's other motions drive the chosen twin, in words (none: no lines)."""
+    if not model.table_motion:
+        return []
+    unit = {c: channel_unit(c) for c in model.table_motion}
+    gains = ", ".join(f"{c} {g:+.3g}" + ("" if unit[c] == "m/s^2" else " m/s per rad/s")
+                      for c, g in zip(model.table_motion, model.table_gains))
+    return [f"  The table's other motions drive the twin beside its shaking axis (gains into the table "
+            f"acceleration the twin feels): {gains}."]
 
 
 def plot_replay(diag: Diagnosis, path: Path) -> Path:
@@ -184,14 +197,14 @@ def plot_replay(diag: Diagnosis, path: Path) -> Path:
         ax.plot(t, c["linear_refit"]["a"][:, j], color="tab:blue", lw=0.5, alpha=0.7,
                 label=f"linear twin refitted ({100 * diag.evidence.channel_nrmse[f'a{j + 1}']['linear_refit']:.1f} %)")
         ax.plot(t, c["augmented"]["a"][:, j], color="tab:red", lw=0.5, alpha=0.8,
-                label=f"twin with joint friction ({100 * diag.evidence.channel_nrmse[f'a{j + 1}']['after']:.1f} %)")
+                label=f"twin with the chosen physics ({100 * diag.evidence.channel_nrmse[f'a{j + 1}']['after']:.1f} %)")
         ax.set_ylabel(f"floor-{j + 1} sensor\n(m/s^2)", fontsize=8)
         ax.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time (s)")
     where = f"\nmisfit left largest at the {diag.location['words']}" if diag.location else ""
     fig.suptitle(f"Held-out trial {diag.held_out}: {diag.mechanism.replace('_', ' ')}; NRMSE linear twin "
                  f"{100 * diag.nrmse_before:.1f} %, refitted {100 * diag.nrmse_linear_refit:.1f} %, "
-                 f"with joint friction {100 * diag.nrmse_after:.1f} %{where}", fontsize=9)
+                 f"with the chosen physics {100 * diag.nrmse_after:.1f} %{where}", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=80)
     plt.close(fig)

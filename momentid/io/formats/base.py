@@ -70,6 +70,8 @@ class SensorRecord:
         What the file says about the device (tag, firmware, start time).
     notes : tuple of str
         What the reader repaired or converted (lost samples, units), one sentence each.
+    rates : ndarray, shape (n, 3), optional
+        Angular rates about the same axes (rad/s), when the export has them.
     """
 
     path: Path
@@ -79,6 +81,7 @@ class SensorRecord:
     axes: tuple[str, ...] = ("X", "Y", "Z")
     info: dict = field(default_factory=dict, compare=False)
     notes: tuple[str, ...] = ()
+    rates: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

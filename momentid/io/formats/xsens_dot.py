@@ -11,10 +11,14 @@ The file (as the Xsens DOT app writes it, gzip allowed): preamble lines
 * ``Acc_X, Acc_Y, Acc_Z``: specific force in m/s^2 in the sensor frame,
   gravity included.
 
+* ``Gyr_X, Gyr_Y, Gyr_Z`` (when present): angular rate in deg/s in the sensor
+  frame, read as ``rates`` in rad/s.  They are secondary: a gap or a wild
+  value in them drops the rates with a note and keeps the accelerations.
+
 * ``PacketCounter``: a 16-bit packet counter (it wraps at 65536; the wrap
   is undone); it places a row whose ``SampleTimeFine`` cell is empty.
 
-Other columns (``Euler_*``, ``Gyr_*``, ``Quat_*``, ...) are parsed for
+Other columns (``Euler_*``, ``Quat_*``, ...) are parsed for
 well-formedness and ignored.  The device writes its first row before it
 measures (all accelerations exactly zero): that row is dropped.
 
@@ -44,13 +48,15 @@ from momentid.errors import SensorDataError
 from momentid.io.formats.base import (MAX_ABS_SAMPLE, ExportFormat, Layout, SensorRecord, first_absurd, read_text,
                                       register, repair_missing, require_table_memory)
 
-__all__ = ["read_xsens_dot", "CLOCK_COLUMN", "ACC_COLUMNS"]
+__all__ = ["read_xsens_dot", "CLOCK_COLUMN", "ACC_COLUMNS", "RATE_COLUMNS"]
 
 CLOCK_COLUMN = "SampleTimeFine"
 COUNTER_COLUMN = "PacketCounter"
 #: ``PacketCounter`` is a uint16 counter of packets.
 COUNTER_WRAP = 2 ** 16
 ACC_COLUMNS = ("Acc_X", "Acc_Y", "Acc_Z")
+#: Angular rates (deg/s, the DOT's unit), read when all three are present.
+RATE_COLUMNS = ("Gyr_X", "Gyr_Y", "Gyr_Z")
 #: Microseconds per second (``SampleTimeFine`` counts microseconds).
 CLOCK_TICKS_PER_SECOND = 1e6
 #: ``SampleTimeFine`` is a uint32 counter of microseconds.
@@ -69,6 +75,10 @@ MIN_SAMPLES = 3
 MAX_SPAN_PER_ROW = 2
 #: Cells read as a missing sample.
 MISSING_CELLS = ("", "nan", "NaN", "NAN")
+#: Largest angular rate (deg/s) read as one: the DOT's gyroscope spans +-2000 deg/s.
+MAX_RATE = 2000.0
+#: Radians per degree.
+DEGREE = np.pi / 180
 #: Standard gravity (m/s^2): an export in g is converted with it.
 STANDARD_GRAVITY = 9.80665
 #: Magnitude (m/s^2) of the mean acceleration of a sensor under gravity: 9.78-10.15 on the shipped
@@ -359,13 +369,16 @@ def read_xsens_dot(path: str | os.PathLike) -> SensorRecord:
     names, body, rows, variants = _harmless_variants(names, lines[h + 1:], first_row)
     data = _parse(path, body, names, rows)
     acc = data[:, [names.index(c) for c in ACC_COLUMNS]]
+    rates = data[:, [names.index(c) for c in RATE_COLUMNS]] if set(RATE_COLUMNS) <= set(names) else None
     ticks = data[:, names.index(CLOCK_COLUMN)]
     rows_read = rows
     if np.all(acc[0] == 0.0):  # written before the device measures
         acc, ticks, rows = acc[1:], ticks[1:], rows[1:]
+        rates = None if rates is None else rates[1:]
     lost, notes = _placeholders(path, acc, ticks, rows)
     notes = locale + variants + notes
     acc, ticks, rows = acc[~lost], ticks[~lost], rows[~lost]
+    rates = None if rates is None else rates[~lost]
     if COUNTER_COLUMN in names:
         counter = data[:, names.index(COUNTER_COLUMN)][data.shape[0] - lost.size:][~lost]
         ticks, stamped = _stamps_from_counter(ticks, counter, rows)
@@ -399,12 +412,36 @@ def read_xsens_dot(path: str | os.PathLike) -> SensorRecord:
             return f"{b - a} samples"
         return f"rows {inside[0]}-{inside[-1]}" if inside.size > 1 else f"row {inside[0]}"
 
+    gone = np.any(np.isnan(full), axis=1)
     full, keep, repaired = repair_missing(full, span, ACC_COLUMNS, str(path))
     acc, units = _units(path, full)
     info = dict(info, lost_samples=gaps + int(lost.sum()))
     time = (start + np.arange(keep.start, keep.stop) * step) / CLOCK_TICKS_PER_SECOND
+    if rates is not None:
+        on_grid = np.full((gone.size, 3), np.nan)
+        on_grid[index] = rates
+        rates, dropped_rates = _rates(path, on_grid, gone, keep, span)
+        units += dropped_rates
     return SensorRecord(path=path, time=time, step=step / CLOCK_TICKS_PER_SECOND, acc=acc,
-                        axes=("X", "Y", "Z"), info=info, notes=tuple(notes + repaired + units))
+                        axes=("X", "Y", "Z"), info=info, notes=tuple(notes + repaired + units), rates=rates)
+
+
+def _rates(path: Path, on_grid: np.ndarray, gone: np.ndarray, keep: slice, span) -> tuple[np.ndarray | None, list]:
+    """The angular rates (rad/s) on the kept accelerations' samples, repaired as they are, or None with a
+    note saying why they were dropped (a gap too long, a missing sample at either end of the kept span, a
+    wild value); a note for each gap the accelerations did not share."""
+    try:
+        out, kept, notes = repair_missing(on_grid, span, RATE_COLUMNS, str(path), "angular-rate samples")
+    except SensorDataError as err:
+        return None, [f"angular rates not read ({err})"]
+    if kept.start > keep.start or kept.stop < keep.stop:
+        return None, [f"angular rates not read: {', '.join(RATE_COLUMNS)} miss samples at an end of the "
+                      f"accelerations' span"]
+    out = out[keep.start - kept.start:keep.stop - kept.start]
+    if first_absurd(out) is not None or np.nanmax(np.abs(out)) > MAX_RATE:
+        return None, [f"angular rates not read: a value beyond {MAX_RATE:g} deg/s (the DOT reads at most 2000)"]
+    shared = np.array_equal(np.any(np.isnan(on_grid), axis=1), gone)
+    return out * DEGREE, [] if shared else notes
 
 
 register(ExportFormat(name="xsens-dot", layout=Layout.SENSOR_FILES, read_sensor=read_xsens_dot,

@@ -1,0 +1,103 @@
+"""The table sensor's other motions: read from an Xsens DOT export (rates in rad/s, dropped with a note
+when they cannot be read), and the twin driven by them through gains it fits."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from momentid.core.series import TABLE_MOTION
+from momentid.errors import IdentificationError
+from momentid.io.formats.xsens_dot import read_xsens_dot
+from momentid.twin import fit as twin_fit
+
+PREAMBLE = ("sep=,\nDeviceTag:,Xsens DOT\nFirmwareVersion:,3.0.0\nAppVersion:,2023.6.0\n"
+            "StartTime: ,2025-03-06_12:21:16_000 PST\n\u00a9 Movella Technologies B. V. 2005-2025\n\n")
+HEADER = "PacketCounter,SampleTimeFine,Euler_X,Euler_Y,Euler_Z,Acc_X,Acc_Y,Acc_Z,Gyr_X,Gyr_Y,Gyr_Z"
+STEP_US, N_ROWS = 8333, 60
+
+
+def _export(path, gyro_cell=lambda k, j, v: f"{v:.6f}"):
+    """A DOT export of ``N_ROWS`` rows: X motion, gravity on Z, angular rates ``(k, 2k, -k) / 10`` deg/s
+    written by ``gyro_cell(row, axis, value)``."""
+    rows = []
+    for k in range(N_ROWS):
+        rates = [k / 10, 2 * k / 10, -k / 10]
+        cells = ",".join(gyro_cell(k, j, v) for j, v in enumerate(rates))
+        rows.append(f"{k},{1000 + k * STEP_US},0,0,0,{0.1 * np.sin(k / 3):.6f},0.01,9.81,{cells}")
+    path.write_text(PREAMBLE + HEADER + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def test_angular_rates_are_read_in_radians_per_second(tmp_path):
+    record = read_xsens_dot(_export(tmp_path / "t.csv"))
+    k = np.arange(N_ROWS)
+    # the file writes deg/s to 6 decimals: the same rates in rad/s to the rounding (5e-7 deg/s)
+    assert np.allclose(record.rates, np.column_stack([k, 2 * k, -k]) / 10 * np.pi / 180, rtol=0, atol=1e-8)
+
+
+def test_a_long_gap_in_the_rates_drops_them_and_keeps_the_accelerations(tmp_path):
+    # 8 empty Gyr_Y cells in a row (more than the 5 a reader interpolates): no rates, a note, the
+    # accelerations read as ever
+    def cell(k, j, v):
+        return "" if j == 1 and 20 <= k < 28 else f"{v:.6f}"
+
+    record = read_xsens_dot(_export(tmp_path / "t.csv", cell))
+    assert record.rates is None and record.acc.shape == (N_ROWS, 3)
+    assert any("angular rates not read" in note for note in record.notes)
+
+
+def test_a_short_gap_in_the_rates_is_interpolated_with_a_note(tmp_path):
+    def cell(k, j, v):
+        return "" if j == 2 and k == 30 else f"{v:.6f}"
+
+    record = read_xsens_dot(_export(tmp_path / "t.csv", cell))
+    # Gyr_Z is a straight line in the row: interpolation gives it back to the written rounding
+    assert record.rates[30, 2] == pytest.approx(-3.0 * np.pi / 180, abs=1e-8)
+    assert any("Gyr_Z" in note for note in record.notes)
+
+
+def _trial(seed: int, n: int = 2400, dt: float = 1 / 120) -> twin_fit.Trial:
+    """A trial of a 1-storey rig: band-limited table shaking after a 1 s quiet lead-in, two table motions
+    (the floors are filled in by the caller)."""
+    rng = np.random.default_rng(seed)
+    b, a = scipy.signal.butter(2, [0.5 / 60, 30 / 60], "band")
+    lead = 120
+    def shaking():
+        return np.concatenate([np.zeros(lead), scipy.signal.lfilter(b, a, rng.standard_normal(n - lead))])
+
+    zdd = shaking()
+    motion = np.column_stack([shaking() for _ in range(2)])
+    return twin_fit.Trial(f"t{seed}", zdd, np.zeros((n, 1)), dt, lead, n, 1.0, 0.2 * motion, TABLE_MOTION[:2])
+
+
+def test_the_twin_fits_the_gains_of_the_table_motions_that_drive_it():
+    truth = twin_fit.FittedRig(np.array([0.2]), np.array([[3000.0]]), np.array([0.01]), table_motion=TABLE_MOTION[:2],
+                               table_gains=np.array([-0.5, 0.3]))
+    trials = []
+    for seed in (1, 2):
+        tr = _trial(seed)
+        a = twin_fit.predict(truth, tr)
+        active = a[tr.start:]
+        trials.append(replace(tr, a=a, norm=float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2)))))
+    start = replace(truth, stiffness=np.array([[2900.0]]), table_gains=np.zeros(2))
+    fit = twin_fit.fit_twin(trials, start)
+    # noise-free data of the same model: the gains come back to the optimiser's tolerance (1e-6 relative
+    # cost); 1e-3 is far below the 0.3-0.5 they are and far above round-off
+    assert np.allclose(fit.model.table_gains, truth.table_gains, atol=1e-3)
+    assert max(fit.nrmse.values()) < 1e-3
+    # without the motions the same fit cannot explain the floors
+    alone = twin_fit.fit_twin(trials, replace(start, table_motion=(), table_gains=np.zeros(0)))
+    assert min(alone.nrmse.values()) > 0.1
+
+
+def test_a_trial_without_the_motions_is_refused_by_a_twin_driven_by_them():
+    model = twin_fit.FittedRig(np.array([0.2]), np.array([[3000.0]]), np.array([0.01]), table_motion=("table_wy",))
+    tr = _trial(3)
+    with pytest.raises(IdentificationError, match="table_wy"):
+        model.drive(tr)
+    with pytest.raises(ValueError, match="one gain per motion"):
+        replace(model, table_gains=np.zeros(2))

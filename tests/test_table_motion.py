@@ -101,3 +101,43 @@ def test_a_trial_without_the_motions_is_refused_by_a_twin_driven_by_them():
         model.drive(tr)
     with pytest.raises(ValueError, match="one gain per motion"):
         replace(model, table_gains=np.zeros(2))
+
+
+def test_motions_that_do_not_drive_the_rig_drive_no_candidate():
+    # three trials of a linear rig whose two table motions are unrelated noise: the twin driven by them
+    # fits their gains to the training trials and predicts the inner held-out trial no better (not within
+    # MOTION_RATIO): no candidate is driven by them
+    from momentid.diagnosis.twin import folds
+
+    truth = twin_fit.FittedRig(np.array([0.2]), np.array([[3000.0]]), np.array([0.01]))
+    rng = np.random.default_rng(5)
+    trials = {}
+    for seed, scale in ((11, 0.5), (12, 1.0), (13, 2.0)):
+        tr = _trial(seed)
+        tr = replace(tr, zdd=scale * tr.zdd)
+        a = twin_fit.predict(truth, tr)
+        a = a + rng.normal(0.0, 0.01 * np.std(a), a.shape)          # 1 % sensor noise
+        active = a[tr.start:]
+        trials[tr.name] = replace(tr, a=a, norm=float(np.sqrt(np.sum((active - active.mean(axis=0)) ** 2))))
+    start = replace(truth, stiffness=np.array([[2950.0]]))
+    best, inner, table = folds.select(trials, list(trials), max_nfev=10, augmented_nfev=3, start=start)
+    assert table["table_motion"]["ratio_to_linear"] > folds.MOTION_RATIO, table
+    assert not best.motion and not any(n.endswith("+table_motion") for n in table), table
+
+
+@pytest.mark.parametrize("linear", [True, False])
+def test_one_drive_per_model_simulates_as_each_alone(linear):
+    # resim.simulate with a table drive per model (the Jacobian's nudged motions in one rollout) reads
+    # what each model reads under its own drive alone: the same arithmetic, to round-off
+    from momentid.lab import resim
+
+    model = twin_fit.FittedRig(np.array([0.2]), np.array([[3000.0]]), np.array([0.01]))
+    tr = _trial(4, n=600)
+    dt, substeps = tr.dt, resim.substeps_for(tr.dt)
+    compiled = resim.compile_models([model.rig()] * 2, dt / substeps)
+    drives = np.stack([tr.zdd, tr.zdd + tr.motion[:, 0]])
+    together = resim.simulate(compiled, drives, dt, substeps, linear=linear)
+    for k in range(2):
+        alone = resim.simulate(compiled[:1], drives[k], dt, substeps, linear=linear)[0]
+        assert np.allclose(together[k], alone, rtol=0, atol=1e-12 * np.max(np.abs(alone)))
+    assert not np.allclose(together[0], together[1])

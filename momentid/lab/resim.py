@@ -124,8 +124,9 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
     ----------
     models : sequence of mujoco.MjModel
         From :func:`compile_models`, one layout, timestep ``dt / substeps``.
-    zdd : ndarray, shape (n,)
-        Table acceleration (m/s^2) at the samples; the floors start at rest on the table.
+    zdd : ndarray, shape (n,) or (len(models), n)
+        Table acceleration (m/s^2) at the samples, one for every model or one per model; the floors start
+        at rest on the table.
     dt : float
         Sample interval (s).
     threads : int, optional
@@ -149,30 +150,37 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
     d = sum(1 for j in range(first.njnt) if first.joint(j).name.startswith("q"))
     layout = lab_rig.sensor_layout(first)
     index = np.array([layout[f"a{i + 1}"] for i in range(d)])
-    n = len(zdd)
-    jerk = np.repeat(np.diff(zdd) / dt, substeps)
-    jerk = np.append(jerk, 0.0)                       # one step more: the last sample's sensors
+    drives = np.atleast_2d(np.asarray(zdd, float))
+    if drives.shape[0] not in (1, len(models)):
+        raise ValueError(f"{drives.shape[0]} table drives for {len(models)} models: expected one, or one per model")
+    n = drives.shape[1]
+    jerk = np.repeat(np.diff(drives, axis=1) / dt, substeps, axis=1)
+    jerk = np.concatenate([jerk, np.zeros((jerk.shape[0], 1))], axis=1)   # one step more: the last sensors
     if linear:
         from momentid.lab import linear_replay
 
-        out = linear_replay.simulate(models, jerk, float(zdd[0]), index, substeps)
+        if drives.shape[0] == 1:
+            out = linear_replay.simulate(models, jerk[0], float(drives[0, 0]), index, substeps)
+        else:
+            out = np.concatenate([linear_replay.simulate([m], j, float(z[0]), index, substeps)
+                                  for m, j, z in zip(models, jerk, drives)])
         return _finite(out)
     nthread = max(1, min(threads or ROLLOUT_THREADS or os.cpu_count() or 1, len(models)))
     datas = [mujoco.MjData(first) for _ in range(nthread)]
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
     states = []
-    for m in models:
+    for k, m in enumerate(models):
         data = mujoco.MjData(m)
-        data.act[0] = zdd[0]
+        data.act[0] = drives[k if drives.shape[0] > 1 else 0, 0]
         s = np.empty(mujoco.mj_stateSize(m, full))
         mujoco.mj_getState(m, data, s, full)
         states.append(s)
     state = np.array(states)
     out = np.empty((len(models), n, d))
-    steps = len(jerk)
+    steps = jerk.shape[1]
     chunk = substeps * max(1, _CHUNK_STEPS // substeps)
-    control = np.zeros((1, steps, first.nu))           # the table's jerk; a force's state actuator takes none
-    control[0, :, 0] = jerk
+    control = np.zeros((jerk.shape[0], steps, first.nu))   # the table's jerk; a force's state actuator takes none
+    control[:, :, 0] = jerk
     with native_forces.installed() if _programs(models) else contextlib.nullcontext():
         for start in range(0, steps, chunk):
             stop = min(steps, start + chunk)

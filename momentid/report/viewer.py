@@ -81,12 +81,18 @@ _SERIES_VIEWS = (
     ("floor absolute accelerations a", None, "a"),
     ("displacements: table z, floors q relative to it", "z", "q"),
     ("velocities: table zd, floors v relative to it", "zd", "v"),
+    ("the table sensor's cross and vertical accelerations", ("table_ay", "table_az"), None),
+    ("the table sensor's angular rates", ("table_wx", "table_wy", "table_wz"), None),
 )
+
+
+def _first(base: str | tuple | None) -> str | None:
+    return base[0] if isinstance(base, tuple) else base
 
 
 def _series_paths(scene: Scene, run: RunData, base: str | None, prefix: str | None) -> list[str]:
     root = run_path(run.name)
-    chans = [base] if base else []
+    chans = list(base) if isinstance(base, tuple) else [base] if base else []
     chans += [f"{prefix}{i + 1}" for i in range(scene.experiment.storeys)] if prefix else []
     return [f"{root}/sensors/{c}" for c in chans if run.has(c)]
 
@@ -109,7 +115,7 @@ def blueprint(scene: Scene) -> rrb.Blueprint:
         root = run_path(run.name)
         eye = rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=[0.9 * total, -1.9 * total, 0.8 * total],
                                 look_target=[0.0, 0.0, 0.45 * total], eye_up=[0.0, 0.0, 1.0])
-        views = [rrb.TimeSeriesView(name=f"{run.name}: {title} ({channel_unit(base or prefix + '1')})",
+        views = [rrb.TimeSeriesView(name=f"{run.name}: {title} ({channel_unit(_first(base) or prefix + '1')})",
                                     contents=paths, plot_legend=legend(len(paths) > 1))
                  for title, base, prefix in _SERIES_VIEWS
                  if (paths := _series_paths(scene, run, base, prefix))]

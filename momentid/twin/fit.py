@@ -246,23 +246,24 @@ def _steps(substeps: int | None, dt: float) -> int:
 
 
 def _simulate(models, tr: Trial, whole: bool, substeps: int | None, compiled=None,
-              threads: int | None = None, linear: bool | None = None) -> np.ndarray:
+              threads: int | None = None, linear: bool | None = None, drives: np.ndarray | None = None) -> np.ndarray:
     """Floor accelerations (len(models), stop, d) of ``models`` (one table drive,
     :meth:`~momentid.twin.fitted_rig.FittedRig.drive`) on ``tr``; the quiet lead-in, where the
     floors ride the table at rest, is not simulated (the floors read the table's acceleration) but for
     its last :data:`LEAD_IN_MARGIN` seconds.  ``compiled``: the models already compiled at ``tr``'s step.
     ``linear``: replay as linear twins (:mod:`momentid.lab.linear_replay`; default: when no model has a
-    mechanism), else by ``mujoco.rollout``."""
+    mechanism), else by ``mujoco.rollout``.  ``drives`` (len(models), n): one table drive per model instead."""
     substeps = _steps(substeps, tr.dt)
     stop = len(tr.zdd) if whole else tr.fit_stop
     first = max(0, tr.start - int(round(LEAD_IN_MARGIN / tr.dt)))
     compiled = resim.compile_models([m.rig() for m in models], tr.dt / substeps) if compiled is None else compiled
-    drive = models[0].drive(tr)
-    if any(not np.array_equal(m.table_gains, models[0].table_gains) for m in models[1:]):
-        raise ValueError("models simulated together share the table's drive: expected the same table gains")
+    if drives is None:
+        drives = models[0].drive(tr)[None, :]
+        if any(not np.array_equal(m.table_gains, models[0].table_gains) for m in models[1:]):
+            raise ValueError("models simulated together share the table's drive: expected the same table gains")
     out = np.empty((len(compiled), stop, tr.a.shape[1]))
-    out[:, :first] = drive[None, :first, None]
-    out[:, first:] = resim.simulate(compiled, drive[first:stop], tr.dt, substeps, threads=threads,
+    out[:, :first] = drives[:, :first, None]
+    out[:, first:] = resim.simulate(compiled, drives[:, first:stop], tr.dt, substeps, threads=threads,
                                     linear=not any(m.friction for m in models) if linear is None else linear)
     return out
 
@@ -406,11 +407,13 @@ class _Problem:
                 J[rows_k, columns] = ((_residual(model, run, t) - base[rows_k]) / steps[columns, None]).T
             sensors = self.layout.n_phys + 2 * self.layout.d
             J[rows_k, self.layout.n_phys:sensors] = sensor_jacobian(model, sims[k], t)
-            for j, channel in enumerate(model.table_motion):    # the point's model, one motion's drive nudged
-                h = DIFF_STEP * self.layout.scale[sensors + j]
-                nudged = replace(t, zdd=t.zdd + h * t.motion[:, t.motion_channels.index(channel)])
-                run = _simulate([model], nudged, False, self.substeps, point[t.dt], threads=1)
-                J[rows_k, sensors + j] = (_residual(model, run, t)[0] - base[rows_k]) / h
+            if model.table_motion:     # the point's model, each motion's drive nudged: one rollout of them all
+                h = DIFF_STEP * self.layout.scale[sensors:]
+                motion = t.motion[:, [t.motion_channels.index(c) for c in model.table_motion]]
+                drives = model.drive(t)[None, :] + (h[:, None] * motion.T)
+                run = _simulate([model] * len(h), t, False, self.substeps, point[t.dt] * len(h),
+                                threads=1 if linear else None, drives=drives)
+                J[rows_k, sensors:] = ((_residual(model, run, t) - base[rows_k]) / h[:, None]).T
 
         if linear:
             each(block, range(len(self.trials)))

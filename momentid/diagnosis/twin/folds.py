@@ -58,6 +58,11 @@ UNCHOSEN = "joint_friction"
 #: The candidate name of the table's other motions as the twin's inputs, and its words.
 TABLE_MOTION = "table_motion"
 MOTION_WORDS = "the table's other motions as inputs (its sway and rocking under the structure)"
+#: Largest ratio of the inner held-out NRMSE of the linear twin driven by the table's other motions to the
+#: linear twin's for the motions to drive the twin: five gains fitted to the training trials buy a percent
+#: or two on a trial they do not drive (the shipped flexible rig: 1.00-1.01 x), a table that rocks under
+#: the structure far more (the shipped stiff rig: 0.47-0.87 x).
+MOTION_RATIO = 0.95
 #: Seed of the sensor noise added to a simulated trial before it is identified.
 NOISE_SEED = 7
 
@@ -190,8 +195,9 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
     """The physics the training trials alone choose: every :func:`candidates` fitted on the training trials
     but :func:`inner_hold_out`, replayed on that one; the lowest NRMSE wins (the linear twin when no
     physics predicts it better).  When ``trials`` record the table's other motions (:func:`table_motion`),
-    the linear twin driven by them is a candidate too, and when it beats the linear twin there every
-    physics candidate is driven by them as well.
+    the linear twin driven by them is fitted too; when it predicts the inner held-out trial within
+    :data:`MOTION_RATIO` of the linear twin's NRMSE it is a candidate and every physics candidate is driven
+    by them as well (its score is reported either way).
 
     Returns
     -------
@@ -208,13 +214,13 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
     linear = twin_fit.fit_twin(train, start, substeps=substeps, max_nfev=max_nfev)
     score = {"linear": twin_fit.nrmse(linear.model, trials[inner], substeps)}
     # the twin's inputs first: the table's other motions drive every physics candidate when they alone
-    # predict the inner held-out trial better than the shaking axis alone
+    # predict the inner held-out trial clearly better than the shaking axis alone (MOTION_RATIO)
     base, motion = linear, table_motion(trials.values())
     if motion:
         moved = twin_fit.fit_twin(train, replace(linear.model, table_motion=motion), substeps=substeps,
                                   max_nfev=max_nfev)
         score[TABLE_MOTION] = twin_fit.nrmse(moved.model, trials[inner], substeps)
-        base = moved if score[TABLE_MOTION] < score["linear"] else linear
+        base = moved if score[TABLE_MOTION] <= MOTION_RATIO * score["linear"] else linear
     cands = [c for c in candidates(d, base is not linear) if c.kind is not None]
 
     def fit(candidate):
@@ -224,7 +230,7 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
 
     fits = (pool or twin_fit.each)(fit, cands)
     score.update({c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(cands, fits)})
-    cands = [Candidate(None)] + ([Candidate(None, motion=True)] if motion else []) + cands
+    cands = [Candidate(None)] + ([Candidate(None, motion=True)] if base is not linear else []) + cands
     table = {n: {"inner_nrmse": v, "ratio_to_linear": v / score["linear"]} for n, v in score.items()}
     best = min(cands, key=lambda c: score[c.name])
     return best, inner, table

@@ -89,6 +89,9 @@ def test_the_twin_fits_the_gains_of_the_table_motions_that_drive_it():
     # cost); 1e-3 is far below the 0.3-0.5 they are and far above round-off
     assert np.allclose(fit.model.table_gains, truth.table_gains, atol=1e-3)
     assert max(fit.nrmse.values()) < 1e-3
+    # held (fit_motion=False, as the physics candidates are fitted), the gains stay as started, to the bit
+    held = twin_fit.fit_twin(trials, replace(start, table_gains=np.array([-0.4, 0.2])), fit_motion=False)
+    assert held.model.table_gains.tolist() == [-0.4, 0.2]
     # without the motions the same fit cannot explain the floors
     alone = twin_fit.fit_twin(trials, replace(start, table_motion=(), table_gains=np.zeros(0)))
     assert min(alone.nrmse.values()) > 0.1
@@ -141,3 +144,14 @@ def test_one_drive_per_model_simulates_as_each_alone(linear):
         alone = resim.simulate(compiled[:1], drives[k], dt, substeps, linear=linear)[0]
         assert np.allclose(together[k], alone, rtol=0, atol=1e-12 * np.max(np.abs(alone)))
     assert not np.allclose(together[0], together[1])
+
+
+def test_a_motion_column_of_zeros_is_no_motion():
+    # an export that writes its angular rates as zeros (the bad-input suite's synthetic DOT files do): the
+    # twin is not offered a motion that never moves (its gain would be undetermined)
+    from momentid.diagnosis.twin import folds
+
+    tr = _trial(6)
+    zero = replace(tr, motion=np.column_stack([tr.motion[:, 0], np.zeros(len(tr.zdd))]))
+    assert folds.table_motion([tr, tr]) == TABLE_MOTION[:2]
+    assert folds.table_motion([tr, zero]) == TABLE_MOTION[:1]

@@ -152,7 +152,7 @@ class _Layout:
     parameters)."""
 
     def __init__(self, template: FittedRig, shared: bool = False, levels: dict | None = None,
-                 motion_scale: np.ndarray | None = None):
+                 motion_scale: np.ndarray | None = None, fit_motion: bool = True):
         self.template = template
         self.d = template.storeys
         self.records = tuple(template.friction)
@@ -175,15 +175,15 @@ class _Layout:
                                      np.ravel(np.concatenate(own)) if own else np.zeros(0), np.full(self.d, 0.01),
                                      np.full(self.d, 1e-3)])
         # the table motions' gains last: each one's typical size makes its motion as large as the shaking
-        self.k = len(template.table_motion)
-        self.scale = np.concatenate([self.scale, np.ones(self.k) if motion_scale is None else motion_scale])
+        self.k = len(template.table_motion) if fit_motion else 0       # else the template's gains, held
+        self.scale = np.concatenate([self.scale, np.ones(self.k) if motion_scale is None else motion_scale[:self.k]])
         assert self.scale.size == self.n_phys + 2 * self.d + self.k
 
     def pack(self, model: FittedRig) -> np.ndarray:
         parts = [np.asarray(model.stiffness)[self.iu], np.asarray(model.damping_ratio)]
         for codec, m in zip(self.codecs, model.friction):
             parts.append(codec.pack(dict(m.parameters)))
-        parts += [np.log(model.gain), model.offset, model.table_gains]
+        parts += [np.log(model.gain), model.offset, np.asarray(model.table_gains)[:self.k]]
         return np.concatenate([np.ravel(np.asarray(p, float)) for p in parts])
 
     def unpack(self, theta) -> FittedRig:
@@ -202,7 +202,8 @@ class _Layout:
         records = tuple(replace(m, parameters=tuple(p.items())) for m, p in zip(self.records, params))
         return replace(self.template, stiffness=K, damping_ratio=zeta, friction=records,
                        gain=np.exp(theta[i:i + d]), offset=np.asarray(theta[i + d:i + 2 * d]),
-                       table_gains=np.asarray(theta[i + 2 * d:i + 2 * d + self.k]))
+                       table_gains=np.asarray(theta[i + 2 * d:i + 2 * d + self.k]) if self.k
+                       else self.template.table_gains)
 
     def bounds(self):
         k = len(self.iu[0])
@@ -393,7 +394,7 @@ class _Problem:
         valid = [m for m, v in zip(phys, ok) if v]
         compiled = _compiled_by_step(valid, self.trials, self.substeps) if valid else {}
         model = self.layout.unpack(theta)
-        point = _compiled_by_step([model], self.trials, self.substeps) if model.table_motion else {}
+        point = _compiled_by_step([model], self.trials, self.substeps) if self.layout.k else {}
         columns = np.flatnonzero(ok)
         rows = np.cumsum([0, *self.sizes])
         # linear twins replay in compiled loops that release the GIL: the trials run side by side; a
@@ -407,7 +408,7 @@ class _Problem:
                 J[rows_k, columns] = ((_residual(model, run, t) - base[rows_k]) / steps[columns, None]).T
             sensors = self.layout.n_phys + 2 * self.layout.d
             J[rows_k, self.layout.n_phys:sensors] = sensor_jacobian(model, sims[k], t)
-            if model.table_motion:     # the point's model, each motion's drive nudged: one rollout of them all
+            if self.layout.k:          # the point's model, each motion's drive nudged: one rollout of them all
                 h = DIFF_STEP * self.layout.scale[sensors:]
                 motion = t.motion[:, [t.motion_channels.index(c) for c in model.table_motion]]
                 drives = model.drive(t)[None, :] + (h[:, None] * motion.T)
@@ -425,7 +426,7 @@ class _Problem:
 
 
 def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None = None,
-             max_nfev: int = MAX_NFEV, shared: bool = False) -> FitResult:
+             max_nfev: int = MAX_NFEV, shared: bool = False, fit_motion: bool = True) -> FitResult:
     """Fit ``start`` (its friction storeys fixed, their values the start) to ``trials`` together.
 
     Parameters
@@ -436,6 +437,9 @@ def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None 
     shared : bool
         One joint's parameters for every friction storey (the first storey's start), instead of one set
         per storey.
+    fit_motion : bool
+        Fit the gains of the table motions ``start`` is driven by (``start.table_motion``); False: hold
+        ``start``'s.
 
     Raises
     ------
@@ -446,7 +450,7 @@ def fit_twin(trials: Sequence[Trial], start: FittedRig, *, substeps: int | None 
     if not _valid(start):
         raise IdentificationError(f"fit start of trials {[t.name for t in trials]}: stiffness not positive definite "
                                   f"or a joint stiffer than its storey: {start.to_dict()}")
-    layout = _Layout(start, shared, storey_levels(start, trials), motion_scale(start, trials))
+    layout = _Layout(start, shared, storey_levels(start, trials), motion_scale(start, trials), fit_motion)
     problem = _Problem(layout, trials, substeps, max_nfev)
     lo, hi = layout.bounds()
     theta0 = np.clip(layout.pack(start), lo + 1e-9, hi - 1e-9)

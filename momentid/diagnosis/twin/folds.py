@@ -164,10 +164,14 @@ def candidates(storeys: int, motion: bool = False) -> tuple:
 
 
 def table_motion(trials: Sequence[twin_fit.Trial]) -> tuple:
-    """The table sensor's other motions every one of ``trials`` records (channel names, in order)."""
+    """The table sensor's other motions every one of ``trials`` records, and records moving (a column an
+    export fills with zeros is no motion), channel names in order."""
     trials = list(trials)
-    return tuple(c for c in (trials[0].motion_channels if trials else ())
-                 if all(c in t.motion_channels for t in trials))
+
+    def moves(t: twin_fit.Trial, c: str) -> bool:
+        return c in t.motion_channels and bool(np.any(t.motion[t.start:, t.motion_channels.index(c)] != 0))
+
+    return tuple(c for c in (trials[0].motion_channels if trials else ()) if all(moves(t, c) for t in trials))
 
 
 def inner_hold_out(trials: dict[str, twin_fit.Trial], training: Sequence[str]) -> str:
@@ -224,7 +228,8 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
     cands = [c for c in candidates(d, base is not linear) if c.kind is not None]
 
     def fit(candidate):
-        fits = [twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, shared=candidate.shared)
+        fits = [twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, shared=candidate.shared,
+                                     fit_motion=False)
                 for guess in _augmented_start(base.model, candidate, starts, train)]
         return min(fits, key=lambda f: f.cost)
 
@@ -290,7 +295,7 @@ def hold_out(experiment: Experiment, held: str, training: Sequence[str], *, subs
         guesses = _augmented_start(base.model, chosen, starts, train)
         jobs = [lambda: own_fit(linear.model)] + [
             lambda guess=guess: twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev,
-                                                  shared=chosen.shared) for guess in guesses]
+                                                  shared=chosen.shared, fit_motion=False) for guess in guesses]
         fits = twin_fit.each(lambda job: job(), jobs)
     own, augmented = fits[0], min(fits[1:], key=lambda fit: fit.cost)
     tr = trials[held]

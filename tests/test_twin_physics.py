@@ -177,3 +177,4 @@ def test_stiff_rig_fold_chooses_physics_that_beats_the_linear_refit(tmp_path, ca
     # the fold has room (refit 1.9 x the trial's own linear fit when written): the chosen physics beats the refit
     assert out["nrmse_after"] < out["nrmse_linear_refit"]
     assert "Physics chosen on the training trials alone" in out["summary"]
+    assert "with the table's other motions as inputs" in out["summary"] and "table_wy" in out["summary"]

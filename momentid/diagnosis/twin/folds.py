@@ -57,7 +57,7 @@ AUGMENTED_NFEV = 10
 UNCHOSEN = "joint_friction"
 #: The candidate name of the table's other motions as the twin's inputs, and its words.
 TABLE_MOTION = "table_motion"
-MOTION_WORDS = "the table's other motions as inputs (its sway and rocking under the structure)"
+MOTION_WORDS = "the table's other motions as inputs"
 #: Largest ratio of the inner held-out NRMSE of the linear twin driven by the table's other motions to the
 #: linear twin's for the motions to drive the twin: five gains fitted to the training trials buy a percent
 #: or two on a trial they do not drive (the shipped flexible rig: 1.00-1.01 x), a table that rocks under

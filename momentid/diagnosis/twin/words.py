@@ -118,6 +118,7 @@ def summary(diag: Diagnosis) -> str:
         lines.append(f"Verdict: unexplained mismatch at the {diag.location['words']}: {physics} removes "
                      f"{100 * share:.0f} % of the linear refit's held-out misfit above noise ({100 * EXPLAINED:.0f} % "
                      f"needed).")
+        lines += _motion_lines(diag.evidence.fold.augmented.model)
     lines += [f"Rig state: {s}." for s in evidence.excluded]
     if evidence.state.tested and not evidence.excluded:
         lines.append(f"Rig state: every trial's modes lie on the others' trend (within {evidence.state.spread():.1f} "
@@ -165,7 +166,7 @@ def _mechanism_lines(diag: Diagnosis, share: float) -> list[str]:
                      + ("" if lost is None else
                         f" Stiffness lost to slip: {lost:.3g} N/m at 1 mm, "
                         f"{named.parameters['stiffness_lost_at_5mm_n_per_m']:.3g} N/m at 5 mm of drift."))
-    lines += _motion_lines(diag.evidence.fold.augmented.model) if diag.verdict is Verdict.MECHANISM else []
+    lines += _motion_lines(diag.evidence.fold.augmented.model)
     if after > EXCESS * noise:
         lines.append(f"WARNING: {_physics_words(diag)} explains only part of the mismatch: the held-out NRMSE is still "
                      f"{100 * after:.2f} % ({after / noise:.1f} x noise); the rest is largest at the "
@@ -180,8 +181,8 @@ def _motion_lines(model) -> list[str]:
     unit = {c: channel_unit(c) for c in model.table_motion}
     gains = ", ".join(f"{c} {g:+.3g}" + ("" if unit[c] == "m/s^2" else " m/s per rad/s")
                       for c, g in zip(model.table_motion, model.table_gains))
-    return [f"  The table's other motions drive the twin beside its shaking axis (gains into the table "
-            f"acceleration the twin feels): {gains}."]
+    return [f"  The table's other motions (its sway and rocking under the structure) drive the twin beside its "
+            f"shaking axis, gains into the table acceleration the twin feels: {gains}."]
 
 
 def plot_replay(diag: Diagnosis, path: Path) -> Path:

@@ -155,3 +155,20 @@ def test_a_motion_column_of_zeros_is_no_motion():
     zero = replace(tr, motion=np.column_stack([tr.motion[:, 0], np.zeros(len(tr.zdd))]))
     assert folds.table_motion([tr, tr]) == TABLE_MOTION[:2]
     assert folds.table_motion([tr, zero]) == TABLE_MOTION[:1]
+
+
+def test_a_run_file_may_carry_the_table_motions(tmp_path):
+    # the CSV run format takes the table's other motions as optional columns (SI units), as the IMU import
+    # writes them; an unknown column is still refused
+    from momentid.errors import SensorDataError
+    from momentid.io.formats.csv_run import read_csv_run
+
+    rows = "\n".join(f"{k / 100:.2f},{np.sin(k / 5):.6f},{np.sin(k / 5 + 0.1):.6f},{0.01 * np.cos(k / 5):.6f}"
+                     for k in range(50))
+    path = tmp_path / "r1.csv"
+    path.write_text("t,zdd,a1,table_wy\n" + rows + "\n")
+    _, channels, values = read_csv_run(path, 1)
+    assert channels == ("zdd", "a1", "table_wy") and values.shape == (50, 3)
+    path.write_text("t,zdd,a1,table_spin\n" + rows + "\n")
+    with pytest.raises(SensorDataError, match="table_spin"):
+        read_csv_run(path, 1)

@@ -2,7 +2,9 @@
 
 A header naming the columns ``t``, ``zdd``, ``a1..ad`` (required),
 ``q1..qd``, ``v1..vd`` (optional, each group all or none) and ``z``, ``zd``
-(optional), in any order, then one row per sample in SI units.  A mistake
+(optional), an IMU table's other motions ``table_ay``, ``table_az`` (m/s^2),
+``table_wx``, ``table_wy``, ``table_wz`` (rad/s) (optional), in any order, then
+one row per sample in SI units.  A mistake
 inside a file is a :class:`~momentid.errors.SensorDataError` naming the file,
 the row (the 1-based line number, the header is row 1) and the column.
 
@@ -19,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from momentid.core.series import channel_unit
+from momentid.core.series import TABLE_MOTION, channel_unit
 from momentid.errors import SensorDataError
 from momentid.io.formats.base import (MAX_ABS_SAMPLE, ExportFormat, Layout, first_absurd, read_text, register,
                                       require_table_memory)
@@ -37,8 +39,8 @@ MIN_SAMPLES = 3
 
 
 def _header_help(d: int) -> str:
-    return (f"t, zdd, a1..a{d} and optionally q1..q{d}, v1..v{d} (each group all or none), z, zd "
-            f"(d = {d} storeys from experiment.toml)")
+    return (f"t, zdd, a1..a{d} and optionally q1..q{d}, v1..v{d} (each group all or none), z, zd, "
+            f"{', '.join(TABLE_MOTION)} (d = {d} storeys from experiment.toml)")
 
 
 def _unit(name: str) -> str:
@@ -59,7 +61,7 @@ def _columns(path: Path, header: str, d: int) -> tuple[str, ...]:
                                                      f"{d} storeys experiment.toml states; expected the columns "
                                                      f"{_header_help(d)}")
     groups = {g: tuple(f"{g}{i + 1}" for i in range(d)) for g in ("a", "q", "v")}
-    known = {"t", "zdd", "z", "zd", *groups["a"], *groups["q"], *groups["v"]}
+    known = {"t", "zdd", "z", "zd", *groups["a"], *groups["q"], *groups["v"], *TABLE_MOTION}
     seen: set[str] = set()
     for j, name in enumerate(names):
         if name not in known:

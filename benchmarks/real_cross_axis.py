@@ -113,8 +113,6 @@ def folds(rig: str) -> list[dict]:
     """Per held-out trial of :data:`benchmarks.real_folds.RIGS`: the linear refit's held-out NRMSE, and the
     same twin driven by the table's other motions too (their gains fitted with it on the training trials,
     :attr:`momentid.twin.fit.FittedRig.table_motion`), and the same on the fold's inner held-out trial."""
-    from dataclasses import replace
-
     import momentid as mi
     from benchmarks.real_folds import RIGS as FOLDS
     from momentid.diagnosis.twin.folds import inner_hold_out, linear_start
@@ -129,7 +127,7 @@ def folds(rig: str) -> list[dict]:
         quiet = min(training, key=lambda n: float(np.sqrt(np.mean(trials[n].a[trials[n].start:] ** 2))))
         train = [trials[n] for n in training]
         refit = twin_fit.fit_twin(train, linear_start(experiment, quiet)).model
-        moved = twin_fit.fit_twin(train, replace(refit, table_motion=OTHERS)).model
+        moved = twin_fit.fit_twin(train, refit.driven_by(OTHERS)).model
         return twin_fit.nrmse(refit, trials[held]), twin_fit.nrmse(moved, trials[held]), moved.table_gains
 
     rows = []

@@ -72,11 +72,15 @@ class FittedRig:
             object.__setattr__(self, "gain", np.ones(d))
         if self.offset is None:
             object.__setattr__(self, "offset", np.zeros(d))
-        if self.table_gains is None or (len(self.table_gains) == 0 and self.table_motion):   # a new motion: no gain
+        if self.table_gains is None:
             object.__setattr__(self, "table_gains", np.zeros(len(self.table_motion)))
         if len(self.table_gains) != len(self.table_motion):
             raise ValueError(f"table gains {list(self.table_gains)} for motions {list(self.table_motion)}: "
                              f"expected one gain per motion")
+
+    def driven_by(self, motion: Sequence[str]) -> FittedRig:
+        """The same rig driven by the table motions ``motion`` (names) too, each at gain zero."""
+        return replace(self, table_motion=tuple(motion), table_gains=np.zeros(len(motion)))
 
     def drive(self, tr: Trial) -> np.ndarray:
         """The table acceleration (m/s^2, shape (n,)) the twin feels on ``tr``: the recorded shaking axis plus

@@ -221,11 +221,11 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
     # predict the inner held-out trial clearly better than the shaking axis alone (MOTION_RATIO)
     base, motion = linear, table_motion(trials.values())
     if motion:
-        moved = twin_fit.fit_twin(train, replace(linear.model, table_motion=motion), substeps=substeps,
-                                  max_nfev=max_nfev)
+        moved = twin_fit.fit_twin(train, linear.model.driven_by(motion), substeps=substeps, max_nfev=max_nfev)
         score[TABLE_MOTION] = twin_fit.nrmse(moved.model, trials[inner], substeps)
         base = moved if score[TABLE_MOTION] <= MOTION_RATIO * score["linear"] else linear
-    cands = [c for c in candidates(d, base is not linear) if c.kind is not None]
+    cands = candidates(d, base is not linear)
+    physics = [c for c in cands if c.kind is not None]
 
     def fit(candidate):
         fits = [twin_fit.fit_twin(train, guess, substeps=substeps, max_nfev=augmented_nfev, shared=candidate.shared,
@@ -233,9 +233,8 @@ def select(trials: dict[str, twin_fit.Trial], training: Sequence[str], *, subste
                 for guess in _augmented_start(base.model, candidate, starts, train)]
         return min(fits, key=lambda f: f.cost)
 
-    fits = (pool or twin_fit.each)(fit, cands)
-    score.update({c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(cands, fits)})
-    cands = [Candidate(None)] + ([Candidate(None, motion=True)] if base is not linear else []) + cands
+    fits = (pool or twin_fit.each)(fit, physics)
+    score.update({c.name: twin_fit.nrmse(f.model, trials[inner], substeps) for c, f in zip(physics, fits)})
     table = {n: {"inner_nrmse": v, "ratio_to_linear": v / score["linear"]} for n, v in score.items()}
     best = min(cands, key=lambda c: score[c.name])
     return best, inner, table
@@ -287,8 +286,8 @@ def hold_out(experiment: Experiment, held: str, training: Sequence[str], *, subs
     linear, (chosen, inner, table) = twin_fit.each(lambda job: job(), [linear_fit, choose])
     base = linear
     if chosen.motion:              # the linear twin driven by the table's other motions, then its physics
-        moved = replace(linear.model, table_motion=table_motion(trials.values()))
-        base = twin_fit.fit_twin(train, moved, substeps=substeps, max_nfev=max_nfev)
+        base = twin_fit.fit_twin(train, linear.model.driven_by(table_motion(trials.values())), substeps=substeps,
+                                 max_nfev=max_nfev)
     if chosen.kind is None:
         fits = [own_fit(linear.model), base]
     else:

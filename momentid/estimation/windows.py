@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
+from momentid.core.processes import run_forked
 from momentid.core.series import RunData
 from momentid.errors import MomentidError
 from momentid.estimation import ringdown
@@ -121,37 +122,52 @@ def forced_windows(runs: Sequence[RunData], selection: ModeSelection, sigma: Seq
         Per storey mode (in the order of ``storey_index``), its windows in time order.
     """
     model, fit = selection.model, selection.fit
-    d = model.d
     f1 = float(np.min(model.omega(fit.theta)[storey_index]) / (2 * np.pi))
-    out = [[] for _ in storey_index]
     bounds = refit_bounds(model, fit.theta)
+    tasks = []
     for r, run in enumerate(runs):
         length = int(min(WINDOW_CYCLES / f1, run.n_samples / run.sample_rate / MIN_WINDOWS) * run.sample_rate)
-        theta = fit.theta.copy()
-        single = type(model)(d, 1, model.n - d, model.quadrature)
-        theta1 = np.concatenate([theta[:model.n_modal], theta[model.sensor_slice(r)]])
-        free = np.arange(single.p) < single.n_modal              # the record's sensors stay as they are
-        for window in _window_runs(run, max(length, 8)):
-            try:
-                sp = [spectra(window, d, fit.f_max, sigma=sigma[r], groups=["a"])]
-                w_fit = refine(single, sp, [("whole record", theta1)], sample_rates=[run.sample_rate], f_max=fit.f_max,
-                               free=free, fix_nuisance=False,
-                               frequency_bounds=bounds)
-            except (MomentidError, np.linalg.LinAlgError, ValueError):
-                continue                   # a window the model cannot fit adds no estimate
-            sd = np.sqrt(np.clip(np.diag(w_fit.covariance), 0, None))
-            w = single.omega(w_fit.theta) / (2 * np.pi)
-            for k, i in enumerate(storey_index):
-                z, s = float(w_fit.theta[single.n + i]), float(sd[single.n + i])
-                # a window whose frequency or damping ends at its bound (held there, its standard error
-                # then the bound's, not the data's) read no mode
-                if not (np.isfinite(z) and np.isfinite(s) and s > 0 and sd[i] > 0) or _held(w[i], z, bounds[i]):
-                    continue
-                amplitude, noise = _window_amplitude(window, w_fit, single, i, sigma[r])
-                # a window where the mode stands barely above the sensor noise (a quiet lead-in or tail)
-                # reads the noise's ripple, not the mode: it would lever any trend in amplitude
-                if amplitude >= MIN_SIGNAL_TO_NOISE * noise:
-                    out[k].append(Window(z, s, float(w[i]), float(w[i] * sd[i]), amplitude))
+        tasks += [(r, window) for window in _window_runs(run, max(length, 8))]
+    # the windows' refits are independent: on forked workers (each a small GIL-bound least-squares fit),
+    # their estimates gathered in time order, as one after another
+    found = run_forked(lambda task: _window_estimates(task[1], task[0], runs[task[0]].sample_rate, selection,
+                                                     sigma[task[0]], storey_index, bounds), tasks)
+    out = [[] for _ in storey_index]
+    for estimates in found:
+        for k, window in estimates:
+            out[k].append(window)
+    return out
+
+
+def _window_estimates(window: RunData, r: int, sample_rate: float, selection: ModeSelection, sigma: dict,
+                      storey_index: Sequence[int], bounds: dict) -> list[tuple[int, Window]]:
+    """One window's refit (run ``r`` of ``selection``): ``(k, Window)`` per storey mode it reads
+    (:func:`forced_windows`)."""
+    model, fit = selection.model, selection.fit
+    d = model.d
+    single = type(model)(d, 1, model.n - d, model.quadrature)
+    theta1 = np.concatenate([fit.theta[:model.n_modal], fit.theta[model.sensor_slice(r)]])
+    free = np.arange(single.p) < single.n_modal              # the record's sensors stay as they are
+    try:
+        sp = [spectra(window, d, fit.f_max, sigma=sigma, groups=["a"])]
+        w_fit = refine(single, sp, [("whole record", theta1)], sample_rates=[sample_rate], f_max=fit.f_max,
+                       free=free, fix_nuisance=False, frequency_bounds=bounds)
+    except (MomentidError, np.linalg.LinAlgError, ValueError):
+        return []                          # a window the model cannot fit adds no estimate
+    sd = np.sqrt(np.clip(np.diag(w_fit.covariance), 0, None))
+    w = single.omega(w_fit.theta) / (2 * np.pi)
+    out = []
+    for k, i in enumerate(storey_index):
+        z, s = float(w_fit.theta[single.n + i]), float(sd[single.n + i])
+        # a window whose frequency or damping ends at its bound (held there, its standard error then the
+        # bound's, not the data's) read no mode
+        if not (np.isfinite(z) and np.isfinite(s) and s > 0 and sd[i] > 0) or _held(w[i], z, bounds[i]):
+            continue
+        amplitude, noise = _window_amplitude(window, w_fit, single, i, sigma)
+        # a window where the mode stands barely above the sensor noise (a quiet lead-in or tail) reads the
+        # noise's ripple, not the mode: it would lever any trend in amplitude
+        if amplitude >= MIN_SIGNAL_TO_NOISE * noise:
+            out.append((k, Window(z, s, float(w[i]), float(w[i] * sd[i]), amplitude)))
     return out
 
 

@@ -279,10 +279,10 @@ def hold_out(experiment: Experiment, held: str, training: Sequence[str], *, subs
         if candidate is not None:
             return candidate, "", {}
         return select(trials, training, substeps=substeps, max_nfev=max_nfev, augmented_nfev=augmented_nfev,
-                      starts=starts, start=start, pool=lambda fn, items: [fn(x) for x in items])
+                      starts=starts, start=start)
 
-    # the selection (its inner fits one after another) runs beside the linear refit (threads: MuJoCo
-    # releases the GIL); then the held-out trial's own fit beside the chosen physics' fits
+    # the selection runs beside the linear refit (threads: MuJoCo releases the GIL), its candidates side by
+    # side once that is done; then the held-out trial's own fit beside the chosen physics' fits
     linear, (chosen, inner, table) = twin_fit.each(lambda job: job(), [linear_fit, choose])
     base = linear
     if chosen.motion:              # the linear twin driven by the table's other motions, then its physics

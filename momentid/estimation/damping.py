@@ -11,7 +11,8 @@ above the structure's own damping: 0.44-2.4 % on the stiff 1-storey rig, whose f
 :func:`resolve_damping` answers with the damping at small amplitude:
 
 * **from the linear fit** when it explains the record to the noise level (:data:`LINEAR_MISFIT`): the
-  structure is linear at the record's amplitudes;
+  structure is linear at the record's amplitudes (a level read from the data's own scatter must first
+  pass for noise: :func:`_scatter_is_noise`);
 * **from free decays** (:mod:`momentid.estimation.ringdown`) when the record holds them, at least
   :data:`~momentid.estimation.ringdown.MIN_CYCLES` cycles of the mode ringing on its own: the envelope
   against the mode's own phase, a constant or amplitude-dependent law by evidence, the limit at small
@@ -48,6 +49,7 @@ from momentid.core.series import RunData
 from momentid.estimation import ringdown
 from momentid.estimation.decays import constant_refusal, free_decays, weak_refusal
 from momentid.estimation.jackknife import block_jackknife
+from momentid.estimation.noise import LEAD_IN_QUIET_RATIO, quietest_level
 from momentid.estimation.periodic import periodic_refusal
 from momentid.estimation.windows import WINDOW_CYCLES, drift_words, forced_windows, frequency_trend, random_effects
 
@@ -63,6 +65,17 @@ LINEAR_MISFIT = 1.5
 #: ... and so does one whose residual is below this share of the floors' response power (noise-free
 #: simulated data, where the residual is the integrator's round-off, many times a noise level of ~0).
 NOISE_FREE = 1e-10
+#: Noise levels read from the data's own scatter are the sensors' own only when the linear fit's residual
+#: reaches at least this share of them (both estimate one variance from thousands of bins when they are; on
+#: windows of the shipped rigs the residual is 0.47-0.73 of the scatter, which holds the rigs' distortion) ...
+SCATTER_RESIDUAL = 0.8
+#: ... and the table shakes: its RMS at least this many times its noise (a shake test drives the table to at
+#: least 5x its noise at rest, :data:`~momentid.estimation.noise.LEAD_IN_QUIET_RATIO`).
+SHAKING = 1.0 / LEAD_IN_QUIET_RATIO
+#: ... and no more than this multiple of the table sensor's RMS in its quietest second (the quietest of some
+#: twenty one-second RMS readings of pure noise lies 10-20 % below its level; the floors' scatter on windows
+#: of the shipped rigs' shaking is 1.4-32 times the table's quietest second, on the simulated rigs at most 0.9).
+QUIETEST_MARGIN = 1.25
 #: A record the linear fit explains (:data:`LINEAR_MISFIT`) is believed to hold an amplitude-dependent
 #: damping only when the dependence stands out by this many standard errors (the free decays' and the
 #: windows' errors are Newey-West and random-effects estimates, not exact: at two a linear rig's beats
@@ -175,16 +188,18 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
 
     Per mode, in this order: the free decays when they show a damping that changes with amplitude;
     else the linear fit when it explains the record to the noise level (its error the larger of its own
-    and its windows'); else the free decays (a constant damping only over a fall of
-    :data:`~momentid.estimation.decays.MIN_CONSTANT_SPAN` that rings down to the noise; pooled with the
-    windows when too uncertain alone); else, when the table's motion is periodic, the linear fit if it
-    explains the record to a noise level read where the table is quiet and no mode hints at the rig
-    changing with amplitude, refused otherwise; else the forced
+    and its windows'; a noise level read from the data's own scatter only when it passes
+    :func:`_scatter_is_noise` and no mode hints at the rig changing); else the free decays (a constant
+    damping only over a fall of :data:`~momentid.estimation.decays.MIN_CONSTANT_SPAN` that rings down to
+    the noise; pooled with the windows when too uncertain alone); else, when the table's motion is
+    periodic, the linear fit if it explains the record so and no mode hints at the rig changing with
+    amplitude, refused otherwise; else the forced
     response: the windows' value at zero amplitude when their frequency falls with amplitude (even one
     that moves beyond the half-power width, when that value lies below the windows' mean), refused when
-    they show no trend while another mode shows the rig changing with amplitude.  An answer refused only as
-    too uncertain, on a rig where no mode hints at a change, gives way to the whole record's linear fit with
-    its delete-a-block jackknife error (:class:`_WholeRecord`).
+    they show no trend while another mode shows the rig changing with amplitude (a frequency that rises
+    with it shows a hardening spring, which dissipates nothing, not a change of the damping).  An answer
+    refused only as too uncertain, on a rig where no mode hints at a change, gives way to the whole
+    record's linear fit with its delete-a-block jackknife error (:class:`_WholeRecord`).
 
     Parameters
     ----------
@@ -214,18 +229,19 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     saids = [None if exact else _windows_say(windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
              for k, i in enumerate(selection.storey)]
     trends = [0.0 if exact else frequency_trend(w)[1] for w in (windows or [None] * len(saids))]
-    # with the noise read from the data's own scatter (it holds the rig's distortion) a linear fit that
-    # explains the record proves nothing (on windows of the shipped rigs it answered 1-3 % for modes damped
-    # 0.07-0.2 %); a rig that changes with amplitude in any mode gives no mode's damping at small amplitude
-    # from windows without a trend of their own (with or without a quiet lead-in)
+    # a rig that changes with amplitude in any mode gives no mode's damping at small amplitude from windows
+    # without a trend of their own (with or without a quiet lead-in)
     rig_changes = "" if exact else _rig_changes(decays, saids, windows, trends)
+    quiet = exact or _rig_quiet(decays, saids, trends)
+    # a linear fit that explains the record to its noise level proves the rig linear at its amplitudes; a
+    # noise level read from the data's own scatter may hold the rig's distortion (on windows of the shipped
+    # rigs the fit then answered 1-3 % for modes damped 0.07-0.2 %): it counts only when it passes what noise
+    # must (_scatter_is_noise) and no mode hints at the rig changing
+    trusted = base_linear and (not scatter or (quiet and _scatter_is_noise(runs, fit, sigma)))
     # a periodic table holds a mode at one amplitude (no trend of its own can show), yet the linear fit may
     # answer it (read from the transients, where the mode rings at its own frequency) when it explains the
-    # record to a noise level read where the table is quiet (noise read from the scatter holds the rig's
-    # distortion: on a window of the flexible rig's sine test it answered 0.27 % for a mode damped 0.09 %)
-    # and no mode shows a hint of the rig changing
-    quiet = exact or _rig_quiet(decays, saids, trends)
-    periodic_linear = base_linear and not scatter and quiet
+    # record so and no mode shows a hint of the rig changing
+    periodic_linear = trusted and quiet
     whole = _WholeRecord(runs, selection, sigma, quiet and not rig_changes)
     out = []
     for k, i in enumerate(selection.storey):
@@ -236,7 +252,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         periodic = periodic_refusal(runs, float(freq[i]))
         # a record forced only at a periodic table's harmonics beside the mode (a constant amplitude: no
         # trend can show; the harmonics read the detuning, not the damping) does not prove the rig linear
-        linear = (exact or (base_linear and not scatter)) and not periodic
+        linear = (exact or trusted) and not periodic
         decay, said = decays[k], saids[k]
         # a record the linear fit explains must show a strong amplitude dependence (of the damping, or of
         # the frequency: a joint that slips softens too) before it is believed
@@ -379,10 +395,13 @@ def _rig_changes(decays, saids, windows, trends) -> str:
     damping trend or a frequency moving across the windows (``trends``: t statistics), beyond
     :data:`STRONG_SIGMAS` standard errors (the strength that makes a record the linear fit explains
     believed amplitude-dependent), or a frequency that moves by more than its half-power width
-    (:func:`~momentid.estimation.windows.drift_words`)."""
+    (:func:`~momentid.estimation.windows.drift_words`); a frequency that rises with amplitude is a hardening
+    spring, which changes no damping."""
     for k, (decay, said) in enumerate(zip(decays, saids)):
         if decay is not None and decay.dof >= MIN_DOF and decay.evidence > STRONG_SIGMAS:
             return f"the rig's joints change with amplitude (mode {k + 1}'s free decays, {decay.evidence:.2g} sigma)"
+        if trends[k] > 0:
+            continue             # a frequency that rises with amplitude: a hardening spring, which dissipates nothing
         t = abs(trends[k])
         if said is not None and t > STRONG_SIGMAS:
             return f"the rig changes with amplitude (mode {k + 1}'s frequency moves with it, {t:.2g} sigma)"
@@ -420,6 +439,23 @@ def _pooled(decay: ModeDamping, windows, equivalent: float, f0: float, cycles: f
                      decay.frequency_slope, (lo, hi), equivalent, decay.cycles + said.cycles)
     return replace(answer, evidence=decay.evidence,
                    refusal=answer.refusal and f"{answer.refusal} (and by the free decays alone: {decay.refusal})")
+
+
+def _scatter_is_noise(runs, fit, sigma) -> bool:
+    """Whether noise levels read from the data's own scatter are the sensors' noise, so that a linear fit
+    explaining the record to them proves the rig linear at its amplitudes.  Three checks, each of what
+    noise must satisfy: the fit's residual reaches that scatter (at least :data:`SCATTER_RESIDUAL` of it; a
+    residual well below says the scatter holds more than noise, the distortion of a rig that is not linear);
+    the table sensor, of one kind with the floors', reads no less in its quietest second (within
+    :data:`QUIETEST_MARGIN`: a sensor's noise lies below all it reads); and the table shakes in every run
+    (its RMS at least :data:`SHAKING` times its noise: a table at rest leaves a free decay, which the decays
+    read)."""
+    for run, sg in zip(runs, sigma):
+        floors = max(level for name, level in sg.items() if name.startswith("a"))
+        if (float(np.std(run["zdd"])) < SHAKING * sg["zdd"]
+                or floors > QUIETEST_MARGIN * quietest_level(run, "zdd")):
+            return False
+    return fit.scale >= SCATTER_RESIDUAL
 
 
 def _explains(runs, fit, sigma, d: int) -> tuple[bool, bool]:

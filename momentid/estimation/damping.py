@@ -411,6 +411,8 @@ def _rig_changes(decays, saids, windows, trends) -> str:
     return ""
 
 
+#: Fewest windows of a hardening mode's quieter half that answer for it (:func:`_windows_say`).
+MIN_QUIET_WINDOWS = 4
 #: Two estimates of one damping at small amplitude are pooled only when they differ by at most this many
 #: standard errors of their difference (beyond, one of them is biased and their mean is no answer).
 POOL_SIGMAS = 2.0
@@ -503,6 +505,13 @@ def _windows_say(windows, equivalent: float, f0: float, cycles: float, trend: bo
                      tuple(np.percentile(amp, [10, 90])), equivalent, cycles)
     slope, _ = frequency_trend(windows)
     refusal = (_drift_refusal(windows, equivalent) if smear else "") or answer.refusal
+    if refusal and not answer.refusal and slope > 0 and not trend:
+        # a frequency that rises with amplitude is a hardening spring, which dissipates nothing: the spread
+        # smears only the windows it moves within; the quieter half, if it stays within the half-power width,
+        # reads the damping
+        low = [w for w in windows if w.amplitude <= np.median(amp)]
+        if MIN_QUIET_WINDOWS <= len(low) < len(windows) and not _drift_refusal(low, equivalent):
+            return _windows_say(low, equivalent, f0, cycles)
     if not refusal and not dependent:
         # windows that read the same damping as the whole record, or their estimate is not one: a window
         # too short for the mode, or edges the windows' transients cannot hold

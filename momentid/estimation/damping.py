@@ -74,7 +74,8 @@ SCATTER_RESIDUAL = 0.8
 SHAKING = 1.0 / LEAD_IN_QUIET_RATIO
 #: ... and no more than this multiple of the table sensor's RMS in its quietest second (the quietest of some
 #: twenty one-second RMS readings of pure noise lies 10-20 % below its level; the floors' scatter on windows
-#: of the shipped rigs' shaking is 1.4-32 times the table's quietest second, on the simulated rigs at most 0.9).
+#: of the shipped rigs' shaking is 1.4-32 times the table's quietest second; on the simulated set's records
+#: without a lead-in at most 0.92, but for one whose linear fit misses by 3.7x anyway, at 1.6).
 QUIETEST_MARGIN = 1.25
 #: A record the linear fit explains (:data:`LINEAR_MISFIT`) is believed to hold an amplitude-dependent
 #: damping only when the dependence stands out by this many standard errors (the free decays' and the

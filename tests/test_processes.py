@@ -212,3 +212,18 @@ def test_a_count_includes_the_threads_and_forked_workers():
             counters.add(counters.REPLAYS, 100)
             assert inner() == 100
         assert replays() == 136
+
+
+def _square_all(xs):
+    from momentid.core.processes import run_forked
+    return run_forked(lambda x: x * x, xs)
+
+
+def test_a_worker_of_the_callers_own_pool_runs_its_jobs_itself():
+    """A daemonic process (a worker of a user's ``multiprocessing.Pool``, which may have no children)
+    runs ``run_forked``'s jobs in turn instead of failing to fork; an identification called there
+    forks its window refits this way."""
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.apply(_square_all, ([1, 2, 3],)) == [1, 4, 9]

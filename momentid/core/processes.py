@@ -88,9 +88,11 @@ def _deeper() -> None:
 
 
 def may_fork() -> bool:
-    """Whether this process may start helper processes: fork exists and it is not too deep
-    (:data:`NESTING`)."""
-    return "fork" in multiprocessing.get_all_start_methods() and _DEPTH < NESTING
+    """Whether this process may start helper processes: fork exists, it is not too deep
+    (:data:`NESTING`), and it is not a daemonic process (a worker of the caller's own
+    ``multiprocessing.Pool``, which may have no children: there the work runs in the process itself)."""
+    return ("fork" in multiprocessing.get_all_start_methods() and _DEPTH < NESTING
+            and not multiprocessing.current_process().daemon)
 
 
 #: Cores of the running pool of :func:`lending` whose worker has no task left: a semaphore its

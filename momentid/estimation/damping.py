@@ -77,6 +77,8 @@ SHAKING = 1.0 / LEAD_IN_QUIET_RATIO
 #: of the shipped rigs' shaking is 1.4-32 times the table's quietest second; on the simulated set's records
 #: without a lead-in at most 0.92, but for one whose linear fit misses by 3.7x anyway, at 1.6).
 QUIETEST_MARGIN = 1.25
+#: Fewest windows of a hardening mode's quieter half that answer for it (:func:`_windows_say`).
+MIN_QUIET_WINDOWS = 4
 #: A record the linear fit explains (:data:`LINEAR_MISFIT`) is believed to hold an amplitude-dependent
 #: damping only when the dependence stands out by this many standard errors (the free decays' and the
 #: windows' errors are Newey-West and random-effects estimates, not exact: at two a linear rig's beats
@@ -238,7 +240,7 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
     # noise level read from the data's own scatter may hold the rig's distortion (on windows of the shipped
     # rigs the fit then answered 1-3 % for modes damped 0.07-0.2 %): it counts only when it passes what noise
     # must (_scatter_is_noise) and no mode hints at the rig changing
-    trusted = base_linear and (not scatter or (quiet and _scatter_is_noise(runs, fit, sigma)))
+    trusted = base_linear and (not scatter or (quiet and _scatter_is_noise(runs, fit, sigma, model.d)))
     # a periodic table holds a mode at one amplitude (no trend of its own can show), yet the linear fit may
     # answer it (read from the transients, where the mode rings at its own frequency) when it explains the
     # record so and no mode shows a hint of the rig changing
@@ -412,8 +414,6 @@ def _rig_changes(decays, saids, windows, trends) -> str:
     return ""
 
 
-#: Fewest windows of a hardening mode's quieter half that answer for it (:func:`_windows_say`).
-MIN_QUIET_WINDOWS = 4
 #: Two estimates of one damping at small amplitude are pooled only when they differ by at most this many
 #: standard errors of their difference (beyond, one of them is biased and their mean is no answer).
 POOL_SIGMAS = 2.0
@@ -444,7 +444,7 @@ def _pooled(decay: ModeDamping, windows, equivalent: float, f0: float, cycles: f
                    refusal=answer.refusal and f"{answer.refusal} (and by the free decays alone: {decay.refusal})")
 
 
-def _scatter_is_noise(runs, fit, sigma) -> bool:
+def _scatter_is_noise(runs, fit, sigma, d: int) -> bool:
     """Whether noise levels read from the data's own scatter are the sensors' noise, so that a linear fit
     explaining the record to them proves the rig linear at its amplitudes.  Three checks, each of what
     noise must satisfy: the fit's residual reaches that scatter (at least :data:`SCATTER_RESIDUAL` of it; a
@@ -454,7 +454,7 @@ def _scatter_is_noise(runs, fit, sigma) -> bool:
     (its RMS at least :data:`SHAKING` times its noise: a table at rest leaves a free decay, which the decays
     read)."""
     for run, sg in zip(runs, sigma):
-        floors = max(level for name, level in sg.items() if name.startswith("a"))
+        floors = max(sg[f"a{j + 1}"] for j in range(d))
         if (float(np.std(run["zdd"])) < SHAKING * sg["zdd"]
                 or floors > QUIETEST_MARGIN * quietest_level(run, "zdd")):
             return False

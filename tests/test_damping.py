@@ -350,11 +350,13 @@ def test_a_mode_the_windows_leave_uncertain_answers_from_the_whole_record_unless
     scatter leaves its damping too uncertain (1.29 +- 0.82 %, refused); the whole record determines it,
     its error from the delete-a-block jackknife (+- 0.10 %), and the interval holds the truth.  Case 115
     (a 1-storey whose joints slip, its frequency falling with amplitude at many standard errors): the whole
-    record's fit (2.5x the damping at small amplitude) is not the answer, and the refusal stands."""
+    record's fit (2.5x the damping at small amplitude) is not the answer; its windows' amplitude law
+    answers (0.23 +- 0.07 % for 0.16 %) or it is refused."""
     from benchmarks import damping_coverage as dc
     from momentid.estimation.damping import Source
 
     linear = dc.evaluate(dc.draw_case(7, 29))["modes"][0]
     assert linear["answer"] and linear["covered"] and linear["source"] == Source.WHOLE_RECORD, linear
     slipping = dc.evaluate(dc.draw_case(115, 29))["modes"][0]
-    assert not slipping["answer"], slipping
+    assert slipping["source"] != Source.WHOLE_RECORD, slipping
+    assert not slipping["answer"] or (slipping["covered"] and slipping["amplitude_dependent"]), slipping

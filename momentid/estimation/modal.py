@@ -49,6 +49,7 @@ from momentid.estimation.eiv import Spectra, spectra
 from momentid.estimation.modal_model import Hold, Likelihood, ModalModel, mode_response
 
 __all__ = ["ModalModel", "ModalFit", "fit_modal", "fit_band", "modal_spectra", "linear_start", "refine",
+           "with_fixed_sensors",
            "FIT_BAND_FACTOR", "START_DAMPING", "NYQUIST_FRACTION", "MAX_NFEV"]
 
 #: The fit uses DFT bins up to this multiple of the highest resonance (the resonance's flanks carry
@@ -278,16 +279,44 @@ def refine(model: ModalModel, spectra_list: Sequence[Spectra], starts: Iterable[
     if fix_nuisance:
         fixed, why = _unidentified(model, fit, sample_rates, [sp.run for sp in spectra_list])
         if fixed.any():
-            theta = fit.theta.copy()
-            for r in range(model.n_runs):
-                s = model.sensor_slice(r)
-                theta[s.start:s.start + model.d][fixed[s.start:s.start + model.d]] = 0.0     # log g = 0
-                theta[s.start + model.d:s.stop][fixed[s.start + model.d:s.stop]] = 0.0       # tau = 0
+            theta = with_fixed_sensors(model, fit.theta, fixed)
             again = refine(model, spectra_list, [("previous fit", theta)], sample_rates=sample_rates,
                            f_max=f_max, free=free & ~fixed, fix_nuisance=False, hold=hold,
                            frequency_bounds=frequency_bounds)
             return replace(again, nfev=again.nfev + fit.nfev, notes=fit.notes + tuple(why))
     return fit
+
+
+def with_fixed_sensors(model: ModalModel, theta: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """``theta`` with the ``fixed`` gains at 1 and clock offsets at 0 (the start of a refit without them).
+
+    A gain the data do not determine trades with its floor's residues (a record that is mostly free
+    decay determines only their product ``g_j R_ij``): where floor j's gain is fixed in every run, its
+    residues take the gains' geometric mean, so the refit starts where the data put the modes' shapes.
+
+    Parameters
+    ----------
+    model : ModalModel
+    theta : ndarray, shape (p,)
+    fixed : ndarray of bool, shape (p,)
+        The sensor parameters to fix (others ignored).
+
+    Returns
+    -------
+    ndarray, shape (p,)
+    """
+    theta = np.asarray(theta, float).copy()
+    log_g = np.array([theta[model.sensor_slice(r)][:model.d] for r in range(model.n_runs)])     # (runs, d)
+    gain_fixed = np.array([fixed[model.sensor_slice(r)][:model.d] for r in range(model.n_runs)])
+    scale = np.where(gain_fixed.all(axis=0), np.exp(log_g.mean(axis=0)), 1.0)                  # (d,)
+    theta[model.residue_slice] = (model.residues(theta) * scale[None, :]).ravel()
+    quad = slice(model.residue_slice.stop, model.n_modal)
+    theta[quad] = (theta[quad].reshape(-1, model.d) * scale[None, :]).ravel()
+    for r in range(model.n_runs):
+        s = model.sensor_slice(r)
+        theta[s.start:s.start + model.d][fixed[s.start:s.start + model.d]] = 0.0     # log g = 0
+        theta[s.start + model.d:s.stop][fixed[s.start + model.d:s.stop]] = 0.0       # tau = 0
+    return theta
 
 
 def _cost(lik: Likelihood, theta) -> float:

@@ -16,7 +16,10 @@ A first-order-hold discretisation assumes a piecewise-linear input instead; the 
 that grows with ``w h``, which near 40 % of the sample rate bends a mode's damping by tens of percent.
 The transient (the record's start and end state, the leakage of a finite record) is a sum of the
 modes' free decays, sampled exactly: per mode ``c / (1 - p z^-1) + conj``, ``p = exp(lambda_i h)``, two
-real coefficients per mode and run, shared by the floors through ``R_ij``, projected out.
+real coefficients per mode and run, shared by the floors through ``R_ij``, projected out.  A floor
+sensor ``tau_j`` late reads those decays ``tau_j`` later: ``c exp(-lambda_i tau_j)``, a constant per mode
+and floor (the forced part's delay ``exp(-i w tau_j)`` would spread a record's ringing end over every
+bin and misfit by twice the noise).
 
 **Likelihood.**  Per bin, the residual ``e = Y - G U - T beta`` has covariance
 ``diag(s_y^2) + s_u^2 G G^H`` (floor noise plus table noise through the model); the cost is the sum of
@@ -293,20 +296,26 @@ class _State:
         p = np.exp(lam * run.h)
         zi = run.zinv[:, None]
         A, Ab = 1 / (1 - p * zi), 1 / (1 - np.conj(p) * zi)          # (m, n)
-        self.basis = np.stack([A + Ab, 1j * (A - Ab)], axis=2)        # (m, n, 2)
+        # Floor j samples its free decays tau_j late: mode i's decay there is exp(-lambda_i tau_j) times
+        # the table clock's (a constant per mode and floor, not the forced part's exp(-i w tau_j)).
+        E = np.exp(-lam[None, :] * offset[:, None])[None]             # (1, d, n)
+        EA, EAb = E * A[:, None, :], np.conj(E) * Ab[:, None, :]      # (m, d, n)
+        self.basis = _pair(EA, EAb)                                   # (m, d, n, 2)
+        self.dbasis_offset = _pair(-lam * EA, -np.conj(lam) * EAb)    # d basis / d tau_j
         dlam = (lam, w * (-1 - 1j * z / root))                       # d lambda / d (log w, zeta)
         self.dbasis = []
         for dl in dlam:
-            dA = zi * A ** 2 * run.h * p * dl
-            dAb = zi * Ab ** 2 * run.h * np.conj(p) * np.conj(dl)
-            self.dbasis.append(np.stack([dA + dAb, 1j * (dA - dAb)], axis=2))
-        self.S = gain[None, :] * np.exp(-1j * run.w[:, None] * offset[None, :]) * run.inv_sd[None, :]
+            dA = (zi * A ** 2 * run.h * p)[:, None, :] * E - offset[None, :, None] * EA
+            dAb = (zi * Ab ** 2 * run.h * np.conj(p))[:, None, :] * np.conj(E) - offset[None, :, None] * EAb
+            self.dbasis.append(_pair(dA * dl, dAb * np.conj(dl)))
+        self.Sn = gain[None, :] * run.inv_sd[None, :]                # (1, d): the transient's scale
+        self.S = self.Sn * np.exp(-1j * run.w[:, None] * offset[None, :])
         F = 1 - self.H @ R
         if self.quad:
             F = F - self.Hq @ Qr[self.quad]
         self.G = G = self.S * F                                      # (m, d), noise-normalised
         weight = np.where(self.classical[None, :], R.T, 1.0)         # (d, n)
-        T = self.S[:, :, None, None] * weight[None, :, :, None] * self.basis[:, None, :, :]     # (m, d, n, 2)
+        T = self.Sn[:, :, None, None] * weight[None, :, :, None] * self.basis                   # (m, d, n, 2)
         cols = [T[:, :, i, :] for i in range(n) if self.classical[i]]
         for i in self.quad:                                          # per floor: d column pairs
             for j in range(d):
@@ -337,8 +346,8 @@ class _State:
         self.beta_shared = np.zeros((n, 2))
         self.beta_shared[self.classical] = beta[:2 * n_classical].reshape(-1, 2)
         self.coeff = coeff
-        self.bb = np.einsum("mnc,nc->mn", self.basis, self.beta_shared)     # classical modes' transients
-        self.Tb = self.S * np.einsum("mnc,njc->mj", self.basis, coeff)
+        self.bb = np.einsum("mjnc,nc->jnm", self.basis, self.beta_shared)   # classical modes' transients
+        self.Tb = self.Sn * np.einsum("mjnc,njc->mj", self.basis, coeff)
         self.v = e - self.Tb                                         # unwhitened residual, beta fixed
         self.gv = np.einsum("md,md->m", np.conj(G), self.v)          # g^H v
 
@@ -347,6 +356,11 @@ class _State:
         G = self.G
         proj = np.einsum("md,md...->m...", np.conj(G), x)
         return x + (self.phi[:, None] * G)[(...,) + (None,) * (x.ndim - 2)] * proj[:, None]
+
+
+def _pair(a, b) -> np.ndarray:
+    """The two real coefficients' columns of ``c a + conj(c) b``: ``[a + b, i (a - b)]`` on a last axis."""
+    return np.stack([a + b, 1j * (a - b)], axis=-1)
 
 
 def _real(x) -> np.ndarray:
@@ -387,19 +401,19 @@ def _jacobian(model: ModalModel, st: _State, k: int, cols) -> np.ndarray:
         dG = -S[None] * (st.dH[a].T[:, :, None] * R[:, None, :])
         if quad:
             dG[quad] -= S[None] * (st.dHq[a].T[:, :, None] * Qr[quad][:, None, :])
-        dTb = S[None] * np.einsum("mnc,njc->nmj", st.dbasis[a], st.coeff)
+        dTb = st.Sn[None] * np.einsum("mjnc,njc->nmj", st.dbasis[a], st.coeff)
         out[idx] = finish(dG, dTb)
-    bb = st.bb.T * st.classical[:, None]                              # a quadrature mode's transient is free
+    bb = st.bb * st.classical[None, :, None]                          # a quadrature mode's transient is free
     for j in range(d):                                                # residues of floor j
         idx = 2 * n + np.arange(n) * d + j
-        out[idx] = finish_column(j, -S[:, j][None] * st.H.T, S[:, j][None] * bb)
+        out[idx] = finish_column(j, -S[:, j][None] * st.H.T, st.Sn[:, j] * bb[j])
         if quad:
             idx = 2 * n + n * d + np.arange(len(quad)) * d + j
             out[idx] = finish_column(j, -S[:, j][None] * st.Hq.T, np.zeros((len(quad), m), complex))
     sl = model.sensor_slice(k)
     for j in range(d):                                                # gain and clock offset of sensor j
         a = np.stack([G[:, j], -1j * run.w * G[:, j]])
-        b = np.stack([st.Tb[:, j], -1j * run.w * st.Tb[:, j]])
+        b = np.stack([st.Tb[:, j], st.Sn[0, j] * np.einsum("mnc,nc->m", st.dbasis_offset[:, j], st.coeff[:, j])])
         out[[sl.start + j, sl.start + d + j]] = finish_column(j, a, b)
     sel = out[cols]                                                   # (q, m, d)
     J = np.sqrt(2.0) * np.concatenate([sel.real.reshape(len(cols), -1), sel.imag.reshape(len(cols), -1)], axis=1)

@@ -27,6 +27,15 @@ SIGMA = 0.01
 LEAD_IN = 5.0
 
 
+def rig(zeta, dt: float):
+    """The 3-storey shear building (modal damping ``zeta``) discretised at ``dt`` (s), first-order hold."""
+    M, K = np.diag(MASSES), mi.shear_stiffness([450.0, 500.0, 520.0])
+    w2, phi = np.linalg.eigh(np.linalg.solve(np.sqrt(M), np.linalg.solve(np.sqrt(M), K).T))
+    phi = np.linalg.solve(np.sqrt(M), phi)
+    C = M @ phi @ np.diag(2 * np.asarray(zeta) * np.sqrt(w2)) @ phi.T @ M
+    return discretize(M, C, K, dt)
+
+
 def shear_run(seed: int, *, zeta=(0.005, 0.004, 0.003), duration=40.0, name="shake") -> RunData:
     """A 3-storey shear building (modes near 4, 11, 16 Hz) under band-limited table noise at 120 Hz,
     exact first-order-hold simulation, a quiet lead-in and white noise on every channel."""
@@ -36,11 +45,7 @@ def shear_run(seed: int, *, zeta=(0.005, 0.004, 0.003), duration=40.0, name="sha
     spectrum[np.fft.rfftfreq(n, 1 / FS) > 30.0] = 0.0
     u = np.fft.irfft(spectrum, n)
     u = np.concatenate([np.zeros(int(LEAD_IN * FS)), 0.5 * u / np.std(u), np.zeros(int(3 * FS))])
-    M, K = np.diag(MASSES), mi.shear_stiffness([450.0, 500.0, 520.0])
-    w2, phi = np.linalg.eigh(np.linalg.solve(np.sqrt(M), np.linalg.solve(np.sqrt(M), K).T))
-    phi = np.linalg.solve(np.sqrt(M), phi)
-    C = M @ phi @ np.diag(2 * np.asarray(zeta) * np.sqrt(w2)) @ phi.T @ M
-    model = discretize(M, C, K, 1 / FS)
+    model = rig(zeta, 1 / FS)
     a = outputs(model, simulate_linear(model, u))["a"]
     values = np.column_stack([u, a]) + SIGMA * rng.standard_normal((u.size, 4))
     return RunData(name, np.zeros(3), np.arange(u.size) / FS, ("zdd", "a1", "a2", "a3"), values)
@@ -55,11 +60,7 @@ def late_run(seed: int, offsets, *, duration=20.0, zeta=(0.005, 0.004, 0.003)) -
     spectrum[np.fft.rfftfreq(n, 1 / FS) > 30.0] = 0.0
     u = np.fft.irfft(spectrum * up, n * up)            # the same band-limited motion on the finer grid
     u = np.concatenate([np.zeros(int(LEAD_IN * FS * up)), 0.5 * u / np.std(u)])
-    M, K = np.diag(MASSES), mi.shear_stiffness([450.0, 500.0, 520.0])
-    w2, phi = np.linalg.eigh(np.linalg.solve(np.sqrt(M), np.linalg.solve(np.sqrt(M), K).T))
-    phi = np.linalg.solve(np.sqrt(M), phi)
-    C = M @ phi @ np.diag(2 * np.asarray(zeta) * np.sqrt(w2)) @ phi.T @ M
-    model = discretize(M, C, K, 1 / (FS * up))
+    model = rig(zeta, 1 / (FS * up))
     a = outputs(model, simulate_linear(model, u))["a"]
     k = np.arange(2 * up, u.size - up, up)
     values = np.column_stack([u[k]] + [a[k - o, j] for j, o in enumerate(offsets)])

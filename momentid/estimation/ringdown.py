@@ -341,7 +341,7 @@ def fit_decay(rings: Iterable[RingDown], correlation_samples: int, slope_sigmas:
     zeta0, var0, slopes, evidence = float(const.x[0]), float(cov[0, 0]), [], 0.0
     E = np.concatenate([r.envelope for r in rings])
     reach = float(np.percentile(E, 10))           # the smallest amplitude the decays hold well
-    unknown_slope = np.inf                         # what the growing laws leave open at zero amplitude
+    left_open = []                                 # what each growing law leaves open at zero amplitude
     if max(float(np.ptp(np.log(r.envelope))) for r in rings) > MIN_LOG_SPAN:
         for p in POWERS:
             scale = float(np.exp(p * np.mean(ln_e0)))
@@ -350,15 +350,14 @@ def fit_decay(rings: Iterable[RingDown], correlation_samples: int, slope_sigmas:
             sd = float(np.sqrt(max(c[1, 1], 0.0)))
             if fit.success and sd > 0:          # a damping that grows with amplitude: joints slipping more
                 evidence = max(evidence, float(fit.x[1]) / sd)
-                left_open = sd * reach ** p
-                unknown_slope = left_open if np.isinf(unknown_slope) else max(unknown_slope, left_open)
+                left_open.append(sd * reach ** p)
             if fit.success and sd > 0 and fit.x[1] > slope_sigmas * sd:
                 slopes.append((p, fit.x, c))
     if not slopes:
         # a constant damping at small amplitude is an extrapolation from the amplitudes the decays reach:
         # as uncertain as a damping growing with amplitude by any law of POWERS, within its own error, would
         # leave it (the square-root law, micro-slip's, leaves the most open at small amplitudes)
-        var0 += min(unknown_slope, abs(zeta0)) ** 2
+        var0 += min(max(left_open, default=np.inf), abs(zeta0)) ** 2
     if slopes:
         z = np.array([x[0] for _, x, _ in slopes])
         zeta0 = float(np.mean(z))

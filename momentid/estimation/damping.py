@@ -26,7 +26,9 @@ above the structure's own damping: 0.44-2.4 % on the stiff 1-storey rig, whose f
   falls with it (a joint that softens as it slips).
 
 The linear fit's own standard error counts white noise only; its answer carries the windows' error
-instead when that is larger (what independent stretches of the record scatter: model error).  A mode the
+instead when that is larger (what independent stretches of the record scatter: model error), and any
+equivalent linear damping answered carries at least :data:`MODEL_ERROR_SHARE` of itself (what one record
+cannot show).  A mode the
 windows or decays leave too uncertain, on a rig showing no change, is answered by the whole record's fit
 with a delete-a-block jackknife error (:mod:`momentid.estimation.jackknife`).
 
@@ -56,7 +58,8 @@ from momentid.estimation.windows import WINDOW_CYCLES, drift_words, forced_windo
 if TYPE_CHECKING:
     from momentid.estimation.modal_select import ModeSelection
 
-__all__ = ["Source", "ModeDamping", "resolve_damping", "MAX_RELATIVE_STD", "MIN_DOF", "WINDOW_CYCLES"]
+__all__ = ["Source", "ModeDamping", "resolve_damping", "MAX_RELATIVE_STD", "MIN_DOF", "MODEL_ERROR_SHARE",
+           "WINDOW_CYCLES"]
 
 #: A linear fit whose residual stays within this factor of the noise level explains the record: the
 #: structure is linear at its amplitudes and the fit's damping is the answer (a rig that is not, 2-50x
@@ -90,6 +93,14 @@ HINT_SIGMAS = 3.0
 #: A damping ratio whose standard error exceeds this share of itself is not an answer (its 95 % interval
 #: then reaches zero: the data do not tell the damping from none).
 MAX_RELATIVE_STD = 0.5
+#: An equivalent linear damping (the linear fit's, the whole record's, the windows' constant mean) answered as
+#: the damping at small amplitude carries at least this share of itself as model error, in quadrature with
+#: its own: one record is one amplitude history, and a joint that slips a little more as the rig shakes harder
+#: moves the ratio without a residual or a trend that one record shows (a fit passes as linear up to
+#: :data:`LINEAR_MISFIT` of its noise).  A floor, below what repeated trials of one rig scatter (the stiff
+#: 1-storey rig's five trials: SRIM 0.13-0.17 %, +-13 %; its two El Centro trials' equivalent linear damping
+#: 0.440 and 0.447 % a few minutes apart).
+MODEL_ERROR_SHARE = 0.05
 #: Fewest degrees of freedom (independent stretches less the parameters) of an answer's error.
 MIN_DOF = 2
 #: The windows' pooled damping and the whole record's may differ by this many of the windows' standard
@@ -296,7 +307,20 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"their damping ({100 * answer.damping_ratio:.3g} %) is the damping at those amplitudes, not at "
                     f"small amplitude"))
             out.append(whole.instead(answer, i, k, periodic, windows))
-    return tuple(out)
+    return tuple(_with_model_error(a) for a in out)
+
+
+def _with_model_error(answer: ModeDamping) -> ModeDamping:
+    """``answer`` with its standard error at least :data:`MODEL_ERROR_SHARE` of its ratio (in quadrature) when it
+    is an equivalent linear damping (no amplitude law) with a finite error; unchanged otherwise."""
+    linear = answer.source in (Source.LINEAR, Source.WHOLE_RECORD, Source.FORCED)
+    if answer.amplitude_dependent or not linear or not np.isfinite(answer.damping_ratio_std):
+        return answer
+    a = answer
+    sd = float(np.hypot(a.damping_ratio_std, MODEL_ERROR_SHARE * a.damping_ratio))
+    new = _answer(a.damping_ratio, sd, a.dof, a.source, False, a.slope, a.exponent, a.frequency, a.frequency_slope,
+                  a.amplitude_range, a.equivalent, a.cycles)
+    return replace(new, refusal=a.refusal or new.refusal, evidence=a.evidence)
 
 
 def _softening(said: ModeDamping, trend: float, windows, equivalent: float, f0: float, cycles: float

@@ -26,7 +26,9 @@ degenerate answers:
 * **identifiable or fixed**: a gain the data determine no better than :data:`GAIN_STD_LIMIT`, or a
   clock offset no better than :data:`OFFSET_STD_LIMIT` samples, trades with the residues and the
   damping instead of being measured: it is fixed (gain 1, offset 0: a calibrated sensor on the table's
-  clock) and the fit repeated, with a note.
+  clock) and the fit repeated, with a note; so is a clock offset that ends at its bound when fixing it at 0
+  costs no more than chance allows (:data:`OFFSET_SIGNIFICANCE`; a misfit pulls an offset that nothing
+  determines there), else the run is refused by the checks.
 
 Covariance: the Jacobian of the whitened residual at the optimum, scaled by the residual variance
 factor when the model explains the data less well than the noise allows.
@@ -41,15 +43,16 @@ import numpy as np
 from numpy.typing import ArrayLike
 import scipy.linalg
 import scipy.optimize
+import scipy.stats
 
 from momentid.core.analytic import shear_stiffness
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.eiv import Spectra, spectra
-from momentid.estimation.modal_model import Hold, Likelihood, ModalModel, mode_response
+from momentid.estimation.modal_model import OFFSET_BOUND, Hold, Likelihood, ModalModel, mode_response
 
 __all__ = ["ModalModel", "ModalFit", "fit_modal", "fit_band", "modal_spectra", "linear_start", "refine",
-           "with_fixed_sensors",
+           "with_fixed_sensors", "OFFSET_SIGNIFICANCE", "BOUND_TOLERANCE",
            "FIT_BAND_FACTOR", "START_DAMPING", "NYQUIST_FRACTION", "MAX_NFEV"]
 
 #: The fit uses DFT bins up to this multiple of the highest resonance (the resonance's flanks carry
@@ -67,6 +70,13 @@ MAX_NFEV = 200
 FTOL, XTOL, GTOL = 1e-7, 1e-8, 1e-8
 #: A gain whose standard error exceeds this is not measured by the data: it is fixed at 1.
 GAIN_STD_LIMIT = 0.05
+#: A clock offset that ends at the fit's bound (:data:`~momentid.estimation.modal_model.OFFSET_BOUND` samples)
+#: is fixed at 0 and the fit repeated; the data determine it, and the run is refused, when fixing it raises
+#: the cost beyond this p-value of the F-test (a misfit pulls an offset that nothing determines to the bound:
+#: a record that mostly rings free, whose transients read no clock offset).
+OFFSET_SIGNIFICANCE = 1e-3
+#: "At a bound": within this fraction of it (log gain, or offset).
+BOUND_TOLERANCE = 1e-3
 #: A clock offset whose standard error exceeds this many samples is fixed at 0.
 OFFSET_STD_LIMIT = 0.5
 #: Clock offsets tried by :func:`linear_start` over the fit's bounds (a quarter of a sample apart).
@@ -158,8 +168,6 @@ def linear_start(model: ModalModel, spectra_list: Sequence[Spectra], omega: Arra
     third of a sample is a radian at 40 % of the sample rate, which no residue can absorb) and kept at
     the best.  Residues are averaged over runs; a gain outside :data:`START_GAIN_RANGE` starts at 1.
     """
-    from momentid.estimation.modal_model import OFFSET_BOUND
-
     omega, zeta = np.asarray(omega, float), np.asarray(zeta, float)
     n, d = model.n, model.d
     residues, gains, offsets = [], np.ones((model.n_runs, d)), np.zeros((model.n_runs, d))
@@ -276,15 +284,56 @@ def refine(model: ModalModel, spectra_list: Sequence[Spectra], starts: Iterable[
                              f"restarted from the {name} start, which converged")
             break
     fit = _finish(model, lik, best, spectra_list, f_max, nfev, tuple(notes) + (f"started from the {best_name}",))
-    if fix_nuisance:
-        fixed, why = _unidentified(model, fit, sample_rates, [sp.run for sp in spectra_list])
-        if fixed.any():
-            theta = with_fixed_sensors(model, fit.theta, fixed)
-            again = refine(model, spectra_list, [("previous fit", theta)], sample_rates=sample_rates,
-                           f_max=f_max, free=free & ~fixed, fix_nuisance=False, hold=hold,
-                           frequency_bounds=frequency_bounds)
-            return replace(again, nfev=again.nfev + fit.nfev, notes=fit.notes + tuple(why))
-    return fit
+    if not fix_nuisance:
+        return fit
+    names = [sp.run for sp in spectra_list]
+    again = dict(sample_rates=sample_rates, f_max=f_max, fix_nuisance=False, hold=hold,
+                 frequency_bounds=frequency_bounds)
+    fixed, why = _unidentified(model, fit, sample_rates, names)
+    if fixed.any():
+        refit = refine(model, spectra_list, [("previous fit", with_fixed_sensors(model, fit.theta, fixed))],
+                       free=free & ~fixed, **again)
+        fit = replace(refit, nfev=refit.nfev + fit.nfev, notes=fit.notes + tuple(why))
+    at = _offsets_at_bound(model, fit, sample_rates)
+    if not at.any():
+        return fit
+    refit = refine(model, spectra_list, [("offsets at the bound fixed", with_fixed_sensors(model, fit.theta, at))],
+                   free=fit.free & ~at, **again)
+    F, p = _f_test(refit.cost, fit.cost, int(at.sum()), fit.dof)
+    if p < OFFSET_SIGNIFICANCE:
+        return fit            # the data put the offset at the bound: refused by the checks, with the reason
+    note = (f"the clock offset(s) {_offset_names(model, at, names)} reached the fit's bound of {OFFSET_BOUND:g} "
+            f"samples, yet fixed at 0 the fit is no worse beyond chance (F = {F:.3g}, p = {p:.2g}): the data do not "
+            f"determine them (a free decay reads no clock offset): fixed at 0")
+    return replace(refit, nfev=refit.nfev + fit.nfev, notes=fit.notes + (note,))
+
+
+def _offsets_at_bound(model: ModalModel, fit: ModalFit, sample_rates) -> np.ndarray:
+    """Mask over theta of the free clock offsets within :data:`BOUND_TOLERANCE` of the fit's bound."""
+    at = np.zeros(model.p, bool)
+    for r, fs in enumerate(sample_rates):
+        s = model.sensor_slice(r)
+        t = np.arange(s.start + model.d, s.stop)
+        limit = OFFSET_BOUND / fs
+        at[t] = fit.free[t] & (np.abs(np.abs(fit.theta[t]) - limit) < BOUND_TOLERANCE * limit)
+    return at
+
+
+def _offset_names(model: ModalModel, mask: np.ndarray, names) -> str:
+    """``run 'name': a1, a3; ...`` for the clock offsets in ``mask``."""
+    out = []
+    for r, name in enumerate(names):
+        s = model.sensor_slice(r)
+        j = np.flatnonzero(mask[s.start + model.d:s.stop])
+        if j.size:
+            out.append(f"of run {name!r}: {', '.join(f'a{k + 1}' for k in j)}")
+    return "; ".join(out)
+
+
+def _f_test(cost_small: float, cost_big: float, extra: int, dof_big: int) -> tuple[float, float]:
+    """F statistic and p-value of a nested fit's cost decrease, against the larger fit's residual variance."""
+    F = max(cost_small - cost_big, 0.0) / extra / (cost_big / dof_big)
+    return float(F), float(scipy.stats.f.sf(F, extra, dof_big))
 
 
 def with_fixed_sensors(model: ModalModel, theta: np.ndarray, fixed: np.ndarray) -> np.ndarray:

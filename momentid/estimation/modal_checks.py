@@ -24,6 +24,7 @@ import numpy as np
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
+from momentid.estimation.modal import BOUND_TOLERANCE
 from momentid.estimation.modal_model import GAIN_RANGE, OFFSET_BOUND
 
 if TYPE_CHECKING:
@@ -40,11 +41,11 @@ POOR_DAMPING = 0.5
 #: suspect (a real accelerometer is calibrated to ~1-2 %).
 SUSPECT_GAIN = 0.05
 #: The fit's gain bounds and clock-offset bound (samples, see
-#: :meth:`~momentid.estimation.modal_model.ModalModel.bounds`); a sensor at one of them is refused.
+#: :meth:`~momentid.estimation.modal_model.ModalModel.bounds`); a sensor at one of them (within
+#: :data:`~momentid.estimation.modal.BOUND_TOLERANCE`) is refused: a clock offset there only when the data
+#: determine it (:func:`~momentid.estimation.modal.refine` fixes one they do not at 0).
 GAIN_BOUNDS = GAIN_RANGE
 OFFSET_BOUND_SAMPLES = OFFSET_BOUND
-#: "At a bound": within this fraction of it (log gain, or offset).
-BOUND_TOLERANCE = 1e-3
 #: Shapes further than this from M-orthogonal (largest off-diagonal of the normalised modal mass
 #: matrix) contradict the stated masses.
 ORTHOGONALITY_WARNING = 0.2

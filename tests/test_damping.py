@@ -333,6 +333,9 @@ def test_a_record_without_lead_in_answers_from_the_linear_fit_when_its_scatter_p
     window = run.window(start, start + int(15 * run.sample_rate))
     damping = mi.identify(replace(experiment, runs=(window,))).damping[0]
     assert not damping.is_answer, damping
+    # its free decays fall only 1.4x: the refusal says that first, then their error (it used to say only
+    # the error, "more than 50 % of the ratio", the less telling reason)
+    assert damping.refusal.startswith("the free decays fall only") and "50%" in damping.refusal, damping.refusal
 
 
 def test_a_frequency_that_rises_with_amplitude_leaves_the_other_modes_answered():

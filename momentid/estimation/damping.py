@@ -282,8 +282,8 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                                      decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
                              evidence=decay.evidence)
             unseen = constant_refusal(decay)
-            if not answer.refusal:
-                answer = replace(answer, refusal=unseen)
+            if unseen:       # the more telling reason first: what the decays cannot show, then their error
+                answer = replace(answer, refusal=f"{unseen}; {answer.refusal}" if answer.refusal else unseen)
             if not unseen:       # a constant read above small amplitudes says nothing there, pooled or not
                 answer = _pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
             out.append(whole.instead(answer, i, k, periodic, windows))

@@ -252,9 +252,13 @@ def test_the_worked_example_is_the_shipped_kind_and_its_rig():
     assert _worked_example("tmd_floor3.toml") == (SCENARIOS / "hidden" / "tmd_floor3.toml").read_text()
 
 
+@pytest.mark.slow
 def test_the_worked_example_is_diagnosed_in_a_copy_of_the_package(tmp_path):
     """Issue 30's proof: a copy of the package without the tuned-mass damper, given the docs' file and
-    nothing else, simulates its hidden rig and names it, at its floor, sized."""
+    nothing else, simulates its hidden rig and names it, at its floor, sized.  Slow (a fresh interpreter
+    simulates and diagnoses the whole scenario: 100-140 s on the 2-core machine, the suite's longest test);
+    the registry's plug-in contract stays in the default run (the docs' file equals the shipped one, and the
+    shipped kind is screened at its floor)."""
     shutil.copytree(ROOT / "momentid", tmp_path / "momentid",
                     ignore=shutil.ignore_patterns("__pycache__", "tuned_mass_damper.py"))
     assert "tuned_mass_damper" not in _momentid(["diagnose", "--help"], tmp_path)   # the copy lacks it ...

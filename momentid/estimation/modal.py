@@ -52,7 +52,7 @@ from momentid.estimation.eiv import Spectra, spectra
 from momentid.estimation.modal_model import OFFSET_BOUND, Hold, Likelihood, ModalModel, mode_response
 
 __all__ = ["ModalModel", "ModalFit", "fit_modal", "fit_band", "modal_spectra", "linear_start", "refine",
-           "with_fixed_sensors", "OFFSET_SIGNIFICANCE", "BOUND_TOLERANCE",
+           "with_fixed_sensors", "f_test", "OFFSET_SIGNIFICANCE", "BOUND_TOLERANCE",
            "FIT_BAND_FACTOR", "START_DAMPING", "NYQUIST_FRACTION", "MAX_NFEV"]
 
 #: The fit uses DFT bins up to this multiple of the highest resonance (the resonance's flanks carry
@@ -299,7 +299,7 @@ def refine(model: ModalModel, spectra_list: Sequence[Spectra], starts: Iterable[
         return fit
     refit = refine(model, spectra_list, [("offsets at the bound fixed", with_fixed_sensors(model, fit.theta, at))],
                    free=fit.free & ~at, **again)
-    F, p = _f_test(refit.cost, fit.cost, int(at.sum()), fit.dof)
+    F, p = f_test(refit.cost, fit.cost, int(at.sum()), fit.dof)
     if p < OFFSET_SIGNIFICANCE:
         return fit            # the data put the offset at the bound: refused by the checks, with the reason
     note = (f"the clock offset(s) {_offset_names(model, at, names)} reached the fit's bound of {OFFSET_BOUND:g} "
@@ -330,10 +330,25 @@ def _offset_names(model: ModalModel, mask: np.ndarray, names) -> str:
     return "; ".join(out)
 
 
-def _f_test(cost_small: float, cost_big: float, extra: int, dof_big: int) -> tuple[float, float]:
-    """F statistic and p-value of a nested fit's cost decrease, against the larger fit's residual variance."""
-    F = max(cost_small - cost_big, 0.0) / extra / (cost_big / dof_big)
-    return float(F), float(scipy.stats.f.sf(F, extra, dof_big))
+def f_test(cost_small: float, cost_big: float, extra_parameters: int, dof_big: int) -> tuple[float, float]:
+    """F statistic and p-value of a nested model's cost decrease, against the larger model's residual
+    variance (which absorbs a misfit beyond the noise level as well as the noise).
+
+    Parameters
+    ----------
+    cost_small, cost_big : float
+        Sums of squared whitened residuals of the nested (fewer parameters) and the larger fit.
+    extra_parameters : int
+        Parameters the larger fit frees.
+    dof_big : int
+        The larger fit's residual degrees of freedom.
+
+    Returns
+    -------
+    F, p : float
+    """
+    F = ((cost_small - cost_big) / extra_parameters) / (cost_big / dof_big)
+    return float(F), float(scipy.stats.f.sf(F, extra_parameters, dof_big))
 
 
 def with_fixed_sensors(model: ModalModel, theta: np.ndarray, fixed: np.ndarray) -> np.ndarray:

@@ -49,13 +49,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
-import scipy.stats
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
 from momentid.estimation.eiv import spectra
-from momentid.estimation.modal import (NYQUIST_FRACTION, START_DAMPING, ModalFit, ModalModel, fit_band, linear_start,
-                                       modal_spectra, refine, shear_start)
+from momentid.estimation.modal import (NYQUIST_FRACTION, START_DAMPING, ModalFit, ModalModel, f_test, fit_band,
+                                       linear_start, modal_spectra, refine, shear_start)
 from momentid.estimation.noise import estimate_noise
 from momentid.estimation.peaks import peak_candidates, require_resonances
 from momentid.estimation.subspace import STABLE_FREQUENCY, stable_poles
@@ -127,13 +126,6 @@ class ModeSelection:
     subspace: tuple
     independent: np.ndarray
     notes: tuple
-
-
-def f_test(cost_small: float, cost_big: float, extra_parameters: int, dof_big: int) -> tuple[float, float]:
-    """F statistic and p-value of a nested model's cost decrease, against the larger model's residual
-    variance (which absorbs a misfit beyond the noise level as well as the noise)."""
-    F = ((cost_small - cost_big) / extra_parameters) / (cost_big / dof_big)
-    return float(F), float(scipy.stats.f.sf(F, extra_parameters, dof_big))
 
 
 def _std(fit: ModalFit) -> np.ndarray:

@@ -282,9 +282,10 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                                      decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
                              evidence=decay.evidence)
             unseen = constant_refusal(decay)
-            if unseen:       # the more telling reason first: what the decays cannot show, then their error
+            if unseen:       # a constant read above small amplitudes says nothing there, pooled or not; the
+                # more telling reason first (what the decays cannot show), then their error
                 answer = replace(answer, refusal=f"{unseen}; {answer.refusal}" if answer.refusal else unseen)
-            if not unseen:       # a constant read above small amplitudes says nothing there, pooled or not
+            else:
                 answer = _pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
             out.append(whole.instead(answer, i, k, periodic, windows))
         elif exact or (linear and evidence <= HINT_SIGMAS) or (periodic and periodic_linear):
@@ -316,11 +317,11 @@ def _with_model_error(answer: ModeDamping) -> ModeDamping:
     linear = answer.source in (Source.LINEAR, Source.WHOLE_RECORD, Source.FORCED)
     if answer.amplitude_dependent or not linear or not np.isfinite(answer.damping_ratio_std):
         return answer
-    a = answer
-    sd = float(np.hypot(a.damping_ratio_std, MODEL_ERROR_SHARE * a.damping_ratio))
-    new = _answer(a.damping_ratio, sd, a.dof, a.source, False, a.slope, a.exponent, a.frequency, a.frequency_slope,
-                  a.amplitude_range, a.equivalent, a.cycles)
-    return replace(new, refusal=a.refusal or new.refusal, evidence=a.evidence)
+    sd = float(np.hypot(answer.damping_ratio_std, MODEL_ERROR_SHARE * answer.damping_ratio))
+    floored = _answer(answer.damping_ratio, sd, answer.dof, answer.source, False, answer.slope, answer.exponent,
+                      answer.frequency, answer.frequency_slope, answer.amplitude_range, answer.equivalent,
+                      answer.cycles)
+    return replace(floored, refusal=answer.refusal or floored.refusal, evidence=answer.evidence)
 
 
 def _softening(said: ModeDamping, trend: float, windows, equivalent: float, f0: float, cycles: float

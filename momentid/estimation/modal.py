@@ -52,7 +52,7 @@ from momentid.estimation.eiv import Spectra, spectra
 from momentid.estimation.modal_model import OFFSET_BOUND, Hold, Likelihood, ModalModel, mode_response
 
 __all__ = ["ModalModel", "ModalFit", "fit_modal", "fit_band", "modal_spectra", "linear_start", "refine",
-           "with_fixed_sensors", "f_test", "OFFSET_SIGNIFICANCE", "BOUND_TOLERANCE",
+           "with_fixed_sensors", "f_test", "at_offset_bound", "OFFSET_SIGNIFICANCE", "BOUND_TOLERANCE",
            "FIT_BAND_FACTOR", "START_DAMPING", "NYQUIST_FRACTION", "MAX_NFEV"]
 
 #: The fit uses DFT bins up to this multiple of the highest resonance (the resonance's flanks carry
@@ -308,14 +308,32 @@ def refine(model: ModalModel, spectra_list: Sequence[Spectra], starts: Iterable[
     return replace(refit, nfev=refit.nfev + fit.nfev, notes=fit.notes + (note,))
 
 
+def at_offset_bound(offset: ArrayLike, sample_rate: float) -> np.ndarray:
+    """Which clock offsets (s) sit at the fit's bound of :data:`~momentid.estimation.modal_model.OFFSET_BOUND`
+    samples, within :data:`BOUND_TOLERANCE` of it.
+
+    Parameters
+    ----------
+    offset : array_like, shape (d,)
+        One run's floor-sensor clock offsets (s).
+    sample_rate : float
+        The run's rate (Hz).
+
+    Returns
+    -------
+    ndarray of bool, shape (d,)
+    """
+    limit = OFFSET_BOUND / sample_rate
+    return np.abs(np.abs(np.asarray(offset, float)) - limit) < BOUND_TOLERANCE * limit
+
+
 def _offsets_at_bound(model: ModalModel, fit: ModalFit, sample_rates) -> np.ndarray:
-    """Mask over theta of the free clock offsets within :data:`BOUND_TOLERANCE` of the fit's bound."""
+    """Mask over theta of the free clock offsets at the fit's bound (:func:`at_offset_bound`)."""
     at = np.zeros(model.p, bool)
     for r, fs in enumerate(sample_rates):
         s = model.sensor_slice(r)
         t = np.arange(s.start + model.d, s.stop)
-        limit = OFFSET_BOUND / fs
-        at[t] = fit.free[t] & (np.abs(np.abs(fit.theta[t]) - limit) < BOUND_TOLERANCE * limit)
+        at[t] = fit.free[t] & at_offset_bound(fit.theta[t], fs)
     return at
 
 

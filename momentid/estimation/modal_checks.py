@@ -24,7 +24,7 @@ import numpy as np
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
-from momentid.estimation.modal import BOUND_TOLERANCE
+from momentid.estimation.modal import BOUND_TOLERANCE, at_offset_bound
 from momentid.estimation.modal_model import GAIN_RANGE, OFFSET_BOUND
 
 if TYPE_CHECKING:
@@ -152,8 +152,7 @@ def _sensor_refusal(runs, gain, offset, storey_f1: float) -> None:
                 f"run {run.name!r}: refused: floor sensor(s) {said}: expected a gain within {GAIN_BOUNDS[0]:g}-"
                 f"{GAIN_BOUNDS[1]:g} of the table sensor's: {cause}; check the import (axis, sign, unit, which "
                 f"file is which floor)")
-        limit = OFFSET_BOUND_SAMPLES / run.sample_rate
-        late = np.flatnonzero(np.abs(np.abs(offset[r]) - limit) < BOUND_TOLERANCE * limit)
+        late = np.flatnonzero(at_offset_bound(offset[r], run.sample_rate))
         if late.size:
             raise IdentificationError(
                 f"run {run.name!r}: refused: the clock offset of floor sensor(s) "

@@ -112,14 +112,18 @@ def stiff_table(orders=None) -> tuple[str, bool, bool]:
             z = f"refused ({m.refusal[:70]})"
             verdict = "refused (an answer is asked for)" if must else "refused"
             ok &= not must
-        if f_ref and (must or r.damping_is_answer[0]):
+        if not r.frequency_answered(0):      # refused with its reason (a periodic table's lines pulled the fit)
+            verdict += "; frequency refused"
+            ok &= not must
+        elif f_ref and (must or r.damping_is_answer[0]):
             ok &= abs(diff) < 100 * FREQUENCY_TOLERANCE
         ref = f"{f_ref:.2f} / 0.13-0.17" if f_ref else "- (a NaN in its file: not in SRIM's set)"
         again = srim_modes(experiment.run(name), 1, orders, r.frequency[:1])[0] if orders else None
         again_diff = 100 * (r.frequency[0] / again[0] - 1) if again else float("nan")
         rerun_ok &= again is None if not orders else (again is not None and abs(again_diff) < 100 * FREQUENCY_TOLERANCE)
         again_text = f"{again[0]:.3f} / {100 * again[1]:.2f}" if again else "-"
-        lines.append(f"| {name} | {r.frequency[0]:.3f} | {z} | {m.source} | {100 * m.equivalent:.3f} | {ref} | "
+        f_text = f"{r.frequency[0]:.3f}" + ("" if r.frequency_answered(0) else " (NOT AN ANSWER)")
+        lines.append(f"| {name} | {f_text} | {z} | {m.source} | {100 * m.equivalent:.3f} | {ref} | "
                      f"{diff:+.2f} | {again_text} | {again_diff:+.2f} | {verdict} |")
     return "\n".join(lines), ok, rerun_ok
 

@@ -186,7 +186,7 @@ def test_a_single_uncertain_decay_is_pooled_with_windows_that_agree(windows_at_z
 def test_a_frequency_at_a_periodic_tables_line_is_not_an_answer():
     """A 2 Hz table rich in harmonics forces a 22 Hz mode at 20, 22 and 24 Hz: a fitted 22.01 Hz lies closer
     to the 22 Hz line than 20 s resolve (0.05 Hz) and is flagged; 22.3 Hz is not, and neither is any
-    frequency under a broadband table."""
+    frequency under a broadband table.  Between the lines, a fit well above where the mode rings free is."""
     from momentid.estimation.periodic import FORCED_LINE, forced_line
 
     t = np.arange(int(20 * FS)) / FS
@@ -202,6 +202,12 @@ def test_a_frequency_at_a_periodic_tables_line_is_not_an_answer():
     broadband = [RunData(name="noise", added_mass=np.zeros(1), time=t, channels=("zdd", "a1"),
                          values=np.column_stack([noise, noise]))]
     assert forced_line(broadband, 22.01) == ""
+    # between the 22 and 24 Hz lines: a fit 0.1 Hz above where the mode rings free, at 5 standard errors, is the
+    # lines' pull; at 2 it may be the fit's scatter; below it, a joint that slips (softening) explains it
+    assert "rings free" in forced_line(runs, 22.3, 22.2, 0.02)
+    assert forced_line(runs, 22.3, 22.2, 0.05) == ""
+    assert forced_line(runs, 22.3, 22.4, 0.02) == ""
+    assert forced_line(broadband, 22.3, 22.2, 0.02) == ""
 
 
 def test_a_linear_answer_carries_what_the_windows_scatter():

@@ -182,6 +182,8 @@ def test_a_sensor_saturation_is_named_at_its_channel_with_its_level(diagnoses):
     assert "sensor saturation" in diag._repr_html_() and "nan" not in diag._repr_html_()
 
 
+@pytest.mark.slow    # a whole diagnosis through the CLI, 40-75 s on 2 cores; the default run keeps the CLI's
+# report folder (tests/test_noise_free_diagnosis.py) and the damper's diagnosis (benchmarks.diagnosis)
 def test_diagnose_cli_writes_the_report(recordings, tmp_path, capsys):
     rec = recordings("damper_storey3")
     assert main(["diagnose", str(rec), "-o", str(tmp_path / "report"), "--json"]) == 0

@@ -22,7 +22,7 @@ Standard errors of every derived quantity: delta method from the fit's covarianc
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,6 +38,7 @@ from momentid.estimation.damping import ModeDamping, Source, resolve_damping
 from momentid.estimation.noise import NoiseSource, estimate_noise, quiet_lead_in
 from momentid.estimation.periodic import forced_line
 from momentid.estimation.peaks import response_amplitude
+from momentid.estimation.trend import AmplitudeTrend, amplitude_trend, weighted_line
 
 __all__ = ["ModalIdentification", "ExtraMode", "AmplitudeTrend", "identify_modal", "identify_per_run",
            "amplitude_trend", "weighted_line"]
@@ -109,6 +110,9 @@ class ModalIdentification:
         Per mode, why its damping ratio is not an answer ('' when it is).
     damping : tuple of ModeDamping
         Per mode, how the damping answer was reached (source, law, amplitudes, degrees of freedom).
+    frequency_is_answer : ndarray of bool, shape (d,)
+        False where a frequency is a periodic table's forced line's, not the mode's
+        (:func:`~momentid.estimation.periodic.forced_line`; the reason is among ``warnings``).
     """
 
     frequency: np.ndarray
@@ -148,11 +152,16 @@ class ModalIdentification:
     damping_interval: np.ndarray | None = None
     damping_refusal: tuple = ()
     damping: tuple = ()
+    frequency_is_answer: np.ndarray | None = None
 
     @property
     def storeys(self) -> int:
         """Number of storey modes ``d``."""
         return self.frequency.shape[0]
+
+    def frequency_answered(self, i: int) -> bool:
+        """Whether mode ``i``'s (0-based) frequency is an answer (:attr:`frequency_is_answer`)."""
+        return self.frequency_is_answer is None or bool(self.frequency_is_answer[i])
 
     @property
     def linear_damping_ratio(self) -> np.ndarray:
@@ -198,6 +207,8 @@ class ModalIdentification:
             "damping_interval_95": lst(self.damping_interval),
             "damping_refusal": [r or None for r in self.damping_refusal],
             "damping": [m.to_dict() for m in self.damping],
+            "frequency_is_answer": None if self.frequency_is_answer is None else
+            [bool(a) for a in self.frequency_is_answer],
             "units": MODAL_UNITS,
         }
 
@@ -225,7 +236,9 @@ class ModalIdentification:
             z = f"{100 * self.damping_ratio[i]:7.3f} +- {100 * std:.3f}" if np.isfinite(std) else "      -         "
             flag = "          " if answer[i] else " NOT AN ANSWER"
             source = self.damping[i].source if self.damping else "linear fit"
-            lines.append(f"{i + 1:>4}  {self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}  {z}{flag:<16} "
+            f = (f"{self.frequency[i]:8.4f} +- {self.frequency_std[i]:.4f}" if self.frequency_answered(i) else
+                 f"{'NOT AN ANSWER':>18}")
+            lines.append(f"{i + 1:>4}  {f}  {z}{flag:<16} "
                          f"{source:<16}{100 * equivalent[i]:8.3f}          {check} {shape}")
         if self.extra_modes:
             lines.append(f"extra modes (beyond the {self.storeys} storey modes; "
@@ -356,7 +369,9 @@ def identify_modal(experiment: Experiment, runs: Sequence[str] | None = None) ->
     damping = _small_amplitude_damping(selected, selection, stated, values["frequency"], warnings, notes)
     answer = answer & np.array([m.is_answer for m in damping])
     rings = [m.frequency if m.source in (Source.FREE_DECAY, Source.POOLED) and m.cycles > 0 else None for m in damping]
-    warnings += [w for w in (forced_line(selected, float(f), r) for f, r in zip(values["frequency"], rings)) if w]
+    forced = [forced_line(selected, float(f), r, float(s))
+              for f, r, s in zip(values["frequency"], rings, std["frequency"])]
+    warnings += [w for w in forced if w]
     if selection.extra:
         notes.append(f"the data hold {model.n} resonances in 0-{fit.f_max:.3g} Hz, {len(selection.extra)} more "
                      f"than the {d} storeys: the extra ones are fitted with the storey modes and reported apart")
@@ -378,6 +393,7 @@ def identify_modal(experiment: Experiment, runs: Sequence[str] | None = None) ->
         damping_ratio_equivalent=equivalent, equivalent_std=equivalent_std,
         damping_interval=np.array([m.interval for m in damping]),
         damping_refusal=tuple(m.refusal for m in damping), damping=damping,
+        frequency_is_answer=np.array([not w for w in forced]),
     )
 
 
@@ -463,66 +479,6 @@ def _notes(fit, runs, offset, values, n_runs) -> list[str]:
     return out
 
 
-@dataclass(frozen=True)
-class AmplitudeTrend:
-    """How the first mode changes with response amplitude across runs (:func:`amplitude_trend`).
-
-    Attributes
-    ----------
-    results : tuple of ModalIdentification
-        One per run, sorted by amplitude.
-    frequency_slope, frequency_slope_std : float
-        Weighted least-squares slope of mode 1's frequency over amplitude (Hz per m/s^2).
-    damping_slope, damping_slope_std : float
-        Same for its damping ratio (1 per m/s^2).
-    """
-
-    results: tuple
-    frequency_slope: float
-    frequency_slope_std: float
-    damping_slope: float
-    damping_slope_std: float
-
-    def table(self) -> str:
-        """A text table: each run's response amplitude and mode 1, then the trend and its verdict."""
-        lines = ["run                 RMS response (m/s^2)  mode-1 frequency (Hz)  mode-1 damping at small "
-                 "amplitude (%)   equiv. linear (%)"]
-        for r in self.results:
-            answer = r.damping_is_answer is None or bool(r.damping_is_answer[0])
-            z = (f"{100 * r.damping_ratio[0]:6.3f} +- {100 * r.damping_ratio_std[0]:.3f}" if answer else
-                 "NOT AN ANSWER  ")
-            lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {r.frequency[0]:8.4f} +- "
-                         f"{r.frequency_std[0]:.4f}   {z:<30}{100 * r.linear_damping_ratio[0]:8.3f}")
-        lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
-                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} "
-                     f"+- {100 * self.damping_slope_std:.2g} % per m/s^2"
-                     f" ({self.verdict()})")
-        return "\n".join(lines)
-
-    def _repr_html_(self) -> str:
-        """A notebook's summary: the words of the report page's answer
-        (:func:`momentid.estimation.summary_html.trend_html`)."""
-        from momentid.estimation.summary_html import trend_html
-        return trend_html(self)
-
-    def verdict(self) -> str:
-        """The trend in words: ``not linear: larger responses are softer ...`` or ``no trend beyond two
-        standard errors``."""
-        softer = self.frequency_slope < -2 * self.frequency_slope_std
-        damped = self.damping_slope > 2 * self.damping_slope_std
-        if softer or damped:
-            return ("not linear: larger responses are " + " and ".join(
-                w for w, flag in (("softer", softer), ("more damped", damped)) if flag))
-        return "no trend beyond two standard errors"
-
-    def to_dict(self) -> dict:
-        """The per-run results and the slopes (per m/s^2 of RMS response) with their standard errors."""
-        return {"runs": [r.to_dict() for r in self.results],
-                "frequency_slope_hz_per_m_s2": self.frequency_slope,
-                "frequency_slope_std": self.frequency_slope_std,
-                "damping_slope_per_m_s2": self.damping_slope, "damping_slope_std": self.damping_slope_std}
-
-
 def identify_per_run(experiment: Experiment, runs: Sequence[str] | None = None) -> tuple[ModalIdentification, ...]:
     """:func:`identify_modal` on every run on its own, on the machine's cores (forked workers, see
     :func:`momentid.core.processes.run_forked`); tuple of results in run order."""
@@ -538,52 +494,3 @@ MODAL_UNITS = {"frequency_hz": "Hz", "damping_ratio": "1 (fraction of critical)"
                "M": "kg", "K": "N/m", "C": "N s/m", "masses": "kg", "M^-1 K": "1/s^2", "M^-1 C": "1/s",
                "sensor_gain": "1 (x the table sensor)", "sensor_offset_s": "s", "amplitude_m_s2": "m/s^2",
                "residual_rms": "m/s^2", "f_max_hz": "Hz"}
-
-
-def weighted_line(x: np.ndarray, y: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, float]:
-    """Weighted least-squares line ``y = c0 + c1 x`` (weights ``1/s^2``).
-
-    Parameters
-    ----------
-    x, y, s : ndarray, shape (n,)
-        Abscissae, ordinates and the ordinates' standard errors.
-
-    Returns
-    -------
-    coef : ndarray, shape (2,)
-        ``(c0, c1)``.
-    slope_std : float
-        Standard error of ``c1``, widened by the scatter beyond the stated errors.
-    """
-    A = np.column_stack([np.ones_like(x), x]) / s[:, None]
-    cov = np.linalg.inv(A.T @ A)
-    coef = cov @ A.T @ (y / s)
-    resid = (y - coef[0] - coef[1] * x) / s
-    scale = max(float(resid @ resid) / max(x.size - 2, 1), 1.0)   # scatter beyond the errors widens it
-    return coef, float(np.sqrt(cov[1, 1] * scale))
-
-
-def _slope(x, y, s):
-    """Slope of :func:`weighted_line` and its standard error."""
-    coef, std = weighted_line(x, y, s)
-    return float(coef[1]), std
-
-
-def amplitude_trend(results: Iterable[ModalIdentification]) -> AmplitudeTrend:
-    """Mode 1's frequency and damping ratio against response amplitude over per-run results.
-
-    Raises
-    ------
-    IdentificationError
-        Fewer than two runs.
-    """
-    results = tuple(sorted(results, key=lambda r: float(r.amplitude[0])))
-    if len(results) < 2:
-        raise IdentificationError(f"{len(results)} run(s): an amplitude trend needs at least two")
-    x = np.array([r.amplitude[0] for r in results])
-    fs, fstd = (np.array([getattr(r, k)[0] for r in results]) for k in ("frequency", "frequency_std"))
-    zs = np.array([r.linear_damping_ratio[0] for r in results])
-    zstd = np.array([r.linear_damping_ratio_std[0] for r in results])
-    f_slope, f_std = _slope(x, fs, np.maximum(fstd, 1e-12))
-    z_slope, z_std = _slope(x, zs, np.maximum(zstd, 1e-12))
-    return AmplitudeTrend(results, f_slope, f_std, z_slope, z_std)

@@ -57,7 +57,10 @@ def modes_table(result: Any) -> str:
         source = result.damping[i].source if result.damping else "linear fit"
         z = (percent_pm(result.damping_ratio[i], result.damping_ratio_std[i])
              if np.isfinite(result.damping_ratio_std[i]) else "–")
-        rows.append([f"{i + 1}", pm(result.frequency[i], result.frequency_std[i]), z, source,
+        answered = getattr(result, "frequency_is_answer", None)
+        f = (pm(result.frequency[i], result.frequency_std[i]) if answered is None or answered[i]
+             else html.Raw(f'<strong class="refused">{REFUSED}</strong> (see the warnings)'))
+        rows.append([f"{i + 1}", f, z, source,
                      f"{100 * result.linear_damping_ratio[i]:.3f}",
                      "none stable" if np.isnan(independent[i]) else f"{100 * independent[i]:.3f}",
                      html.Raw('<span class="answer">answer</span>') if answer[i]

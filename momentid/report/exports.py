@@ -45,6 +45,10 @@ def _geometry(experiment, d: int) -> str:
     return ""
 
 
+def _answered(what: str, answer: bool) -> str:
+    return f"{what}: an answer" if answer else f"{what}: {REFUSED} (see the warnings)"
+
+
 def _modal_sets(result, experiment, load_case: int) -> list[str]:
     d = result.storeys
     answer = np.ones(d, bool) if result.damping_is_answer is None else np.asarray(result.damping_is_answer)
@@ -56,8 +60,7 @@ def _modal_sets(result, experiment, load_case: int) -> list[str]:
                f"runs: {', '.join(result.runs)}",
                f"f = {result.frequency[i]:.6g} +- {result.frequency_std[i]:.2g} Hz; damping ratio "
                f"{result.damping_ratio[i]:.6g} +- {result.damping_ratio_std[i]:.2g}",
-               "damping ratio: an answer" if answer[i] else f"damping ratio: {REFUSED} (see the identification's "
-                                                            f"warnings)",
+               _answered("damping ratio", answer[i]) + "; " + _answered("frequency", result.frequency_answered(i)),
                "shape: floor sensor readings, 1 at the top floor; node 0 table, node j floor j"]
         out.append(uff.mode(i + 1, float(result.frequency[i]), float(result.damping_ratio[i]), range(1, d + 1),
                             shape, ids, modal_mass=modal_mass, load_case=load_case))

@@ -195,4 +195,5 @@ def modal_from_dict(data: dict, source: str) -> ModalIdentification:
         damping_ratio_equivalent=read.array("damping_ratio_equivalent", (d,), optional=True),
         equivalent_std=np.full(d, np.nan),
         damping_interval=read.array("damping_interval_95", (d, 2), optional=True),
-        damping_refusal=read.texts("damping_refusal"), damping=damping)
+        damping_refusal=read.texts("damping_refusal"), damping=damping,
+        frequency_is_answer=read.flags("frequency_is_answer", d))

@@ -61,6 +61,12 @@ def test_mode_one_is_where_the_peer_puts_it():
     assert not sine_2.frequency_answered(0)
     words = [w for w in sine_2.warnings if FORCED_LINE in w]
     assert len(words) == 1 and "only at its harmonics" in words[0] and "rings free" in words[0], sine_2.warnings
+    # ... and the amplitude trend of mode 1's frequency is read without it, and says so (text and HTML)
+    from momentid.estimation.trend import amplitude_trend
+
+    trend = amplitude_trend(results.values())
+    assert "without sine_2: not an answer" in trend.table()
+    assert trend._repr_html_().count("NOT AN ANSWER (see the warnings)") >= 1
 
 
 def test_damping_is_right_or_refused_with_its_reason():

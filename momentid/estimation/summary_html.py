@@ -107,7 +107,8 @@ def identification_html(result: Any) -> str:
 def trend_html(trend: Any) -> str:
     """The answer of an :class:`~momentid.estimation.scaled.AmplitudeTrend`: each run's mode 1 against its
     response amplitude, and the trend's verdict."""
-    rows = [[r.runs[0], f"{r.amplitude[0]:.3g}", pm(r.frequency[0], r.frequency_std[0]),
+    rows = [[r.runs[0], f"{r.amplitude[0]:.3g}",
+             pm(r.frequency[0], r.frequency_std[0]) if r.frequency_answered(0) else f"{REFUSED} (see the warnings)",
              percent_pm(r.damping_ratio[0], r.damping_ratio_std[0]) if np.isfinite(r.damping_ratio_std[0]) else "–",
              REFUSED if refused_modes(r)[:1] == [1] else "answer", f"{100 * r.linear_damping_ratio[0]:.3f}"]
             for r in trend.results]

@@ -51,8 +51,10 @@ class AmplitudeTrend:
                  f"{'NOT AN ANSWER':>18}")
             lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {f}   {z:<30}"
                          f"{100 * r.linear_damping_ratio[0]:8.3f}")
-        lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2, "
-                     f"equivalent linear damping ratio {100 * self.damping_slope:+.3g} "
+        left_out = [r.runs[0] for r in self.results if not _frequency_answered(r)]
+        without = f" (without {', '.join(left_out)}: not an answer)" if left_out else ""
+        lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2"
+                     f"{without}, equivalent linear damping ratio {100 * self.damping_slope:+.3g} "
                      f"+- {100 * self.damping_slope_std:.2g} % per m/s^2"
                      f" ({self.verdict()})")
         return "\n".join(lines)

@@ -69,6 +69,25 @@ def test_mode_one_is_where_the_peer_puts_it():
     assert trend._repr_html_().count("NOT AN ANSWER (see the warnings)") >= 1
 
 
+def test_at_60_hz_the_pulled_frequency_is_still_refused():
+    """An IMU at 60 Hz (Sine 2 low-passed and decimated by 2, zero phase): the table's fundamental is read
+    from its line (1.993 Hz; a bin of the line's window lobe gave 2.036 Hz, whose 11th harmonic lies 0.47 Hz
+    off), so the 21.93 and 23.92 Hz lines still bracket the mode and the fit's 22.32 Hz, above where the rig
+    rings free, is refused as at 120 Hz; its damping from the free ringing stays an answer within 2x."""
+    import dataclasses
+
+    import scipy.signal
+
+    experiment, _ = per_run()
+    run = experiment.run("sine_2")
+    values = scipy.signal.decimate(run.values, 2, ftype="fir", axis=0, zero_phase=True)
+    run = dataclasses.replace(run, time=run.time[::2][:values.shape[0]], values=values)
+    r = mi.identify(dataclasses.replace(experiment, runs=(run,)))
+    assert not r.frequency_answered(0) and any(FORCED_LINE in w and "(1.993 Hz)" in w for w in r.warnings), r.warnings
+    lo, hi = SRIM_DAMPING
+    assert r.damping_is_answer[0] and lo / 2 <= r.damping_ratio[0] <= 2 * hi, r.damping_ratio
+
+
 def test_damping_is_right_or_refused_with_its_reason():
     _, results = per_run()
     lo, hi = SRIM_DAMPING

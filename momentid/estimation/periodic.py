@@ -40,8 +40,8 @@ def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
 
     The table's power (Hann window) is periodic when lines at the multiples of one frequency hold
     :data:`PERIODIC_SHARE` of it, at :data:`CONCENTRATION` times the power per bin off them; the
-    fundamentals tried are the five strongest lines and their halves
-    and thirds.
+    fundamentals tried are the five strongest lines (local maxima of the spectrum: the bins beside a
+    line's peak are its window's main lobe, not lines of their own) and their halves and thirds.
     """
     u = np.asarray(table, float) - np.mean(table)
     n = u.size
@@ -53,7 +53,8 @@ def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
         return None
     df = freq[1]
     found = []
-    for k in np.argsort(power * keep)[::-1][:5]:
+    peak = np.r_[False, (power[1:-1] >= power[:-2]) & (power[1:-1] > power[2:]), False] & keep
+    for k in np.argsort(np.where(peak, power, 0.0))[::-1][:5]:
         for m in (1, 2, 3):
             f0 = freq[k] / m
             if f0 < MIN_FUNDAMENTAL:
@@ -93,7 +94,7 @@ def _forced_only(run: RunData, f_mode: float) -> tuple[float, int, float] | None
           if h >= 1 and h * f0 < freq[-1] - LINE_BINS * df]
     between = (freq > k * f0 + 3 * df) & (freq < (k + 1) * f0 - 3 * df)
     level = float(np.median(power[between])) if between.any() else 0.0
-    return f0, k, (min(at) / max(level, 1e-300) if at else np.inf)
+    return f0, k, (min(at) / level if at and level > 0 else np.inf)
 
 
 def periodic_refusal(runs: Sequence[RunData], f_mode: float) -> str:
@@ -117,10 +118,12 @@ def periodic_refusal(runs: Sequence[RunData], f_mode: float) -> str:
         if forced is None:
             continue
         f0, k, ratio = forced
+        # lines a few bins apart (a short record) leave no bin between them to compare
+        between = (f"between them its power is {ratio:.2g} times below theirs" if np.isfinite(ratio) else
+                   "the record holds no bin between them to compare")
         return (f"the table's motion in run {run.name!r} is periodic at {f0:.4g} Hz and never leaves the mode at "
                 f"{f_mode:.4g} Hz ringing free: it forces it at its harmonics ({k * f0:.4g} and {(k + 1) * f0:.4g} "
-                f"Hz), and between them its power is {ratio:.2g} times below theirs; a forced response there measures "
-                f"the detuning, not the damping")
+                f"Hz), and {between}; a forced response there measures the detuning, not the damping")
     return ""
 
 

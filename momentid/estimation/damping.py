@@ -277,16 +277,12 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                        max(said.evidence, abs(trends[k])) if said is not None else 0.0)
         changes = evidence > needed
         if decay is not None and (changes or not linear):
-            answer = replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY,
-                                     decay.amplitude_dependent, decay.slope, decay.exponent, decay.frequency0,
-                                     decay.frequency_slope, decay.amplitude_range, float(zeta[i]), decay.cycles),
-                             evidence=decay.evidence)
-            unseen = constant_refusal(decay)
-            if unseen:       # a constant read above small amplitudes says nothing there, pooled or not; the
-                # more telling reason first (what the decays cannot show), then their error
-                answer = replace(answer, refusal=f"{unseen}; {answer.refusal}" if answer.refusal else unseen)
-            else:
-                answer = _pooled(answer, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+            answer = _decay_answer(decay, windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
+            if answer.refusal and periodic and periodic_linear and not changes:
+                # a periodic table on a rig the linear fit explains, no mode showing a change: decays too poor
+                # to answer leave it to the linear fit, read from the transients (change 5)
+                answer = _linear_answer(float(zeta[i]), float(sd[model.n + i]), max(fit.dof, 1), said,
+                                        float(freq[i]), seconds * freq[i])
             out.append(whole.instead(answer, i, k, periodic, windows))
         elif exact or (linear and evidence <= HINT_SIGMAS) or (periodic and periodic_linear):
             # a linear structure at these amplitudes: the linear fit's damping
@@ -309,6 +305,18 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
                     f"small amplitude"))
             out.append(whole.instead(answer, i, k, periodic, windows))
     return tuple(_with_model_error(a) for a in out)
+
+
+def _decay_answer(decay, windows, equivalent: float, f0: float, cycles: float) -> ModeDamping:
+    """The free decays' answer: refused when their constant is read above small amplitude only (the more
+    telling reason first, then their error), else pooled with the forced ``windows``."""
+    answer = replace(_answer(decay.zeta0, decay.zeta0_std, decay.dof, Source.FREE_DECAY, decay.amplitude_dependent,
+                             decay.slope, decay.exponent, decay.frequency0, decay.frequency_slope,
+                             decay.amplitude_range, equivalent, decay.cycles), evidence=decay.evidence)
+    unseen = constant_refusal(decay)
+    if unseen:       # a constant read above small amplitudes says nothing there, pooled or not
+        return replace(answer, refusal=f"{unseen}; {answer.refusal}" if answer.refusal else unseen)
+    return _pooled(answer, windows, equivalent, f0, cycles)
 
 
 def _with_model_error(answer: ModeDamping) -> ModeDamping:

@@ -57,8 +57,7 @@ def modes_table(result: Any) -> str:
         source = result.damping[i].source if result.damping else "linear fit"
         z = (percent_pm(result.damping_ratio[i], result.damping_ratio_std[i])
              if np.isfinite(result.damping_ratio_std[i]) else "–")
-        answered = getattr(result, "frequency_is_answer", None)
-        f = (pm(result.frequency[i], result.frequency_std[i]) if answered is None or answered[i]
+        f = (pm(result.frequency[i], result.frequency_std[i]) if result.frequency_answered(i)
              else html.Raw(f'<strong class="refused">{REFUSED}</strong> (see the warnings)'))
         rows.append([f"{i + 1}", f, z, source,
                      f"{100 * result.linear_damping_ratio[i]:.3f}",

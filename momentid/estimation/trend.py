@@ -47,11 +47,11 @@ class AmplitudeTrend:
             answer = r.damping_is_answer is None or bool(r.damping_is_answer[0])
             z = (f"{100 * r.damping_ratio[0]:6.3f} +- {100 * r.damping_ratio_std[0]:.3f}" if answer else
                  "NOT AN ANSWER  ")
-            f = (f"{r.frequency[0]:8.4f} +- {r.frequency_std[0]:.4f}" if _frequency_answered(r) else
+            f = (f"{r.frequency[0]:8.4f} +- {r.frequency_std[0]:.4f}" if r.frequency_answered(0) else
                  f"{'NOT AN ANSWER':>18}")
             lines.append(f"{r.runs[0]:<20}{r.amplitude[0]:>10.3g}          {f}   {z:<30}"
                          f"{100 * r.linear_damping_ratio[0]:8.3f}")
-        left_out = [r.runs[0] for r in self.results if not _frequency_answered(r)]
+        left_out = [r.runs[0] for r in self.results if not r.frequency_answered(0)]
         without = f" (without {', '.join(left_out)}: not an answer)" if left_out else ""
         lines.append(f"trend: frequency {self.frequency_slope:+.3g} +- {self.frequency_slope_std:.2g} Hz per m/s^2"
                      f"{without}, equivalent linear damping ratio {100 * self.damping_slope:+.3g} "
@@ -112,12 +112,6 @@ def _slope(x, y, s):
     return float(coef[1]), std
 
 
-def _frequency_answered(result: Any) -> bool:
-    """Whether a per-run result's mode-1 frequency is an answer (results that do not say: yes)."""
-    answered = getattr(result, "frequency_is_answer", None)
-    return answered is None or bool(answered[0])
-
-
 def amplitude_trend(results: Iterable[Any]) -> AmplitudeTrend:
     """Mode 1's frequency and damping ratio against response amplitude over per-run results.
 
@@ -145,7 +139,7 @@ def amplitude_trend(results: Iterable[Any]) -> AmplitudeTrend:
     fs, fstd = (np.array([getattr(r, k)[0] for r in results]) for k in ("frequency", "frequency_std"))
     zs = np.array([r.linear_damping_ratio[0] for r in results])
     zstd = np.array([r.linear_damping_ratio_std[0] for r in results])
-    keep = np.array([_frequency_answered(r) for r in results])
+    keep = np.array([r.frequency_answered(0) for r in results])
     f_slope, f_std = (_slope(x[keep], fs[keep], np.maximum(fstd[keep], 1e-12)) if np.count_nonzero(keep) >= 2
                       else (float("nan"), float("inf")))
     z_slope, z_std = _slope(x, zs, np.maximum(zstd, 1e-12))

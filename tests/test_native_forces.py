@@ -30,6 +30,17 @@ def test_the_native_callbacks_are_available_here():
     assert native_forces.available()
 
 
+def test_the_dispatching_callbacks_load_from_numbas_cache():
+    """numba keys a cached closure on its cells' pickled values: the callbacks close over integers only (the
+    struct offsets), so a second process loads them from disk, and a MuJoCo laid out differently compiles
+    its own (a function or an object among the cells would miss the cache in every process)."""
+    control, act_dyn = native_forces._callbacks()
+    for callback in (control, act_dyn):
+        cells = [c.cell_contents for c in callback._pyfunc.__closure__]
+        assert cells and all(type(c) is int for c in cells)
+        assert callback._cache is not None and type(callback._cache).__name__ != "NullCache"
+
+
 @pytest.mark.parametrize("name", CALLBACK_KINDS)
 def test_a_kinds_compiled_law_is_its_force_law_to_round_off(name):
     kind = mechanisms.get(name)

@@ -18,7 +18,8 @@ actuator-dynamics callbacks (``mujoco.set_mjcb_control`` takes a C function poin
 The callbacks read ``mjModel`` and ``mjData`` through their C layout, taken from MuJoCo's own
 description of its structs (``mujoco.introspect``) and checked against a live model and data before
 first use (:func:`available`); where numba or that check fails, or a kind has no native law, the
-simulator keeps the Python callback.  Compiled once a process (about 0.3 s; the laws are cached on disk).
+simulator keeps the Python callback.  Compiled once (:mod:`momentid.lab._native_dispatch`), then loaded from
+numba's on-disk cache, as the laws are.
 """
 
 from __future__ import annotations
@@ -124,160 +125,16 @@ _CALLBACKS: list = []   # [(control, act_dyn)] once compiled, [None] when unavai
 
 
 def _compile():
-    """The control and act_dyn callbacks (numba ``cfunc``), or None when they cannot be built here."""
+    """The control and act_dyn callbacks (numba ``cfunc``, cached on disk), or None when they cannot be
+    built here."""
     try:
-        pointer, call_force, call_rate = _intrinsics()   # numba's and llvmlite's parts imported
+        from momentid.lab import _native_dispatch as native   # numba's and llvmlite's parts imported
     except ImportError:
         return None
     offsets = _offsets()
     if offsets is None:
         return None
-    word, program = _readers(offsets, pointer)
-    return (_control_callback(offsets, pointer, word, program, call_force),
-            _act_dyn_callback(offsets, pointer, word, program, call_rate))
-
-
-def _intrinsics():
-    """numba intrinsics: an address as a pointer, and calls of a compiled law's force and rate at an address."""
-    from llvmlite import ir
-    from numba import types
-    from numba.core import cgutils
-    from numba.extending import intrinsic
-
-    @intrinsic
-    def pointer(typingctx, address):
-        def codegen(context, builder, signature, args):
-            return builder.inttoptr(args[0], cgutils.voidptr_t)
-        return types.voidptr(types.int64), codegen
-
-    @intrinsic
-    def call_force(typingctx, fn, p, x, v, t, s):
-        def codegen(context, builder, signature, args):
-            double = ir.DoubleType()
-            fnty = ir.FunctionType(double, [cgutils.voidptr_t, double, double, double, double])
-            return builder.call(builder.inttoptr(args[0], fnty.as_pointer()),
-                                [builder.inttoptr(args[1], cgutils.voidptr_t)] + list(args[2:]))
-        f8 = types.float64
-        return f8(types.int64, types.int64, f8, f8, f8, f8), codegen
-
-    @intrinsic
-    def call_rate(typingctx, fn, p, s, x, v):
-        def codegen(context, builder, signature, args):
-            double = ir.DoubleType()
-            fnty = ir.FunctionType(double, [cgutils.voidptr_t, double, double, double])
-            return builder.call(builder.inttoptr(args[0], fnty.as_pointer()),
-                                [builder.inttoptr(args[1], cgutils.voidptr_t)] + list(args[2:]))
-        f8 = types.float64
-        return f8(types.int64, types.int64, f8, f8, f8), codegen
-
-    return pointer, call_force, call_rate
-
-
-def _readers(offsets: dict[str, int], pointer):
-    """Jitted readers: the 8-byte word at an address, and the address of a model's program."""
-    import numba
-    from numba import carray
-
-    m_numadr, m_numdata = offsets["m_numeric_adr"], offsets["m_numeric_data"]
-
-    @numba.njit(inline="always")
-    def word(address):
-        return carray(pointer(address), 1, np.int64)[0]
-
-    @numba.njit(inline="always")
-    def program(m):
-        """Address of the model's program (its first numeric)."""
-        return word(m + m_numdata) + 8 * np.int64(carray(pointer(word(m + m_numadr)), 1, np.int32)[0])
-
-    return word, program
-
-
-def _control_callback(offsets: dict[str, int], pointer, word, program, call_force):
-    """The control callback: every force of the model's program into ``qfrc_applied``."""
-    import numba
-    from numba import carray, types
-
-    d_time, d_qpos, d_qvel, d_act, d_qfrc = (offsets[f"d_{f}"] for f in ("time", "qpos", "qvel", "act",
-                                                                          "qfrc_applied"))
-    m_nnumeric = offsets["m_nnumeric"]
-
-    @numba.njit(inline="always")
-    def stretch(prog, k, qpos, qvel):
-        top, below = np.int64(prog[k + 2]), np.int64(prog[k + 3])
-        x, v = qpos[top], qvel[top]
-        if below >= 0:
-            x -= qpos[below]
-            v -= qvel[below]
-        return x, v
-
-    @numba.cfunc(types.void(types.int64, types.int64))
-    def control(m, d):
-        if carray(pointer(m + m_nnumeric), 1, np.int64)[0] < 1:
-            return   # a model with no callback force, rolled out on another thread meanwhile: nothing to push
-        base = program(m)
-        n = np.int64(carray(pointer(base), 1, np.float64)[0])
-        size = 1
-        for _ in range(n):   # the program's length
-            size += HEADER + np.int64(carray(pointer(base + 8 * (size + 6)), 1, np.float64)[0])
-        prog = carray(pointer(base), size, np.float64)
-        nv, k = 1, 1
-        for _ in range(n):   # the dofs the forces push: the arrays' length read
-            nv = max(nv, 1 + np.int64(prog[k + 2]), 1 + np.int64(prog[k + 3]))
-            k += HEADER + np.int64(prog[k + 6])
-        qpos = carray(pointer(word(d + d_qpos)), nv, np.float64)
-        qvel = carray(pointer(word(d + d_qvel)), nv, np.float64)
-        out = carray(pointer(word(d + d_qfrc)), nv, np.float64)
-        act_base = word(d + d_act)
-        t = carray(pointer(d + d_time), 1, np.float64)[0]
-        k = 1
-        for _ in range(n):   # the floors the forces push start from 0
-            out[np.int64(prog[k + 2])] = 0.0
-            if prog[k + 3] >= 0.0:
-                out[np.int64(prog[k + 3])] = 0.0
-            k += HEADER + np.int64(prog[k + 6])
-        k = 1
-        for _ in range(n):
-            x, v = stretch(prog, k, qpos, qvel)
-            adr = np.int64(prog[k + 4])
-            s = carray(pointer(act_base + 8 * adr), 1, np.float64)[0] if adr >= 0 else 0.0
-            f = call_force(np.int64(prog[k]), base + 8 * (k + HEADER), x, v, t, s)
-            out[np.int64(prog[k + 2])] -= f          # the link resists its stretch on its upper floor ...
-            if prog[k + 3] >= 0.0:
-                out[np.int64(prog[k + 3])] += f      # ... and on its lower one
-            k += HEADER + np.int64(prog[k + 6])
-
-    return control
-
-
-def _act_dyn_callback(offsets: dict[str, int], pointer, word, program, call_rate):
-    """The actuator-dynamics callback: the state rate of the force whose state ``actuator`` holds."""
-    import numba
-    from numba import carray, types
-
-    d_qpos, d_qvel, d_act = offsets["d_qpos"], offsets["d_qvel"], offsets["d_act"]
-
-    @numba.cfunc(types.float64(types.int64, types.int64, types.int32))
-    def act_dyn(m, d, actuator):
-        base = program(m)
-        n = np.int64(carray(pointer(base), 1, np.float64)[0])
-        k = 1
-        for _ in range(n):
-            head = carray(pointer(base + 8 * k), HEADER, np.float64)
-            if np.int64(head[5]) == actuator:
-                top, below, adr = np.int64(head[2]), np.int64(head[3]), np.int64(head[4])
-                nv = 1 + max(top, below)
-                qpos = carray(pointer(word(d + d_qpos)), nv, np.float64)
-                qvel = carray(pointer(word(d + d_qvel)), nv, np.float64)
-                x, v = qpos[top], qvel[top]
-                if below >= 0:
-                    x -= qpos[below]
-                    v -= qvel[below]
-                s = carray(pointer(word(d + d_act) + 8 * adr), 1, np.float64)[0]
-                return call_rate(np.int64(head[1]), base + 8 * (k + HEADER), s, x, v)
-            k += HEADER + np.int64(head[6])
-        return 0.0
-
-    return act_dyn
+    return native.control_callback(offsets, HEADER), native.act_dyn_callback(offsets, HEADER)
 
 
 def _callbacks():

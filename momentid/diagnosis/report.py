@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from momentid.core.processes import run_forked
 from momentid.core.series import json_safe
 from momentid.diagnosis.result import Diagnosis
 from momentid.io.outputs import OwnedFolder
@@ -43,7 +44,10 @@ def write_report(diag: Diagnosis, folder: str | os.PathLike, *, force: bool = Fa
     alone.  ``extra(staging)`` writes more files beside them (the report page of :mod:`momentid.report`,
     which this layer does not import) and returns their names."""
     def files(staging):
-        return _write_files(diag, staging) + (list(extra(staging)) if extra is not None else [])
+        # drawing is most of the time (matplotlib, rerun): the replay's files and the rest, side by side
+        jobs = [lambda: _write_files(diag, staging), lambda: _write_figures(diag, staging, extra)]
+        first, rest = run_forked(lambda job: job(), jobs)
+        return first + rest
 
     return tuple(report_folder(folder, force=force).write(files))
 
@@ -62,11 +66,15 @@ def _write_files(diag: Diagnosis, folder: Path) -> list[str]:
         diag.evidence.plot_replay(diag, folder / "replay.png")
         _rerun(diag, folder / "diagnosis.rrd")
         written += ["replay.png", "diagnosis.rrd"]
-    written += diag.evidence.figures(diag, folder)
+    return written
+
+
+def _write_figures(diag: Diagnosis, folder: Path, extra: Callable[[Path], list[str]] | None) -> list[str]:
+    written = list(diag.evidence.figures(diag, folder))
     if diag.discovered is not None:
         diag.discovered.draw(folder / "discovered.png")
         written.append("discovered.png")
-    return written
+    return written + (list(extra(folder)) if extra is not None else [])
 
 
 def _rerun(diag: Diagnosis, path: Path) -> None:

@@ -27,6 +27,7 @@ import scipy.optimize
 from momentid.core.series import RunData
 from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.added_mass.augmented import Entry, identified_structure, joint_replay, records
+from momentid.diagnosis.added_mass.joint_search import search_logs
 from momentid.diagnosis.added_mass.residuals import LinearModel, band_signals, nrmse, replay_noise
 from momentid.core.processes import run_forked, run_threaded
 from momentid.errors import ModelError, SimulationError
@@ -57,12 +58,6 @@ SEARCH_TOLERANCE = 0.005
 SEARCH_REPLAYS = 14
 #: ... and the relative step of the misfit's curvature at the optimum (the standard error).
 CURVATURE_STEP = 0.02
-#: Several parameters searched together (:meth:`Refitter.search`): the starting simplex's width in their
-#: logarithms (20 %: a screening grid's spacing and more), the tolerance on them (0.5 %) and the replays
-#: allowed.
-SIMPLEX_STEP = 0.2
-SIMPLEX_TOLERANCE = 0.005
-SEARCH_EVALUATIONS = 100
 
 
 #: scipy's bounded search: its golden section and its floor on the square root of the machine epsilon.
@@ -381,17 +376,23 @@ class Refitter:
     def misfit(self, structure: Structure, entries: Sequence[Entry]) -> float:
         """Normalised sum of squares of the search run replayed through the model with ``entries``
         (:class:`Entry` each): sum over channels and samples of ((measured - simulated) / RMS(measured))^2."""
+        parts = self.residual(structure, entries)
+        return _UNSTABLE if parts is None else sum(float(np.sum(r ** 2)) for r in parts)
+
+    def residual(self, structure: Structure, entries: Sequence[Entry]) -> list[np.ndarray] | None:
+        """The terms of :meth:`misfit`: per measured group, ((measured - simulated) / RMS(measured)) of the
+        band-limited search run, shape (n_samples, d) each; None when the model goes unstable."""
         run = self._search_run()
         try:
             sim, measured = joint_replay(structure, entries, records(entries), run, self.d, structure != self.nominal)
         except (SimulationError, ModelError):   # e.g. a storey made unstable: not a candidate fit
-            return _UNSTABLE
+            return None
         fs, band = run.sample_rate, self.model.band
-        q = 0.0
+        out = []
         for g in measured:
             m = band_filter(measured[g], fs, band)
-            q += float(np.sum(((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0))) ** 2))
-        return q
+            out.append((m - band_filter(sim[g], fs, band)) / np.sqrt(np.mean(m ** 2, axis=0)))
+        return out
 
     def misfits(self, trials: Iterable[tuple[Structure, Sequence[Entry]]]) -> list[float]:
         """:meth:`misfit` of each ``(structure, entries)`` of ``trials``, side by side when there are several
@@ -478,10 +479,10 @@ class Refitter:
 
     def search(self, structure: Structure, entry: Entry, names: tuple[str, ...]) -> tuple[dict, dict]:
         """Output-error search of several positive parameters ``names`` of ``entry`` together, by
-        re-simulation: Nelder-Mead on their logarithms (a simplex :data:`SIMPLEX_STEP` wide around the
-        starting values) of :meth:`misfit`, to :data:`SIMPLEX_TOLERANCE` in at most :data:`SEARCH_EVALUATIONS`
-        replays.  Standard errors from the misfit's curvature at the optimum (a central-difference
-        Hessian in the logarithms, :data:`CURVATURE_STEP`): ``cov = 2 s^2 H^-1`` as :meth:`resimulate`.
+        re-simulation of :meth:`residual` (:func:`~momentid.diagnosis.added_mass.joint_search.search_logs`:
+        Gauss-Newton on their logarithms, each point replayed side by side with its Jacobian's columns);
+        standard errors from that Jacobian at the optimum, ``cov = s^2 (J^T J)^-1`` with ``s^2`` the misfit
+        per independent sample, as :meth:`resimulate`'s curvature rule.
 
         Returns
         -------
@@ -489,45 +490,19 @@ class Refitter:
             The entry's parameters with ``names`` refined, and the standard errors of ``names``.
         """
         kind, place, params = entry
-        x0 = np.log([float(params[n]) for n in names])
-        seen: dict[tuple, float] = {}
 
         def trial(x) -> list:
             return [Entry(kind, place, dict(params, **{n: float(np.exp(v)) for n, v in zip(names, x)}))]
 
-        def costs(xs) -> list[float]:   # points known in advance: replayed side by side
-            keys = [tuple(np.asarray(x, float)) for x in xs]
-            new = list(dict.fromkeys(k for k in keys if k not in seen))
-            seen.update(zip(new, self.misfits([(structure, trial(k)) for k in new])))
-            return [seen[k] for k in keys]
+        def residuals(xs) -> list:     # a point and its columns, known together: replayed side by side
+            trials = [(structure, trial(x)) for x in xs]
+            parts = side_by_side(lambda t: self.residual(*t), trials, [m for _, e in trials for m in records(e)])
+            return [None if p is None else np.concatenate([r.ravel() for r in p]) for p in parts]
 
-        n = len(names)
-        simplex = x0 + np.vstack([np.zeros(n), SIMPLEX_STEP * np.eye(n)])
-        costs(list(simplex))
-        res = scipy.optimize.minimize(lambda x: costs([x])[0], x0, method="Nelder-Mead",
-                                      options={"initial_simplex": simplex, "xatol": SIMPLEX_TOLERANCE,
-                                               "fatol": 0.0, "maxfev": SEARCH_EVALUATIONS})
-        best = np.asarray(res.x, float)
-        h = CURVATURE_STEP
-        steps = [np.zeros(n)] + [s * h * np.eye(n)[i] for i in range(n) for s in (1, -1)]
-        steps += [h * (si * np.eye(n)[i] + sj * np.eye(n)[j]) for i in range(n) for j in range(i + 1, n)
-                  for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
-        q = dict(zip(range(len(steps)), costs([best + s for s in steps])))
-        H = np.zeros((n, n))
-        for i in range(n):
-            H[i, i] = (q[1 + 2 * i] - 2 * q[0] + q[2 + 2 * i]) / h ** 2
-        k = 1 + 2 * n
-        for i in range(n):
-            for j in range(i + 1, n):
-                H[i, j] = H[j, i] = (q[k] - q[k + 1] - q[k + 2] + q[k + 3]) / (4 * h * h)
-                k += 4
+        x0 = np.log([float(params[n]) for n in names])
+        best, std_logs = search_logs(residuals, x0, self._independent_samples())
         values = np.exp(best)
-        s2 = q[0] / max(self._independent_samples() - 1, 1)
-        try:
-            var = np.diag(2 * s2 * np.linalg.inv(H)) if np.all(np.linalg.eigvalsh(H) > 0) else np.full(n, np.inf)
-        except np.linalg.LinAlgError:
-            var = np.full(n, np.inf)
-        std = {name: float(v * np.sqrt(w)) for name, v, w in zip(names, values, var)}
+        std = {name: float(v * s) for name, v, s in zip(names, values, std_logs)}
         return dict(params, **{name: float(v) for name, v in zip(names, values)}), std
 
     def score(self, augmented: Augmented) -> float:

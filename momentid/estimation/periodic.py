@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+import functools
+
 import numpy as np
 
 from momentid.core.series import RunData
@@ -42,8 +44,16 @@ def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
     :data:`PERIODIC_SHARE` of it, at :data:`CONCENTRATION` times the power per bin off them; the
     fundamentals tried are the five strongest lines (local maxima of the spectrum: the bins beside a
     line's peak are its window's main lobe, not lines of their own) and their halves and thirds.
+    Remembered per table (the refusals ask it for every mode of every run).
     """
-    u = np.asarray(table, float) - np.mean(table)
+    u = np.ascontiguousarray(table, float)
+    return _fundamental(u.tobytes(), float(sample_rate))
+
+
+@functools.lru_cache(maxsize=64)
+def _fundamental(table: bytes, sample_rate: float) -> float | None:
+    u = np.frombuffer(table, float)
+    u = u - np.mean(u)
     n = u.size
     power = np.abs(np.fft.rfft(u * np.hanning(n))) ** 2
     freq = np.fft.rfftfreq(n, 1.0 / sample_rate)

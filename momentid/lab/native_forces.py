@@ -18,7 +18,7 @@ actuator-dynamics callbacks (``mujoco.set_mjcb_control`` takes a C function poin
 The callbacks read ``mjModel`` and ``mjData`` through their C layout, taken from MuJoCo's own
 description of its structs (``mujoco.introspect``) and checked against a live model and data before
 first use (:func:`available`); where numba or that check fails, or a kind has no native law, the
-simulator keeps the Python callback.  Compiled once (:mod:`momentid.lab._native_dispatch`), then loaded from
+simulator keeps the Python callback.  Compiled once (:mod:`momentid.lab.native_dispatch`), then loaded from
 numba's on-disk cache, as the laws are.
 """
 
@@ -128,7 +128,7 @@ def _compile():
     """The control and act_dyn callbacks (numba ``cfunc``, cached on disk), or None when they cannot be
     built here."""
     try:
-        from momentid.lab import _native_dispatch as native   # numba's and llvmlite's parts imported
+        from momentid.lab import native_dispatch as native   # numba's and llvmlite's parts imported
     except ImportError:
         return None
     offsets = _offsets()

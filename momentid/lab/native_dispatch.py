@@ -2,11 +2,11 @@
 ``cache=True``.
 
 Imported only when a model first needs its callback forces natively (numba is then loaded).  Everything
-a callback calls is a module-level numba function, and the callbacks close over plain integers only
-(the byte offsets of the ``mjModel`` and ``mjData`` fields they read, :func:`~momentid.lab.native_forces.
-_offsets`): numba keys its on-disk cache on the closure's values, so a MuJoCo whose structs are laid out
-differently compiles afresh, and the same one loads the callbacks from the cache (about 2 s saved a
-process on 2 cores).
+a callback calls is a module-level numba function, and the callbacks close over plain integers only:
+the byte offsets of the ``mjModel`` and ``mjData`` fields they read, found and checked by
+:mod:`momentid.lab.native_forces`.  numba keys its on-disk cache on the closure's values, so a MuJoCo
+whose structs are laid out differently compiles afresh, and the same one loads the callbacks from the
+cache (about 2 s saved a process on 2 cores).
 """
 
 from __future__ import annotations
@@ -16,13 +16,14 @@ import numpy as np
 from llvmlite import ir
 from numba import carray, types
 from numba.core import cgutils
+from numba.core.ccallback import CFunc
 from numba.extending import intrinsic
 
 __all__ = ["control_callback", "act_dyn_callback"]
 
 
 @intrinsic
-def pointer(typingctx, address):
+def _pointer(typingctx, address):
     """An address (int64) as a pointer."""
     def codegen(context, builder, signature, args):
         return builder.inttoptr(args[0], cgutils.voidptr_t)
@@ -30,7 +31,7 @@ def pointer(typingctx, address):
 
 
 @intrinsic
-def call_force(typingctx, fn, p, x, v, t, s):
+def _call_force(typingctx, fn, p, x, v, t, s):
     """A compiled force law at address ``fn`` called with its parameters at address ``p``."""
     def codegen(context, builder, signature, args):
         double = ir.DoubleType()
@@ -42,7 +43,7 @@ def call_force(typingctx, fn, p, x, v, t, s):
 
 
 @intrinsic
-def call_rate(typingctx, fn, p, s, x, v):
+def _call_rate(typingctx, fn, p, s, x, v):
     """A compiled state rate at address ``fn`` called with its parameters at address ``p``."""
     def codegen(context, builder, signature, args):
         double = ir.DoubleType()
@@ -54,19 +55,19 @@ def call_rate(typingctx, fn, p, s, x, v):
 
 
 @numba.njit(inline="always", cache=True)
-def word(address):
+def _word(address):
     """The 8-byte word at ``address``."""
-    return carray(pointer(address), 1, np.int64)[0]
+    return carray(_pointer(address), 1, np.int64)[0]
 
 
 @numba.njit(inline="always", cache=True)
-def program(m, m_numadr, m_numdata):
+def _program(m, m_numadr, m_numdata):
     """Address of the model's program (its first numeric), the model's fields at these offsets."""
-    return word(m + m_numdata) + 8 * np.int64(carray(pointer(word(m + m_numadr)), 1, np.int32)[0])
+    return _word(m + m_numdata) + 8 * np.int64(carray(_pointer(_word(m + m_numadr)), 1, np.int32)[0])
 
 
 @numba.njit(inline="always", cache=True)
-def stretch(prog, k, qpos, qvel):
+def _stretch(prog, k, qpos, qvel):
     """The stretch and its rate of the link of the force at entry ``k`` of the program ``prog``."""
     top, below = np.int64(prog[k + 2]), np.int64(prog[k + 3])
     x, v = qpos[top], qvel[top]
@@ -76,7 +77,7 @@ def stretch(prog, k, qpos, qvel):
     return x, v
 
 
-def control_callback(offsets: dict[str, int], header: int):
+def control_callback(offsets: dict[str, int], header: int) -> CFunc:
     """The control callback: every force of the model's program into ``qfrc_applied``."""
     d_time, d_qpos, d_qvel, d_act, d_qfrc = (int(offsets[f"d_{f}"]) for f in ("time", "qpos", "qvel", "act",
                                                                                "qfrc_applied"))
@@ -86,23 +87,23 @@ def control_callback(offsets: dict[str, int], header: int):
 
     @numba.cfunc(types.void(types.int64, types.int64), cache=True)
     def control(m, d):
-        if carray(pointer(m + m_nnumeric), 1, np.int64)[0] < 1:
+        if carray(_pointer(m + m_nnumeric), 1, np.int64)[0] < 1:
             return   # a model with no callback force, rolled out on another thread meanwhile: nothing to push
-        base = program(m, m_numadr, m_numdata)
-        n = np.int64(carray(pointer(base), 1, np.float64)[0])
+        base = _program(m, m_numadr, m_numdata)
+        n = np.int64(carray(_pointer(base), 1, np.float64)[0])
         size = 1
         for _ in range(n):   # the program's length
-            size += HEADER + np.int64(carray(pointer(base + 8 * (size + 6)), 1, np.float64)[0])
-        prog = carray(pointer(base), size, np.float64)
+            size += HEADER + np.int64(carray(_pointer(base + 8 * (size + 6)), 1, np.float64)[0])
+        prog = carray(_pointer(base), size, np.float64)
         nv, k = 1, 1
         for _ in range(n):   # the dofs the forces push: the arrays' length read
             nv = max(nv, 1 + np.int64(prog[k + 2]), 1 + np.int64(prog[k + 3]))
             k += HEADER + np.int64(prog[k + 6])
-        qpos = carray(pointer(word(d + d_qpos)), nv, np.float64)
-        qvel = carray(pointer(word(d + d_qvel)), nv, np.float64)
-        out = carray(pointer(word(d + d_qfrc)), nv, np.float64)
-        act_base = word(d + d_act)
-        t = carray(pointer(d + d_time), 1, np.float64)[0]
+        qpos = carray(_pointer(_word(d + d_qpos)), nv, np.float64)
+        qvel = carray(_pointer(_word(d + d_qvel)), nv, np.float64)
+        out = carray(_pointer(_word(d + d_qfrc)), nv, np.float64)
+        act_base = _word(d + d_act)
+        t = carray(_pointer(d + d_time), 1, np.float64)[0]
         k = 1
         for _ in range(n):   # the floors the forces push start from 0
             out[np.int64(prog[k + 2])] = 0.0
@@ -111,10 +112,10 @@ def control_callback(offsets: dict[str, int], header: int):
             k += HEADER + np.int64(prog[k + 6])
         k = 1
         for _ in range(n):
-            x, v = stretch(prog, k, qpos, qvel)
+            x, v = _stretch(prog, k, qpos, qvel)
             adr = np.int64(prog[k + 4])
-            s = carray(pointer(act_base + 8 * adr), 1, np.float64)[0] if adr >= 0 else 0.0
-            f = call_force(np.int64(prog[k]), base + 8 * (k + HEADER), x, v, t, s)
+            s = carray(_pointer(act_base + 8 * adr), 1, np.float64)[0] if adr >= 0 else 0.0
+            f = _call_force(np.int64(prog[k]), base + 8 * (k + HEADER), x, v, t, s)
             out[np.int64(prog[k + 2])] -= f          # the link resists its stretch on its upper floor ...
             if prog[k + 3] >= 0.0:
                 out[np.int64(prog[k + 3])] += f      # ... and on its lower one
@@ -123,7 +124,7 @@ def control_callback(offsets: dict[str, int], header: int):
     return control
 
 
-def act_dyn_callback(offsets: dict[str, int], header: int):
+def act_dyn_callback(offsets: dict[str, int], header: int) -> CFunc:
     """The actuator-dynamics callback: the state rate of the force whose state ``actuator`` holds."""
     d_qpos, d_qvel, d_act = (int(offsets[f"d_{f}"]) for f in ("qpos", "qvel", "act"))
     m_numadr, m_numdata = int(offsets["m_numeric_adr"]), int(offsets["m_numeric_data"])
@@ -131,22 +132,22 @@ def act_dyn_callback(offsets: dict[str, int], header: int):
 
     @numba.cfunc(types.float64(types.int64, types.int64, types.int32), cache=True)
     def act_dyn(m, d, actuator):
-        base = program(m, m_numadr, m_numdata)
-        n = np.int64(carray(pointer(base), 1, np.float64)[0])
+        base = _program(m, m_numadr, m_numdata)
+        n = np.int64(carray(_pointer(base), 1, np.float64)[0])
         k = 1
         for _ in range(n):
-            head = carray(pointer(base + 8 * k), HEADER, np.float64)
+            head = carray(_pointer(base + 8 * k), HEADER, np.float64)
             if np.int64(head[5]) == actuator:
                 top, below, adr = np.int64(head[2]), np.int64(head[3]), np.int64(head[4])
                 nv = 1 + max(top, below)
-                qpos = carray(pointer(word(d + d_qpos)), nv, np.float64)
-                qvel = carray(pointer(word(d + d_qvel)), nv, np.float64)
+                qpos = carray(_pointer(_word(d + d_qpos)), nv, np.float64)
+                qvel = carray(_pointer(_word(d + d_qvel)), nv, np.float64)
                 x, v = qpos[top], qvel[top]
                 if below >= 0:
                     x -= qpos[below]
                     v -= qvel[below]
-                s = carray(pointer(word(d + d_act) + 8 * adr), 1, np.float64)[0]
-                return call_rate(np.int64(head[1]), base + 8 * (k + HEADER), s, x, v)
+                s = carray(_pointer(_word(d + d_act) + 8 * adr), 1, np.float64)[0]
+                return _call_rate(np.int64(head[1]), base + 8 * (k + HEADER), s, x, v)
             k += HEADER + np.int64(head[6])
         return 0.0
 

@@ -145,6 +145,7 @@ def test_eiv_on_each_sensor_set(truth, sensor_set):
     assert np.max(np.abs(z)) < 4, z   # as above
 
 
+@pytest.mark.slow   # 8 noisy identifications, 30-35 s on 2 cores: the default run keeps one draw's coverage
 def test_standard_errors_match_monte_carlo_and_the_crlb(truth):
     sc, ex = truth
     estimates, stds = [], []

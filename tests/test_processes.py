@@ -134,7 +134,8 @@ def test_sigterm_of_diagnose_is_an_interrupt_and_leaves_no_worker(friction_recor
         _kill_and_check(proc, _workers_of(proc, 2), signal.SIGTERM)
         if proc.returncode != 0:
             break
-    assert proc.returncode == 143 and proc.stderr.read() == "error: terminated (SIGTERM)\n"
+    err = proc.stderr.read()   # in the message: a rare exit 1 in CI (2026-12-02) left no trace to read
+    assert proc.returncode == 143 and err == "error: terminated (SIGTERM)\n", (proc.returncode, err)
     assert not out.exists()   # the report folder made for it, still empty, is gone
 
 

@@ -8,9 +8,8 @@ sits on one of those lines, closer than the record resolves.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Sequence
-
-import functools
 
 import numpy as np
 
@@ -44,15 +43,23 @@ def periodic_fundamental(table: np.ndarray, sample_rate: float) -> float | None:
     :data:`PERIODIC_SHARE` of it, at :data:`CONCENTRATION` times the power per bin off them; the
     fundamentals tried are the five strongest lines (local maxima of the spectrum: the bins beside a
     line's peak are its window's main lobe, not lines of their own) and their halves and thirds.
-    Remembered per table (the refusals ask it for every mode of every run).
+    Remembered per table, by a digest of its samples (the refusals ask it for every mode of every run).
     """
     u = np.ascontiguousarray(table, float)
-    return _fundamental(u.tobytes(), float(sample_rate))
+    key = (hashlib.blake2b(u.tobytes(), digest_size=16).digest(), u.size, float(sample_rate))
+    if key not in _FUNDAMENTALS:
+        if len(_FUNDAMENTALS) >= _REMEMBERED:
+            _FUNDAMENTALS.pop(next(iter(_FUNDAMENTALS)))     # the oldest
+        _FUNDAMENTALS[key] = _fundamental(u, float(sample_rate))
+    return _FUNDAMENTALS[key]
 
 
-@functools.lru_cache(maxsize=64)
-def _fundamental(table: bytes, sample_rate: float) -> float | None:
-    u = np.frombuffer(table, float)
+#: Tables whose fundamental is remembered (keyed by a digest: a long record's samples are not kept).
+_REMEMBERED = 64
+_FUNDAMENTALS: dict[tuple, float | None] = {}
+
+
+def _fundamental(u: np.ndarray, sample_rate: float) -> float | None:
     u = u - np.mean(u)
     n = u.size
     power = np.abs(np.fft.rfft(u * np.hanning(n))) ** 2

@@ -1,13 +1,12 @@
-"""A residual function evaluated at many points on the machine's cores: finite-difference Jacobians.
+"""A residual function evaluated at many points on the machine's cores.
 
-The errors-in-variables fit (:mod:`momentid.estimation.eiv`) spends most of its time on
-forward-difference Jacobians: one residual evaluation per parameter (36 for a 5-storey rig), each a
-few milliseconds of small dense algebra that holds the GIL.  :func:`point_map` evaluates the
-residual at a list of points on :data:`WORKERS` forked processes, which inherit the function (only
-the points and the residuals are pickled); :func:`forward_jacobian` is scipy's ``'2-point'``
-Jacobian (the same steps and the same arithmetic, so the same numbers, bit for bit) with its columns
-evaluated that way.  In a worker process (a diagnosis trial: the other worker keeps the other core
-busy) the points are evaluated one after the other.
+The errors-in-variables fit (:mod:`momentid.estimation.eiv`) opens by scanning 41 scalings of its
+start, each residual a few milliseconds of small dense algebra that holds the GIL.
+:func:`point_map` evaluates the residual at a list of points on :data:`WORKERS` forked processes,
+which inherit the function (only the points and the residuals are pickled).  In a worker process (a
+diagnosis trial: the other worker keeps the other core busy) the points are evaluated one after the
+other.  (The fit's Jacobians are exact and cost about one residual each:
+:mod:`momentid.estimation.eiv_jacobian`.)
 """
 
 from __future__ import annotations
@@ -21,7 +20,7 @@ from threadpoolctl import threadpool_limits
 
 from momentid.core.processes import borrow, forked_pool
 
-__all__ = ["WORKERS", "point_map", "forward_jacobian", "Cached"]
+__all__ = ["WORKERS", "point_map"]
 
 #: Processes evaluating points: the 2 cores a lab laptop has.
 WORKERS = 2
@@ -82,52 +81,3 @@ def _started(stack: contextlib.ExitStack, fun: Callable, workers: int):
 def _forget() -> None:
     global _FUN
     _FUN = None
-
-
-class Cached:
-    """``fun`` remembering its last point and value (a Jacobian at the point scipy just evaluated)."""
-
-    def __init__(self, fun: Callable[[np.ndarray], np.ndarray]):
-        self.fun, self.x, self.f = fun, None, None
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        f = self.fun(x)
-        self.x, self.f = np.array(x, copy=True), f
-        return f
-
-    def at(self, x: np.ndarray) -> np.ndarray:
-        """``fun(x)``, from memory when ``x`` was the last point."""
-        if self.x is not None and self.x.shape == x.shape and np.array_equal(self.x, x):
-            return self.f
-        return self(x)
-
-
-def forward_jacobian(fun: Cached, x: np.ndarray, evaluate: Callable[[list], list]) -> np.ndarray:
-    """scipy's ``'2-point'`` Jacobian of ``fun`` at ``x`` (``approx_derivative`` without bounds:
-    relative step ``sqrt(eps)``, at least ``sqrt(eps)`` absolute), its columns by ``evaluate``.
-
-    Parameters
-    ----------
-    fun : Cached
-        The residual; its value at ``x`` is reused when it was the last point evaluated.
-    x : ndarray, shape (n,)
-    evaluate : callable
-        ``points -> values`` (:func:`point_map`).
-
-    Returns
-    -------
-    ndarray, shape (m, n)
-    """
-    x = np.asarray(x, float)
-    f0 = fun.at(x)
-    sign = (x >= 0).astype(float) * 2 - 1
-    h = np.finfo(np.float64).eps ** 0.5 * sign * np.maximum(1.0, np.abs(x))
-    points = []
-    for i in range(x.size):
-        x1 = np.copy(x)
-        x1[i] = x[i] + h[i]
-        points.append(x1)
-    J = np.empty((x.size, f0.size))
-    for i, f in enumerate(evaluate(points)):
-        J[i] = (f - f0) / ((x[i] + h[i]) - x[i])
-    return J.T

@@ -45,7 +45,9 @@ import scipy.optimize
 
 from momentid.core.series import RunData
 from momentid.errors import IdentificationError
-from momentid.estimation.columns import Cached, forward_jacobian, point_map
+from momentid.estimation.bins import Spectra
+from momentid.estimation.columns import point_map
+from momentid.estimation.eiv_jacobian import whitened_jacobian
 from momentid.estimation.layout import Layout
 from momentid.estimation.noise import estimate_noise
 from momentid.estimation.linear import discretize, force_response, frequency_response, output_matrix
@@ -57,45 +59,6 @@ __all__ = ["EivFit", "fit_eiv", "Spectra", "spectra", "fisher_information", "out
 def output_groups(run: RunData, d: int) -> list[str]:
     """Measured floor channel groups used as outputs: ``a``, ``q``, ``v`` where complete."""
     return [g for g in ("a", "q", "v") if all(run.has(f"{g}{i + 1}") for i in range(d))]
-
-
-@dataclass(frozen=True)
-class Spectra:
-    """The DFT bins of one run that the fit uses.
-
-    Attributes
-    ----------
-    run : str
-    added_mass : ndarray, shape (d,)
-    h : float
-        Sample interval (s).
-    groups : list of str
-        Output groups, e.g. ``['a', 'q']``.
-    z : ndarray, shape (m,)
-        ``exp(2 pi i k / N)`` of the bins used.
-    U : ndarray, shape (m,)
-        Table acceleration DFT (normalised by sqrt(N)).
-    Y : ndarray, shape (m, n_out)
-        Output DFTs.
-    sigma_u : float
-        Input noise RMS (m/s^2) per normalised bin.
-    sigma_y : ndarray, shape (n_out,)
-        Output noise RMS per channel.
-    """
-
-    run: str
-    added_mass: np.ndarray
-    h: float
-    groups: list
-    z: np.ndarray
-    U: np.ndarray
-    Y: np.ndarray
-    sigma_u: float
-    sigma_y: np.ndarray
-    freq: np.ndarray
-    forces: np.ndarray | None = None     # (d, m) floor directions of extra force signals
-    F: np.ndarray | None = None          # (bins, m) DFTs of the extra force signals
-    noise_source: str = ""               # where sigma_u, sigma_y came from (see momentid.estimation.noise)
 
 
 def spectra(run: RunData, d: int, f_max: float, *, noise_floor: tuple[float, float] | None = None,
@@ -220,6 +183,18 @@ class _Problem:
         self.spectra = spectra_list
         self.n_nuisance = 0
 
+    def jacobian(self, theta):
+        """The residual's Jacobian (:func:`~momentid.estimation.eiv_jacobian.whitened_jacobian`), zero on a run
+        whose model cannot be simulated (its residual is then the constant penalty)."""
+        parts = []
+        for sp in self.spectra:
+            try:
+                J = whitened_jacobian(self.layout, theta, sp)
+            except (IdentificationError, np.linalg.LinAlgError, ValueError):
+                J = np.zeros((2 * sp.Y.size, theta.size))
+            parts.append(np.where(np.isfinite(J), J, 0.0))
+        return np.vstack(parts)
+
     def residual(self, theta):
         parts = []
         self.n_nuisance = 0
@@ -262,22 +237,6 @@ def _scales(layout, theta):
     s[np.unique(layout.k)] = max(np.max(np.abs(K)), 1e-12)
     s[layout.mu] = max(abs(mu), 1e-3 * s[layout.c[0, 0]] / s[layout.m_columns[0]])
     return s
-
-
-def _jacobian(problem, theta, scale, evaluate=None):
-    """Central-difference Jacobian (residuals x parameters) at ``theta`` in steps of ``1e-6 scale``;
-    ``evaluate``: a :func:`~momentid.estimation.columns.point_map` (default: one point after another)."""
-    step = 1e-6
-    points = []
-    for i in range(theta.size):
-        e = np.zeros_like(theta)
-        e[i] = scale[i] * step
-        points += [theta + e, theta - e]
-    values = (evaluate or (lambda xs: [problem.residual(x) for x in xs]))(points)
-    J = np.empty((values[0].size, theta.size))
-    for i in range(theta.size):
-        J[:, i] = (values[2 * i] - values[2 * i + 1]) / (2 * step)
-    return J
 
 
 def _with_forces(sp: Spectra, run: RunData, force) -> Spectra:
@@ -357,16 +316,16 @@ def fit_eiv(layout: Layout, runs: Sequence[RunData], theta0: np.ndarray, *, f_ma
     with point_map(problem.residual) as evaluate:
         theta0 = _rescaled_start(layout, problem, np.asarray(theta0, float), evaluate)
     scale = _scales(layout, theta0)
-    fun = Cached(lambda delta: problem.residual(theta0 + scale * delta))
-    with point_map(fun.fun) as evaluate:   # the Jacobians' columns on the cores (the same numbers)
-        result = scipy.optimize.least_squares(
-            fun, np.zeros_like(theta0), jac=lambda delta: forward_jacobian(fun, delta, evaluate),
-            method="trf", x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev,
-        )
+    # Each iteration's Jacobian is exact and costs about one residual (momentid.estimation.eiv_jacobian),
+    # where forward differences cost one residual per unknown.
+    result = scipy.optimize.least_squares(
+        lambda delta: problem.residual(theta0 + scale * delta), np.zeros_like(theta0),
+        jac=lambda delta: problem.jacobian(theta0 + scale * delta) * scale[None, :],
+        method="trf", x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev,
+    )
     theta = theta0 + scale * result.x
     r = problem.residual(theta)
-    with point_map(problem.residual) as evaluate:
-        J = _jacobian(problem, theta, scale, evaluate)
+    J = problem.jacobian(theta) * scale[None, :]
     dof = max(r.size - theta.size - problem.n_nuisance, 1)
     s2 = float(r @ r) / dof
     try:
@@ -391,6 +350,5 @@ def fisher_information(layout: Layout, runs: Iterable[RunData], theta: ArrayLike
     """
     spectra_list = [spectra(r, layout.d, f_max, sigma=sigma) for r in runs]
     problem = _Problem(layout, spectra_list)
-    scale = _scales(layout, np.asarray(theta, float))
-    J = _jacobian(problem, np.asarray(theta, float), scale)
-    return (J.T @ J) / np.outer(scale, scale)
+    J = problem.jacobian(np.asarray(theta, float))
+    return J.T @ J

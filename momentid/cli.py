@@ -319,6 +319,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _run_command(args)
     except BrokenPipeError:
         return quiet_broken_pipe()
+    except Terminated:   # landed after the command's own handlers, before SIGTERM's old handler came back
+        print("error: terminated (SIGTERM)", file=sys.stderr)
+        return 128 + signal.SIGTERM
+    except KeyboardInterrupt:   # the same for Ctrl-C: never a traceback
+        print("error: interrupted", file=sys.stderr)
+        return 130
 
 
 def _run_command(args: argparse.Namespace) -> int:

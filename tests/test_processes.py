@@ -139,6 +139,24 @@ def test_sigterm_of_diagnose_is_an_interrupt_and_leaves_no_worker(friction_recor
     assert not out.exists()   # the report folder made for it, still empty, is gone
 
 
+@pytest.mark.parametrize("signalled, code, line", [("Terminated", 143, "error: terminated (SIGTERM)\n"),
+                                                     ("KeyboardInterrupt", 130, "error: interrupted\n")])
+def test_a_signal_after_the_command_returned_is_still_one_line(monkeypatch, capsys, signalled, code, line):
+    """A signal that lands as the command returns (after its own handlers, before SIGTERM's old handler is
+    back) still ends in one line and the signal's exit code, never a traceback (a rare exit 1 in CI)."""
+    from momentid import cli
+    from momentid.core.processes import Terminated
+
+    raised = {"Terminated": Terminated, "KeyboardInterrupt": KeyboardInterrupt}[signalled]
+
+    def returns_then_signalled(args):
+        raise raised
+
+    monkeypatch.setattr(cli, "_run_command", returns_then_signalled)
+    assert cli.main(["identify", "lab.mcap"]) == code
+    assert capsys.readouterr().err == line
+
+
 @pytest.mark.slow
 def test_sigkill_of_diagnose_leaves_no_worker(friction_recording, tmp_path):
     """SIGKILL cannot be handled: the workers' parent-death signal ends them (the pool test above

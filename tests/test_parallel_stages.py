@@ -18,8 +18,16 @@ def _screened(experiment):
     return [(c.kind.name, c.place, c.parameters, c.std, c.explained, c.domain) for c in out.candidates], out.pool
 
 
+def _first_seconds(experiment, seconds: float):
+    """``experiment`` with every run cut to its first ``seconds`` (each replay costs that much less)."""
+    from dataclasses import replace
+
+    runs = tuple(r.window(0, int(round(seconds * r.sample_rate))) for r in experiment.runs)
+    return replace(experiment, runs=runs)
+
+
 def test_screening_on_the_workers_is_screening_in_turn(simulated, monkeypatch):
-    experiment = simulated("hidden/flexible_floor3", ideal=True)
+    experiment = _first_seconds(simulated("hidden/flexible_floor3", ideal=True), 8.0)
     forked, forked_pool = _screened(experiment)
     monkeypatch.setattr(selection, "run_forked", lambda job, tasks: [job(t) for t in tasks])   # here, in turn
     here, here_pool = _screened(experiment)
@@ -39,7 +47,7 @@ def test_replays_on_the_workers_are_replays_in_turn(simulated, monkeypatch):
     from momentid.diagnosis.added_mass.augmented import Entry, records
     from momentid.lab import native_forces
 
-    experiment = simulated("hidden/friction_storey2")
+    experiment = _first_seconds(simulated("hidden/friction_storey2"), 8.0)   # as long as the equality needs
     with threadpool_limits(limits=1, user_api="blas"):
         model = fit_linear_model(experiment, None)
     kind = mechanisms.get("coulomb_friction")
@@ -79,7 +87,7 @@ def test_native_and_plain_replays_share_the_threads(simulated):
     from momentid.diagnosis.added_mass import resimulation as refit
     from momentid.diagnosis.added_mass.augmented import Entry
 
-    experiment = simulated("hidden/friction_storey2")
+    experiment = _first_seconds(simulated("hidden/friction_storey2"), 8.0)
     with threadpool_limits(limits=1, user_api="blas"):
         model = fit_linear_model(experiment, None)
     refitter = refit.Refitter(model, None)

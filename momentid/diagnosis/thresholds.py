@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["EXCESS", "EXPLAINED", "ACCEPTED", "NOTHING_TO_EXPLAIN", "BLOCK_S", "removed_share"]
+__all__ = ["EXCESS", "EXPLAINED", "ACCEPTED", "NOTHING_TO_EXPLAIN", "BLOCK_S", "UNSTABLE_MISFIT", "removed_share"]
 
 #: A residual above this multiple of its noise-only level counts as a mismatch: equation and replay
 #: residual RMS (:mod:`~momentid.diagnosis.added_mass.residuals`), storey/run/window excess
@@ -30,6 +30,10 @@ NOTHING_TO_EXPLAIN = 1.02
 #: Length (s) of the alternate time blocks of screening: fitted on even blocks, scored on odd ones.
 #: 1 s: several periods of the slowest mode, so a block's samples are not the neighbours' echo.
 BLOCK_S = 1.0
+
+#: Misfit (sum of squares) of a trial model that goes unstable in a replay: worse than any fit, finite
+#: for the searches (a one-parameter line search and the several-parameter Gauss-Newton alike).
+UNSTABLE_MISFIT = 1e200
 
 
 def removed_share(before: float, after: float, noise: float) -> float:

@@ -20,6 +20,8 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import scipy.optimize
 
+from momentid.diagnosis.thresholds import UNSTABLE_MISFIT
+
 __all__ = ["search_logs", "DIFF_STEP", "SEARCH_EVALUATIONS", "SEARCH_TOLERANCE"]
 
 #: Forward-difference step in the parameters' logarithms (0.1 %): a replay is deterministic to round-off,
@@ -72,7 +74,7 @@ def search_logs(residuals: Callable[[Sequence[np.ndarray]], list], x0: np.ndarra
     start = last[x0.tobytes()]
     if start is None:
         return x0, np.full(n, np.inf)
-    unstable = np.full(start.size, np.sqrt(1e200 / start.size))   # finite, worse than any fit
+    unstable = np.full(start.size, np.sqrt(UNSTABLE_MISFIT / start.size))   # finite, worse than any fit
 
     def fun(x: np.ndarray) -> np.ndarray:
         batch(x)

@@ -29,6 +29,7 @@ from momentid.core.structure import Mechanism, Structure
 from momentid.diagnosis.added_mass.augmented import Entry, identified_structure, joint_replay, records
 from momentid.diagnosis.added_mass.joint_search import search_logs
 from momentid.diagnosis.added_mass.residuals import LinearModel, band_signals, nrmse, replay_noise
+from momentid.diagnosis.thresholds import UNSTABLE_MISFIT
 from momentid.core.processes import run_forked, run_threaded
 from momentid.errors import ModelError, SimulationError
 from momentid.estimation.identification import identify
@@ -43,8 +44,6 @@ if TYPE_CHECKING:
 __all__ = ["Augmented", "ForceRefit", "Refitter", "Resimulator", "refit_eiv", "noise_ratios", "noise_carrier",
            "brent_opening", "side_by_side", "SEARCH_RANGE"]
 
-#: Misfit of a trial model that goes unstable: worse than any fit, finite for the line search.
-_UNSTABLE = 1e200
 #: The errors-in-variables refit reads its forces from signals low-passed at this multiple of the top
 #: mode (noise would flip the sign of small drift velocities and shrink a friction force) ...
 REFIT_BAND_OVER_TOP_MODE = 1.5
@@ -377,7 +376,7 @@ class Refitter:
         """Normalised sum of squares of the search run replayed through the model with ``entries``
         (:class:`Entry` each): sum over channels and samples of ((measured - simulated) / RMS(measured))^2."""
         parts = self.residual(structure, entries)
-        return _UNSTABLE if parts is None else sum(float(np.sum(r ** 2)) for r in parts)
+        return UNSTABLE_MISFIT if parts is None else sum(float(np.sum(r ** 2)) for r in parts)
 
     def residual(self, structure: Structure, entries: Sequence[Entry]) -> list[np.ndarray] | None:
         """The terms of :meth:`misfit`: per measured group, ((measured - simulated) / RMS(measured)) of the

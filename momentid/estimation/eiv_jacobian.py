@@ -56,8 +56,8 @@ def whitened_jacobian(layout: Layout, theta: np.ndarray, sp: Spectra) -> np.ndar
     m = _Model(layout, theta, sp)
     cols, terms = [], np.zeros((2 * sp.Y.size, theta.size))
     for i in range(layout.p):
-        cols.append(m.column(_directions(layout, i, sp.added_mass)))
-        terms[:, i] = m.last_term
+        column, terms[:, i] = m.column(_directions(layout, i, sp.added_mass))
+        cols.append(column)
     for k in range(theta.size - layout.p):                     # a force signal's coefficient: linear
         cols.append(m.whiten(-m.Gf[:, :, k] * sp.F[None, :, k].T))
     J = np.sqrt(2.0) * np.concatenate([np.array([c.real.ravel() for c in cols]),
@@ -113,7 +113,7 @@ class _Model:
         self.coef_f = theta[layout.p:]
         self._whitening(sp)
         T = np.einsum("oj,mj,jl->mol", self.HV, self.R * sp.z[:, None], self.Vinv) * self.inv_sd[None, :, None]
-        self.e, self.T = e, T
+        self.T = T
         self._project(e, T)
 
     @staticmethod
@@ -166,8 +166,8 @@ class _Model:
         rest = rw - self.Q @ (self.Q.T @ rw)
         n = rest.size // 2
         rho = ((rest[:n] + 1j * rest[n:]) / np.sqrt(2.0)).reshape(e.shape)
-        self.rho_hv = (self.whiten(rho) * self.inv_sd[None, :]) @ np.conj(self.HV)   # (bins, 2d)
-        self.rho_s = self.whiten(rho) * self.inv_sd[None, :]
+        self.rho_s = self.whiten(rho) * self.inv_sd[None, :]    # W rho, per unit of the unscaled outputs
+        self.rho_hv = self.rho_s @ np.conj(self.HV)              # (bins, 2d)
         self.g_rho = np.einsum("mo,mo->m", np.conj(self.g), rho)
         self.rho = rho
         self.T_g = np.einsum("mol,mo->ml", np.conj(T), self.g)   # T^H g per bin
@@ -187,8 +187,9 @@ class _Model:
         s, Vt, norms = self._pinv
         return -self.Q @ ((Vt @ (x / norms)) / s)
 
-    def column(self, directions) -> np.ndarray:
-        """``d(W v)`` along one direction of ``(M, C, K)`` with ``beta`` fixed, shape (bins, n_out)."""
+    def column(self, directions) -> tuple[np.ndarray, np.ndarray]:
+        """Along one direction of ``(M, C, K)``: ``d(W v)`` with ``beta`` fixed, shape (bins, n_out), and the
+        column's second projection term (:meth:`transient_term`), shape (2 bins n_out,)."""
         dM, dC, dK = directions
         d, h, sp = self.d, self.h, self.sp
         lower = -self.Minv @ (np.hstack([dK, dC]) + dM @ self.A[d:])
@@ -211,11 +212,11 @@ class _Model:
         t = self.R * sp.z[:, None] * self.gamma[None, :]         # (bins, 2d): R z V^-1 beta
         dTb = (t @ (dH @ self.V).T + (self.R * (t @ W.T)) @ self.HV.T) * self.inv_sd[None, :]
         dg = dG[:, :, 0]
-        self.last_term = self.transient_term(dH, W, dg)
+        term = self.transient_term(dH, W, dg)
         dv = -dg * sp.U[:, None] - dTb
         if nw > 1:
             dv = dv - np.einsum("mok,mk->mo", dG[:, :, 1:], sp.F * self.coef_f[None, :])
         gdg = np.einsum("mo,mo->m", np.conj(self.g), dg)
         kappa = (self.dphi * 2.0 * gdg.real * self.gv
                  + self.phi * np.einsum("mo,mo->m", np.conj(dg), self.v))
-        return self.whiten(dv) + self.g * kappa[:, None] + self.phi[:, None] * dg * self.gv[:, None]
+        return self.whiten(dv) + self.g * kappa[:, None] + self.phi[:, None] * dg * self.gv[:, None], term

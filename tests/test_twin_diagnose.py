@@ -47,6 +47,20 @@ def test_rig_state_finds_the_trial_off_the_trend():
     assert default_hold_out(same + [_result("e", 3.70, 2.7, shift=0.1)], odd) == "c"
 
 
+def test_a_trial_that_shook_beyond_the_others_may_bend_their_trend():
+    """The hardest trial of a rig whose joints reach macro-slip: every higher mode further along the trend
+    than the others' line says, not against it (a simulated 5-storey rig's was called another rig state)."""
+    same = [_result("a", 3.79, 0.5), _result("b", 3.77, 1.2), _result("c", 3.75, 1.3), _result("d", 3.73, 2.0)]
+    bent = SimpleNamespace(runs=("e",), frequency=np.array([3.65, 3.0 * 3.65 + 0.05, 4.4 * 3.65 + 0.06]),
+                           frequency_std=np.array([0.001, 0.003, 0.003]), amplitude=np.array([4.6]))
+    state = check_state(same + [bent])
+    assert state.outliers == () and state.sigmas["e"] == 0.0
+    # the same trial with modes 2 and 3 moved against the trend (up while mode 1 went down): another state
+    back = SimpleNamespace(runs=("e",), frequency=np.array([3.65, 3.0 * 3.73 + 0.1, 4.4 * 3.73 + 0.1]),
+                           frequency_std=np.array([0.001, 0.003, 0.003]), amplitude=np.array([4.6]))
+    assert check_state(same + [back]).outliers == ("e",)
+
+
 def test_rig_state_needs_enough_trials():
     state = check_state([_result("a", 3.79, 0.5), _result("b", 3.77, 1.2), _result("c", 3.75, 1.3, shift=0.5)])
     assert not state.tested and state.outliers == ()          # three trials: a line through two has no scatter

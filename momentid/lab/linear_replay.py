@@ -23,6 +23,7 @@ import mujoco
 import numba
 import numpy as np
 
+from momentid.core.compiled import disk_cached
 from momentid.errors import ModelError
 
 __all__ = ["check_linear", "state_space", "simulate", "FD_EPS"]
@@ -152,7 +153,7 @@ def _lifted(A: np.ndarray, b: np.ndarray, substeps: int) -> tuple[np.ndarray, np
     return np.ascontiguousarray(lifted), np.ascontiguousarray(gain)
 
 
-@numba.njit(cache=True, nogil=True)
+@disk_cached(numba.njit, nogil=True)
 def _run(A, b, C, d, y0, x, jerk, substeps, out):     # pragma: no cover  (compiled; its results are tested)
     """The replay loop: readings ``out[row] = y0 + C x + d u`` at every ``substeps``-th step, ``x = A x + b u``."""
     nx, k = x.size, y0.size

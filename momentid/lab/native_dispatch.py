@@ -1,5 +1,5 @@
 """The numba parts of :mod:`momentid.lab.native_forces`: the two dispatching callbacks, compiled with
-``cache=True``.
+numba's disk cache where one can be written (:func:`momentid.core.compiled.disk_cached`).
 
 Imported only when a model first needs its callback forces natively (numba is then loaded).  Everything
 a callback calls is a module-level numba function, and the callbacks close over plain integers only:
@@ -18,6 +18,8 @@ from numba import carray, types
 from numba.core import cgutils
 from numba.core.ccallback import CFunc
 from numba.extending import intrinsic
+
+from momentid.core.compiled import disk_cached
 
 __all__ = ["control_callback", "act_dyn_callback"]
 
@@ -54,19 +56,19 @@ def _call_rate(typingctx, fn, p, s, x, v):
     return f8(types.int64, types.int64, f8, f8, f8), codegen
 
 
-@numba.njit(inline="always", cache=True)
+@disk_cached(numba.njit, inline="always")
 def _word(address):
     """The 8-byte word at ``address``."""
     return carray(_pointer(address), 1, np.int64)[0]
 
 
-@numba.njit(inline="always", cache=True)
+@disk_cached(numba.njit, inline="always")
 def _program(m, m_numadr, m_numdata):
     """Address of the model's program (its first numeric), the model's fields at these offsets."""
     return _word(m + m_numdata) + 8 * np.int64(carray(_pointer(_word(m + m_numadr)), 1, np.int32)[0])
 
 
-@numba.njit(inline="always", cache=True)
+@disk_cached(numba.njit, inline="always")
 def _stretch(prog, k, qpos, qvel):
     """The stretch and its rate of the link of the force at entry ``k`` of the program ``prog``."""
     top, below = np.int64(prog[k + 2]), np.int64(prog[k + 3])
@@ -85,7 +87,7 @@ def control_callback(offsets: dict[str, int], header: int) -> CFunc:
                                                                   "m_numeric_data"))
     HEADER = int(header)
 
-    @numba.cfunc(types.void(types.int64, types.int64), cache=True)
+    @disk_cached(numba.cfunc, types.void(types.int64, types.int64))
     def control(m, d):
         if carray(_pointer(m + m_nnumeric), 1, np.int64)[0] < 1:
             return   # a model with no callback force, rolled out on another thread meanwhile: nothing to push
@@ -130,7 +132,7 @@ def act_dyn_callback(offsets: dict[str, int], header: int) -> CFunc:
     m_numadr, m_numdata = int(offsets["m_numeric_adr"]), int(offsets["m_numeric_data"])
     HEADER = int(header)
 
-    @numba.cfunc(types.float64(types.int64, types.int64, types.int32), cache=True)
+    @disk_cached(numba.cfunc, types.float64(types.int64, types.int64, types.int32))
     def act_dyn(m, d, actuator):
         base = _program(m, m_numadr, m_numdata)
         n = np.int64(carray(_pointer(base), 1, np.float64)[0])

@@ -54,8 +54,10 @@ def compiled(law: NativeLaw) -> tuple:
     if got is None:
         import numba
 
-        force = numba.cfunc(FORCE_SIGNATURE, cache=True)(law.force)
-        rate = numba.cfunc(RATE_SIGNATURE, cache=True)(law.rate) if law.rate is not None else None
+        from momentid.core.compiled import disk_cached
+
+        force = disk_cached(numba.cfunc, FORCE_SIGNATURE)(law.force)
+        rate = disk_cached(numba.cfunc, RATE_SIGNATURE)(law.rate) if law.rate is not None else None
         got = _COMPILED[law] = (force, rate)
     return got
 

@@ -188,6 +188,7 @@ def test_a_figure_that_cannot_be_drawn_is_a_note(recording, tmp_path, monkeypatc
     assert (tmp_path / "b" / "modes.uff").exists()          # the other files are written all the same
 
 
+@pytest.mark.slow   # 13 s: an identification, a twin, a diagnosis and a per-run fit for their notebook blocks
 def test_notebooks_show_the_words_of_the_page(identified, recording, tmp_path):
     from momentid.report.files import diagnosis_html_page, identification_html_page, twin_html_page
     from momentid.report.page import provenance

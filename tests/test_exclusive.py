@@ -32,6 +32,7 @@ def _cli(capsys, *argv) -> tuple[int, str]:
     return code, capsys.readouterr().err
 
 
+@pytest.mark.slow   # 10 s of two processes; the lock itself is tested in this process below
 def test_two_runs_writing_the_same_recording(tmp_path):
     """Two `momentid run -o same.mcap` at once: the second is refused with one line, the first
     finishes and its recording reads back whole."""

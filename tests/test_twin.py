@@ -523,6 +523,7 @@ def test_twin_refused_while_another_process_writes_its_folder(tmp_path, experime
     assert list(out.iterdir()) == []   # the holder's folder is not disturbed
 
 
+@pytest.mark.slow   # 8 s of two twins at once; the folder lock is tested in tests/test_exclusive.py
 def test_two_twins_writing_the_same_folder(tmp_path, experiment, capsys):
     """Two `momentid twin -o same` at once: the second gets one line, the first finishes and its folder
     reads back whole."""

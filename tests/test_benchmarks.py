@@ -104,3 +104,22 @@ def test_predictable_share_finds_a_driven_misfit_and_not_an_unrelated_one():
     assert 0.45 < predictable_share(misfit, channels, fs, band) < 0.8
     unrelated = predictable_share(rng.standard_normal(n), channels, fs, band)
     assert unrelated < 1.5 * 5 / (n // (SEGMENT // 2) - 1)         # measured 0.29-0.32, the bias 0.29
+
+
+def test_pole_families_find_the_column_found_at_most_orders():
+    """The SRIM stability diagram's columns: a pole found at every order wins over a wandering one found at a
+    few, a pole beyond the band is left out, and a README figure is counted only where a pole lies within 1 %."""
+    from benchmarks.srim_comparison import orders_near, pole_families
+
+    rng = np.random.default_rng(3)
+    poles = []
+    for k in range(14):
+        rows = [(22.0 * (1 + 0.002 * rng.standard_normal()), 0.004), (30.0, 0.01)]   # 30 Hz: beyond 10 %
+        if k % 4 == 0:                                       # a weaker pole at 4 of the 14 orders
+            rows.append((21.6 * (1 + 0.001 * rng.standard_normal()), 0.001))
+        poles.append(np.array(rows))
+    families = pole_families(poles, 22.03)
+    assert [n for _, _, n in families] == [14, 4]
+    assert abs(families[0][0] / 22.0 - 1) < 0.002           # the median of 14 draws with 0.2 % scatter
+    assert abs(families[1][0] / 21.6 - 1) < 0.002
+    assert orders_near(poles, 21.61) == 4 and orders_near(poles, 22.0) == 14 and orders_near(poles, 25.0) == 0

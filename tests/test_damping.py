@@ -413,3 +413,28 @@ def test_a_mode_the_windows_leave_uncertain_answers_from_the_whole_record_unless
     slipping = dc.evaluate(dc.draw_case(115, 29))["modes"][0]
     assert slipping["source"] != Source.WHOLE_RECORD, slipping
     assert not slipping["answer"] or (slipping["covered"] and slipping["amplitude_dependent"]), slipping
+
+
+@pytest.mark.parametrize("low, answered", [(0.5, True), (2.9, False)])
+def test_windows_with_no_trend_on_a_rig_that_changes_answer_at_zero_amplitude_or_refuse(low, answered):
+    """Twelve windows with no trend of their own, on a rig another mode shows changing with amplitude (change
+    19): their laws' value at zero amplitude answers, with that extrapolation's error, when the windows reach
+    down near it (0.5-3 m/s^2); from windows at 2.9-3 m/s^2 only, the extrapolation's error passes half its
+    value and both reasons refuse it."""
+    from momentid.estimation import damping as dm
+    from momentid.estimation.windows import Window
+
+    amp = np.linspace(low, 3.0, 12)
+    rng = np.random.default_rng(8)
+    windows = [Window(0.004 + rng.normal(0, 2e-4), 3e-4, 10.0 + rng.normal(0, 2e-3), 3e-3, a) for a in amp]
+    said = dm._windows_say(windows, 0.004, 10.0, 400.0)
+    assert said.is_answer and not said.amplitude_dependent, said
+    got = dm._extrapolated(said, windows, "the rig changes with amplitude (mode 2's frequency moves with it)",
+                           0.004, 10.0, 400.0)
+    if answered:
+        # the windows' constant 0.4 % within the extrapolation's interval, which is wider than the mean's
+        assert got.is_answer and got.amplitude_dependent, got
+        assert got.interval[0] <= 0.004 <= got.interval[1] and got.damping_ratio_std > said.damping_ratio_std, got
+    else:
+        assert not got.is_answer and "show no trend of their own" in got.refusal, got
+        assert "extrapolated to zero amplitude" in got.refusal, got.refusal

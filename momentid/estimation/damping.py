@@ -1,46 +1,46 @@
 """The damping answer: each storey mode's damping ratio at small amplitude, right or refused.
 
-The linear modal fit (:mod:`momentid.estimation.modal_select`) gives every mode one damping ratio for a
-whole record.  A real rig's damping is not one number: its joints slip more as it shakes harder, so its
-damping grows and its frequency falls with amplitude inside one trial; strong shaking drives what no
-modal model holds; a sine table forces a mode at its harmonics.  The linear fit's ratio (the
-*equivalent linear* damping of that record, kept as :attr:`ModeDamping.equivalent`) then lies far
-above the structure's own damping: 0.44-2.4 % on the stiff 1-storey rig, whose free decays fall at
-0.15-0.3 %.
+The linear modal fit (:mod:`momentid.estimation.modal_select`) gives every mode one damping ratio for a whole
+record.  A real rig's damping is not one number: its joints slip more as it shakes harder, so its damping
+grows and its frequency falls with amplitude inside one trial; strong shaking drives what no modal model
+holds; a sine table forces a mode at its harmonics.  The linear fit's ratio (the *equivalent linear* damping
+of that record, kept as :attr:`ModeDamping.equivalent`) then lies far above the structure's own damping:
+0.44-2.4 % on the stiff 1-storey rig, whose free decays fall at 0.15-0.3 %.
 
 :func:`resolve_damping` answers with the damping at small amplitude:
 
 * **from the linear fit** when it explains the record to the noise level (:data:`LINEAR_MISFIT`): the
-  structure is linear at the record's amplitudes (a level read from the data's own scatter must first
-  pass for noise: :func:`_scatter_is_noise`);
+  structure is linear at the record's amplitudes (a level read from the data's own scatter must first pass for
+  noise: :func:`_scatter_is_noise`);
 * **from free decays** (:mod:`momentid.estimation.ringdown`) when the record holds them, at least
-  :data:`~momentid.estimation.ringdown.MIN_CYCLES` cycles of the mode ringing on its own: the envelope
-  against the mode's own phase, a constant or amplitude-dependent law by evidence, the limit at small
-  amplitude with a Newey-West standard error over the envelope's correlation time (and the spread of
-  the laws' extrapolations when the damping depends on amplitude);
+  :data:`~momentid.estimation.ringdown.MIN_CYCLES` cycles of the mode ringing on its own: the envelope against
+  the mode's own phase, a constant or amplitude-dependent law by evidence, the limit at small amplitude with a
+  Newey-West standard error over the envelope's correlation time (and the spread of the laws' extrapolations
+  when the damping depends on amplitude);
 * **from the forced response** otherwise: the linear modal model refitted on consecutive windows of
-  :data:`WINDOW_CYCLES` cycles of mode 1 (each with its own transient, the record's sensor gains and
-  clock offsets; :mod:`momentid.estimation.windows`), the windows' damping ratios pooled with a random
-  effect for what they scatter beyond their own errors (model error), Student's t on the windows; their
-  trend's value at zero amplitude when the damping grows with amplitude across them, or the frequency
-  falls with it (a joint that softens as it slips).
+  :data:`WINDOW_CYCLES` cycles of mode 1 (each with its own transient, the record's sensor gains and clock
+  offsets; :mod:`momentid.estimation.windows`), the windows' damping ratios pooled with a random effect for
+  what they scatter beyond their own errors (model error), Student's t on the windows; their trend's value at
+  zero amplitude when the damping grows with amplitude across them, or the frequency falls with it (a joint
+  that softens as it slips).
 
-The linear fit's own standard error counts white noise only; its answer carries the windows' error
-instead when that is larger (what independent stretches of the record scatter: model error), and any
-equivalent linear damping answered carries at least :data:`MODEL_ERROR_SHARE` of itself (what one record
-cannot show).  A mode the
-windows or decays leave too uncertain, on a rig showing no change, is answered by the whole record's fit
+The linear fit's own standard error counts white noise only; its answer carries the windows' error instead
+when that is larger (what independent stretches of the record scatter: model error), and any equivalent linear
+damping answered carries at least :data:`MODEL_ERROR_SHARE` of itself (what one record cannot show).  A mode
+the windows or decays leave too uncertain, on a rig showing no change, is answered by the whole record's fit
 with a delete-a-block jackknife error (:mod:`momentid.estimation.jackknife`).
 
-A damping ratio is refused, with the reason in words, when its standard error exceeds
-:data:`MAX_RELATIVE_STD` of itself, when it is not positive, or when too few independent stretches
-carry it (:data:`MIN_DOF`).
+On a rig that changes with amplitude, windows of a mode showing no trend of their own answer their laws' value
+at zero amplitude with that extrapolation's error, not their damping at their amplitudes.
+
+A damping ratio is refused, with the reason in words, when its standard error exceeds :data:`MAX_RELATIVE_STD`
+of itself, when it is not positive, or when too few independent stretches carry it (:data:`MIN_DOF`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from functools import cached_property
 from typing import TYPE_CHECKING
 
@@ -51,6 +51,7 @@ from momentid.core.series import RunData
 from momentid.estimation import ringdown
 from momentid.estimation.decays import constant_refusal, free_decays, weak_refusal
 from momentid.estimation.jackknife import block_jackknife
+from momentid.estimation.mode_damping import ModeDamping, Source
 from momentid.estimation.noise import LEAD_IN_QUIET_RATIO, quietest_level
 from momentid.estimation.periodic import periodic_refusal
 from momentid.estimation.windows import WINDOW_CYCLES, drift_words, forced_windows, frequency_trend, random_effects
@@ -106,94 +107,6 @@ MIN_DOF = 2
 #: The windows' pooled damping and the whole record's may differ by this many of the windows' standard
 #: errors when no amplitude dependence explains it; beyond, the windows' estimate is not one.
 CONSISTENCY_SIGMAS = 3.0
-
-
-class Source:
-    """Where a damping answer came from (closed set of names)."""
-
-    LINEAR = "linear fit"
-    FREE_DECAY = "free decays"
-    FORCED = "forced response"
-    POOLED = "free decays and forced windows"
-    WHOLE_RECORD = "whole record's linear fit (delete-a-block jackknife error)"
-
-
-@dataclass(frozen=True)
-class ModeDamping:
-    """One storey mode's damping answer (:func:`resolve_damping`).
-
-    Attributes
-    ----------
-    damping_ratio, damping_ratio_std : float
-        At small amplitude (1), and its standard error (model error included).
-    interval : tuple of float
-        95 % interval (Student's t with ``dof`` degrees of freedom).
-    dof : int
-    source : str
-        A :class:`Source` name.
-    amplitude_dependent : bool
-        The free decays show a damping that grows (or falls) with amplitude.
-    slope, exponent : float
-        ``zeta = zeta0 + slope E^exponent`` (E: envelope in m/s^2 on the mode's strongest floor); 0, 0 for a
-        constant law.
-    frequency, frequency_slope : float
-        Frequency at small amplitude (Hz) and its change per m/s^2 (free decays; the linear fit's
-        frequency and 0 otherwise).
-    amplitude_range : tuple of float
-        10th and 90th percentiles of the amplitudes (m/s^2) the answer rests on.
-    equivalent : float
-        The linear fit's damping ratio over the whole record (the equivalent linear damping).
-    cycles : float
-        Cycles of the mode the answer rests on.
-    evidence : float
-        How many standard errors the amplitude dependence stands out by (0: none tried).
-    refusal : str
-        Why the damping ratio is not an answer ('' when it is).
-    """
-
-    damping_ratio: float
-    damping_ratio_std: float
-    interval: tuple
-    dof: int
-    source: str
-    amplitude_dependent: bool
-    slope: float
-    exponent: float
-    frequency: float
-    frequency_slope: float
-    amplitude_range: tuple
-    equivalent: float
-    cycles: float
-    refusal: str = ""
-    evidence: float = 0.0
-
-    @property
-    def is_answer(self) -> bool:
-        """Whether the damping ratio is an answer (no refusal)."""
-        return not self.refusal
-
-    def to_dict(self) -> dict:
-        """The estimate as a JSON-ready dict (frequencies in Hz, amplitudes in m/s^2; no refusal: None)."""
-        return {"damping_ratio": self.damping_ratio, "damping_ratio_std": self.damping_ratio_std,
-                "interval_95": list(self.interval), "dof": self.dof, "source": self.source,
-                "amplitude_dependent": self.amplitude_dependent, "slope_per_m_s2_power": self.slope,
-                "exponent": self.exponent, "frequency_hz": self.frequency,
-                "frequency_slope_hz_per_m_s2": self.frequency_slope,
-                "amplitude_range_m_s2": list(self.amplitude_range),
-                "equivalent_linear_damping_ratio": self.equivalent, "cycles": self.cycles,
-                "refusal": self.refusal or None}
-
-    def words(self) -> str:
-        """One line: the answer (or the refusal) and where it came from."""
-        if self.refusal:
-            return f"damping NOT AN ANSWER: {self.refusal}"
-        law = (f", rising as {self.slope:.3g} E^{self.exponent:g} with the envelope E (m/s^2)"
-               if self.amplitude_dependent else "")
-        lo, hi = self.amplitude_range
-        return (f"damping {100 * self.damping_ratio:.3g} +- {100 * self.damping_ratio_std:.2g} % at small amplitude "
-                f"(95 %: {100 * self.interval[0]:.3g}-{100 * self.interval[1]:.3g} %), from {self.cycles:.0f} cycles "
-                f"of {self.source} at {lo:.2g}-{hi:.2g} m/s^2{law}; equivalent linear over the record "
-                f"{100 * self.equivalent:.3g} %")
 
 
 def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma: Sequence[dict],
@@ -298,13 +211,25 @@ def resolve_damping(runs: Sequence[RunData], selection: ModeSelection, *, sigma:
         else:
             answer = _softening(said, trends[k], windows[k], float(zeta[i]), float(freq[i]), seconds * freq[i])
             if rig_changes and not answer.amplitude_dependent and not answer.refusal:
-                lo, hi = answer.amplitude_range
-                answer = replace(answer, refusal=(
-                    f"{rig_changes}, and this mode's windows ({lo:.2g}-{hi:.2g} m/s^2) show no trend of their own: "
-                    f"their damping ({100 * answer.damping_ratio:.3g} %) is the damping at those amplitudes, not at "
-                    f"small amplitude"))
+                answer = _extrapolated(answer, windows[k], rig_changes, float(zeta[i]), float(freq[i]),
+                                       seconds * freq[i])
             out.append(whole.instead(answer, i, k, periodic, windows))
     return tuple(_with_model_error(a) for a in out)
+
+
+def _extrapolated(answer: ModeDamping, windows, rig_changes: str, equivalent: float, f0: float,
+                  cycles: float) -> ModeDamping:
+    """A mode whose windows show no trend of their own on a rig that changes with amplitude: their damping is
+    the damping at their amplitudes, so the answer is their laws' value at zero amplitude with the error of
+    that extrapolation (:func:`_windows_say` with ``trend``), refused with both reasons when that is no answer."""
+    at_zero = _windows_say(windows, equivalent, f0, cycles, trend=True)
+    if at_zero.amplitude_dependent and not at_zero.refusal:
+        return at_zero
+    lo, hi = answer.amplitude_range
+    why = (f"{rig_changes}, and this mode's windows ({lo:.2g}-{hi:.2g} m/s^2) show no trend of their own: their "
+           f"damping ({100 * answer.damping_ratio:.3g} %) is the damping at those amplitudes, not at small amplitude")
+    return replace(answer, refusal=why + (f"; extrapolated to zero amplitude, {at_zero.refusal}" if at_zero.refusal
+                                          else ""))
 
 
 def _decay_answer(decay, windows, equivalent: float, f0: float, cycles: float) -> ModeDamping:

@@ -67,7 +67,12 @@ FAMILY_BAND = 0.10
 
 def srim_modes(run, d: int, orders, near) -> list:
     """Per identified mode (frequencies ``near``, Hz): (f, zeta) of the SRIM pole stable over ``orders``, or None."""
-    poles = srim_poles(run, d, orders)
+    return stable_modes(srim_poles(run, d, orders), near)
+
+
+def stable_modes(poles, near) -> list:
+    """Per frequency of ``near`` (Hz): (f, zeta) of the pole found near it within :data:`STABLE_FREQUENCY` at
+    every order of ``poles`` (:func:`srim_poles`' list), the medians over the orders; None where there is none."""
     out = []
     for f0 in near:
         picks = []
@@ -126,15 +131,15 @@ def orders_near(poles, f: float) -> int:
     return sum(bool(p.size) and bool(np.any(np.abs(p[:, 0] / f - 1) < STABLE_FREQUENCY)) for p in poles)
 
 
-def stiff_reference(run, f_fit: float, f_readme, diagram: bool) -> tuple[float | None, str]:
+def stiff_reference(poles, f_fit: float, f_readme) -> tuple[float | None, str]:
     """The SRIM frequency (Hz) a stiff trial's mode 1 is judged against, and its stability-diagram text.
 
-    The data README's figure, unless SRIM re-run over the README's orders 4-30 (``diagram``) finds a
-    pole within 1 % of it at fewer than half of them: then the family SRIM finds at the most orders
-    near ``f_fit`` (what "stable over model orders" picks). Without ``diagram``, the README's figure."""
-    if not diagram:
+    The data README's figure, unless SRIM re-run over the README's orders 4-30 (``poles``:
+    :func:`srim_poles` at :data:`README_ORDERS`) finds a pole within 1 % of it at fewer than half of them:
+    then the family SRIM finds at the most orders near ``f_fit`` (what "stable over model orders" picks).
+    Without ``poles`` (None), the README's figure."""
+    if poles is None:
         return f_readme, "-"
-    poles = srim_poles(run, 1, README_ORDERS)
     families = pole_families(poles, f_fit)
     n = len(README_ORDERS)
     text = "; ".join(f"{f:.3f} / {100 * z:.2f} / {k}" for f, z, k in families if k >= n // 2)
@@ -166,7 +171,11 @@ def stiff_table(orders=None) -> tuple[str, bool, bool]:
     ok = rerun_ok = True
     for r in results:
         name = r.runs[0]
-        f_ref, diagram = stiff_reference(experiment.run(name), r.frequency[0], STIFF_SRIM.get(name), bool(orders))
+        # SRIM once per order over the README's orders and ``orders`` (deterministic: the same poles either way)
+        every = sorted(set(README_ORDERS) | set(orders or ()))
+        by_order = dict(zip(every, srim_poles(experiment.run(name), 1, every))) if orders else {}
+        f_ref, diagram = stiff_reference([by_order[o] for o in README_ORDERS] if orders else None, r.frequency[0],
+                                         STIFF_SRIM.get(name))
         diff = 100 * (r.frequency[0] / f_ref - 1) if f_ref else float("nan")
         m = r.damping[0]
         must = name in ANSWER_TRIALS
@@ -185,7 +194,7 @@ def stiff_table(orders=None) -> tuple[str, bool, bool]:
             ok &= abs(diff) < 100 * FREQUENCY_TOLERANCE
         readme = STIFF_SRIM.get(name)
         ref = f"{readme:.2f} / 0.13-0.17" if readme else "- (a NaN in its file: not in SRIM's set)"
-        again = srim_modes(experiment.run(name), 1, orders, r.frequency[:1])[0] if orders else None
+        again = stable_modes([by_order[o] for o in orders], r.frequency[:1])[0] if orders else None
         again_diff = 100 * (r.frequency[0] / again[0] - 1) if again else float("nan")
         rerun_ok &= again is None if not orders else (again is not None and abs(again_diff) < 100 * FREQUENCY_TOLERANCE)
         again_text = f"{again[0]:.3f} / {100 * again[1]:.2f}" if again else "-"

@@ -20,7 +20,7 @@ class Source:
 
 @dataclass(frozen=True)
 class ModeDamping:
-    """One storey mode's damping answer (:func:`resolve_damping`).
+    """One storey mode's damping answer (:func:`~momentid.estimation.damping.resolve_damping`).
 
     Attributes
     ----------

@@ -26,7 +26,7 @@ import numpy as np
 from momentid.core.compiled import disk_cached
 from momentid.errors import ModelError
 
-__all__ = ["check_linear", "state_space", "simulate", "FD_EPS"]
+__all__ = ["check_linear", "nonlinear_elements", "state_space", "simulate", "FD_EPS"]
 
 #: Perturbation of ``mjd_transitionFD`` (centred): for a linear step any small one is exact to round-off.
 FD_EPS = 1e-6
@@ -34,6 +34,34 @@ FD_EPS = 1e-6
 #: tendon's polynomial coefficients): any nonzero entry makes the step nonlinear.
 _NONLINEAR = ("tendon_stiffnesspoly", "tendon_dampingpoly", "jnt_stiffnesspoly", "dof_dampingpoly",
               "actuator_dampingpoly", "tendon_springyield", "jnt_springyield", "nplastic")
+
+
+def nonlinear_elements(model: mujoco.MjModel) -> list[str]:
+    """What in ``model`` besides its actuators makes a step nonlinear, in words (empty: nothing).
+
+    Parameters
+    ----------
+    model : mujoco.MjModel
+        A compiled twin.
+
+    Returns
+    -------
+    list of str
+        Plugins or equality constraints, friction loss, polynomial or yielding springs and dampers, limits,
+        colliding geoms: each present one.
+    """
+    why = []
+    if model.nplugin or model.neq:
+        why.append(f"{model.nplugin} plugins and {model.neq} equality constraints")
+    if np.any(model.dof_frictionloss) or np.any(model.tendon_frictionloss):
+        why.append("friction loss")
+    if any(np.any(getattr(model, name, 0)) for name in _NONLINEAR):
+        why.append("polynomial springs or dampers, or yielding springs")
+    if np.any(model.jnt_limited) or np.any(model.tendon_limited):
+        why.append("limits")
+    if np.any(model.geom_contype) or np.any(model.geom_conaffinity):
+        why.append("colliding geoms")
+    return why
 
 
 def check_linear(model: mujoco.MjModel) -> None:
@@ -47,16 +75,7 @@ def check_linear(model: mujoco.MjModel) -> None:
     why = []
     if model.nu != 1 or model.na != 1:
         why.append(f"{model.nu} actuators and {model.na} activations (the table's jerk actuator alone is linear)")
-    if model.nplugin:
-        why.append(f"{model.nplugin} plugins")
-    if np.any(model.dof_frictionloss) or np.any(model.tendon_frictionloss):
-        why.append("friction loss")
-    if any(np.any(getattr(model, name, 0)) for name in _NONLINEAR):
-        why.append("polynomial springs or dampers, or yielding springs")
-    if np.any(model.jnt_limited) or np.any(model.tendon_limited):
-        why.append("limits")
-    if np.any(model.geom_contype) or np.any(model.geom_conaffinity):
-        why.append("colliding geoms")
+    why += nonlinear_elements(model)
     if why:
         raise ModelError(f"the twin's model has {', '.join(why)}: expected a linear twin (its replay is "
                          f"momentid.lab.resim.simulate's)")

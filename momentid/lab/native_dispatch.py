@@ -1,5 +1,6 @@
 """The numba parts of :mod:`momentid.lab.native_forces`: the two dispatching callbacks, compiled with
-numba's disk cache where one can be written (:func:`momentid.core.compiled.disk_cached`).
+numba's disk cache where one can be written (:func:`momentid.core.compiled.disk_cached`); and the RK4 loop of
+:mod:`momentid.lab.native_replay`, which calls the same compiled laws through the same program.
 
 Imported only when a model first needs its callback forces natively (numba is then loaded).  Everything
 a callback calls is a module-level numba function, and the callbacks close over plain integers only:
@@ -21,7 +22,7 @@ from numba.extending import intrinsic
 
 from momentid.core.compiled import disk_cached
 
-__all__ = ["control_callback", "act_dyn_callback"]
+__all__ = ["control_callback", "act_dyn_callback", "rk4_replay"]
 
 
 @intrinsic
@@ -154,3 +155,129 @@ def act_dyn_callback(offsets: dict[str, int], header: int) -> CFunc:
         return 0.0
 
     return act_dyn
+
+
+@disk_cached(numba.njit, inline="always")
+def _derivative(x, u, t, lin, prog, base, header, nv, applied, dx):   # pragma: no cover  (compiled; tested)
+    """``dx``: the state's rate at ``x`` (positions, velocities, activations) under control ``u`` at time
+    ``t``; ``applied``: the program's forces at ``x`` (generalised, per dof).  ``lin`` packs the linear
+    part: ``[rate at rest | rate per state (nx x nx) | per control | per applied force (nx x nv)]``."""
+    nx = x.size
+    n = np.int64(prog[0])
+    applied[:] = 0.0
+    k = 1
+    for _ in range(n):
+        top, below, adr = np.int64(prog[k + 2]), np.int64(prog[k + 3]), np.int64(prog[k + 4])
+        xs, vs = x[top], x[nv + top]
+        if below >= 0:
+            xs -= x[below]
+            vs -= x[nv + below]
+        st = x[2 * nv + adr] if adr >= 0 else 0.0
+        f = _call_force(np.int64(prog[k]), base + 8 * (k + header), xs, vs, t, st)
+        applied[top] -= f
+        if below >= 0:
+            applied[below] += f
+        k += header + np.int64(prog[k + 6])
+    for i in range(nx):
+        s = lin[i] + lin[nx + nx * nx + i] * u
+        row = nx + i * nx
+        for j in range(nx):
+            s += lin[row + j] * x[j]
+        row = 2 * nx + nx * nx + i * nv
+        for j in range(nv):
+            s += lin[row + j] * applied[j]
+        dx[i] = s
+    k = 1
+    for _ in range(n):   # a force's state: its law's rate
+        adr = np.int64(prog[k + 4])
+        if adr >= 0:
+            top, below = np.int64(prog[k + 2]), np.int64(prog[k + 3])
+            xs, vs = x[top], x[nv + top]
+            if below >= 0:
+                xs -= x[below]
+                vs -= x[nv + below]
+            dx[2 * nv + adr] = _call_rate(np.int64(prog[k + 1]), base + 8 * (k + header), x[2 * nv + adr], xs, vs)
+        k += header + np.int64(prog[k + 6])
+
+
+@disk_cached(numba.njit, inline="always")
+def _bad(x, start, stop):   # pragma: no cover  (compiled; tested)
+    """MuJoCo's ``mju_isBad`` over ``x[start:stop]``: a NaN or a magnitude beyond ``mjMAXVAL`` (1e10)."""
+    for i in range(start, stop):
+        if not abs(x[i]) <= 1e10:
+            return True
+    return False
+
+
+@disk_cached(numba.njit, nogil=True)
+def _rk4(x, jerk, h, substeps, lin, prog, base, header, nv, sensors, out):   # pragma: no cover  (compiled; tested)
+    """Classical RK4 on the rate of :func:`_derivative`; readings ``out[row] = y0 + C x + d u + F f`` before
+    every ``substeps``-th step (``sensors`` packs ``[y0 | C (k x nx) | d | F (k x nv)]``).  A state or
+    acceleration MuJoCo calls bad resets the model as ``mj_step`` does (``mj_resetData``: at rest, the
+    table's activation, time and control at 0 for that step) and the replay goes on from rest: a diverged twin
+    reads its blow-up, finite, as its rollout does (which stops stepping it meanwhile)."""
+    nx, k = x.size, out.shape[1]
+    applied, k1, k2, k3, k4, stage = (np.empty(nv), np.empty(nx), np.empty(nx), np.empty(nx), np.empty(nx),
+                                      np.empty(nx))
+    t = 0.0
+    for step in range(jerk.size):
+        u = jerk[step]
+        if _bad(x, 0, 2 * nv):           # MuJoCo's checks of positions and velocities: reset
+            x[:] = 0.0
+            t, u = 0.0, 0.0
+        _derivative(x, u, t, lin, prog, base, header, nv, applied, k1)
+        if _bad(k1, nv, 2 * nv):         # and of accelerations: reset, forward again
+            x[:] = 0.0
+            t, u = 0.0, 0.0
+            _derivative(x, u, t, lin, prog, base, header, nv, applied, k1)
+        if step % substeps == 0:
+            row = step // substeps
+            for i in range(k):
+                s = sensors[i] + sensors[k + k * nx + i] * u
+                for j in range(nx):
+                    s += sensors[k + i * nx + j] * x[j]
+                for j in range(nv):
+                    s += sensors[2 * k + k * nx + i * nv + j] * applied[j]
+                out[row, i] = s
+        for i in range(nx):
+            stage[i] = x[i] + 0.5 * h * k1[i]
+        _derivative(stage, u, t + 0.5 * h, lin, prog, base, header, nv, applied, k2)
+        for i in range(nx):
+            stage[i] = x[i] + 0.5 * h * k2[i]
+        _derivative(stage, u, t + 0.5 * h, lin, prog, base, header, nv, applied, k3)
+        for i in range(nx):
+            stage[i] = x[i] + h * k3[i]
+        _derivative(stage, u, t + h, lin, prog, base, header, nv, applied, k4)
+        for i in range(nx):
+            x[i] += h * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]) / 6.0
+        t += h
+
+
+def rk4_replay(x: np.ndarray, jerk: np.ndarray, h: float, substeps: int, lin: np.ndarray, prog: np.ndarray,
+               header: int, nv: int, sensors: np.ndarray, out: np.ndarray) -> None:
+    """Replay a model's RK4 steps from state ``x`` (modified) under the control ``jerk``, its forces the
+    program ``prog``'s compiled laws (:mod:`momentid.lab.native_replay` builds the arguments).
+
+    Parameters
+    ----------
+    x : ndarray, shape (nx,)
+        Positions (nv), velocities (nv) and activations at the start; the end state on return.
+    jerk : ndarray, shape (n_steps,)
+        The control at each step.
+    h : float
+        The step (s).
+    substeps : int
+        Steps per reading.
+    lin, sensors : ndarray
+        The packed linear rate and readings (see :func:`_derivative` and :func:`_rk4`).
+    prog : ndarray
+        The model's program (:data:`momentid.lab.native_forces.PROGRAM`); it must stay alive meanwhile.
+    header : int
+        :data:`momentid.lab.native_forces.HEADER`.
+    nv : int
+        Degrees of freedom.
+    out : ndarray, shape (ceil(n_steps / substeps), k)
+        The readings, written.
+    """
+    _rk4(x, jerk, float(h), int(substeps), lin, prog, np.int64(prog.ctypes.data), np.int64(header), np.int64(nv),
+         sensors, out)

@@ -134,7 +134,9 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
     linear : bool
         The models are linear twins (no mechanism): replayed as MuJoCo's own step map
         (:mod:`momentid.lab.linear_replay`: the same readings to round-off, about 50x faster); a model that
-        is not linear raises :class:`~momentid.errors.ModelError`.
+        is not linear raises :class:`~momentid.errors.ModelError`.  Twins whose only nonlinear forces are
+        compiled laws (Bouc-Wen's, under RK4) replay in compiled code whatever ``linear`` says
+        (:mod:`momentid.lab.native_replay`: the same readings to round-off).
 
     Returns
     -------
@@ -166,6 +168,10 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
                                   for m, j, z in zip(models, jerk, drives)])
         return _finite(out)
     nthread = max(1, min(threads or ROLLOUT_THREADS or os.cpu_count() or 1, len(models)))
+    from momentid.lab import native_replay
+
+    if native_replay.applies(models):      # compiled laws the only nonlinear forces: no MuJoCo in the loop
+        return _finite(native_replay.simulate(models, jerk, drives[:, 0], index, substeps, nthread))
     datas = [mujoco.MjData(first) for _ in range(nthread)]
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
     states = []

@@ -319,11 +319,11 @@ def fit_eiv(layout: Layout, runs: Sequence[RunData], theta0: np.ndarray, *, f_ma
     # Each iteration's Jacobian is exact and costs about one residual (momentid.estimation.eiv_jacobian),
     # where forward differences cost one residual per unknown.
     result = scipy.optimize.least_squares(
-        lambda x: problem.residual(scale * x), theta0 / scale,
-        jac=lambda x: problem.jacobian(scale * x) * scale[None, :],
+        lambda delta: problem.residual(theta0 + scale * delta), np.zeros_like(theta0),
+        jac=lambda delta: problem.jacobian(theta0 + scale * delta) * scale[None, :],
         method="trf", x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev,
     )
-    theta = scale * result.x
+    theta = theta0 + scale * result.x
     r = problem.residual(theta)
     J = problem.jacobian(theta) * scale[None, :]
     dof = max(r.size - theta.size - problem.n_nuisance, 1)

@@ -438,3 +438,22 @@ def test_a_discovered_forces_terms_on_floats_are_numpys_bit_for_bit():
             for t in (0.5, 1.0, 2.0):
                 want = dd._SIGNALS[name](params, np.float64(x), np.float64(x), t, 0.0)
                 assert _bitwise_equal(dd._FLOAT_SIGNALS[name](params, x, x, t, 0.0), want), (name, x, t)
+
+
+def test_a_signature_fit_on_an_overflowed_replay_is_no_candidate():
+    """A replay of an unstable identified model overflows (randomised case stiffness_change 2 crashed
+    with numpy's 'SVD did not converge'): a target or column that is not finite fits nothing, while the
+    same columns with a finite target fit."""
+    from momentid.diagnosis.added_mass import screening
+
+    rng = np.random.default_rng(0)
+    n = 400
+    column = rng.standard_normal(n)
+    train = np.arange(n) < n // 2
+    target = 2.0 * column + 0.01 * rng.standard_normal(n)
+    assert screening._fit([column], [], target, train, ~train, 0.0) is not None
+    for bad in (np.nan, np.inf):
+        broken = target.copy()
+        broken[n // 3] = bad
+        assert screening._fit([column], [], broken, train, ~train, 0.0) is None
+        assert screening._fit([np.where(np.arange(n) == 7, bad, column)], [], target, train, ~train, 0.0) is None

@@ -130,9 +130,12 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     A handful of columns over many samples: solved through the (scaled) normal equations of each
     half, so every sum of squares below is a quadratic form of small Gram matrices.  Returns
     (coefficients, standard errors, share explained) of the signature columns, or None when a
-    column is zero.
+    column is zero, or a column or the target is not finite (a replay of an unstable identified model
+    that overflowed: nothing to fit).
     """
     X = np.column_stack(columns + confounds)
+    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(target))):
+        return None
     Xtr, ytr, Xte, yte = X[train], target[train], X[test], target[test]
     scale = np.linalg.norm(Xtr, axis=0)
     if np.any(scale == 0):

@@ -211,8 +211,8 @@ def _bad(x, start, stop):   # pragma: no cover  (compiled; tested)
 
 @disk_cached(numba.njit, nogil=True)
 def _rk4(x, jerk, h, substeps, lin, prog, base, header, nv, sensors, out):   # pragma: no cover  (compiled; tested)
-    """Classical RK4 on the rate of :func:`_derivative`; readings ``out[row] = y0 + C x + d u + F f`` before
-    every ``substeps``-th step (``sensors`` packs ``[y0 | C (k x nx) | d | F (k x nv)]``).  A state or
+    """Classical RK4 on the rate of :func:`_derivative`; readings ``out[row] = y0 + C x + d u + G f`` before
+    every ``substeps``-th step (``sensors`` packs ``[y0 | C (k x nx) | d | G (k x nv)]``).  A state or
     acceleration MuJoCo calls bad resets the model as ``mj_step`` does (``mj_resetData``: at rest, the
     table's activation, time and control at 0 for that step) and the replay goes on from rest: a diverged twin
     reads its blow-up, finite, as its rollout does (which stops stepping it meanwhile)."""

@@ -86,20 +86,22 @@ def applies(models: Sequence[mujoco.MjModel]) -> bool:
     return True
 
 
-def maps(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
+def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The linear part of ``model``'s rate and sensors (module docstring), packed for the compiled loop.
 
     Parameters
     ----------
     model : mujoco.MjModel
         A twin that passes :func:`check`.
+    rows : ndarray of int, shape (k,), optional
+        The sensordata entries read (default: all ``nsensordata``).
 
     Returns
     -------
     lin : ndarray, shape (nx + nx nx + nx + nx nv,)
         ``r0``, ``A`` (row-major), ``b``, ``F`` (row-major); ``nx = 2 nv + na``.
     sensors : ndarray, shape (k + k nx + k + k nv,)
-        ``y0``, ``C``, ``d``, ``G`` of all ``k = nsensordata`` readings.
+        ``y0``, ``C`` (row-major), ``d``, ``G`` (row-major) of the ``k`` readings.
     """
     check(model)
     inert = copy.copy(model)
@@ -131,15 +133,9 @@ def maps(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
     F, G = np.zeros((nx, nv)), np.zeros((y0.size, nv))
     for j in range(nv):
         F[:, j], G[:, j] = centred(lambda e: at(x0, 0.0, e * np.eye(nv)[j]))
+    rows = np.arange(y0.size) if rows is None else np.asarray(rows, int)
     lin = np.concatenate([r0, A.ravel(), b, F.ravel()])
-    return lin, np.concatenate([y0, C.ravel(), d, G.ravel()])
-
-
-def _rows(sensors: np.ndarray, k: int, nx: int, nv: int, rows: np.ndarray) -> np.ndarray:
-    """The packed sensor maps of all ``k`` readings cut to ``rows``."""
-    y0, C = sensors[:k], sensors[k:k + k * nx].reshape(k, nx)
-    d, G = sensors[k + k * nx:2 * k + k * nx], sensors[2 * k + k * nx:].reshape(k, nv)
-    return np.ascontiguousarray(np.concatenate([y0[rows], C[rows].ravel(), d[rows], G[rows].ravel()]))
+    return lin, np.concatenate([y0[rows], C[rows].ravel(), d[rows], G[rows].ravel()])
 
 
 def simulate(models: Sequence[mujoco.MjModel], jerk: np.ndarray, act0: float, rows: np.ndarray, substeps: int,
@@ -175,15 +171,14 @@ def simulate(models: Sequence[mujoco.MjModel], jerk: np.ndarray, act0: float, ro
 
     def one(k):
         model = models[k]
-        lin, sensors = maps(model)
-        nv, nx = model.nv, 2 * model.nv + model.na
-        x = np.zeros(nx)
+        lin, sensors = maps(model, rows)
+        nv = model.nv
+        x = np.zeros(2 * nv + model.na)
         x[2 * nv + int(model.actuator_actadr[0])] = act0[k]
         adr = int(model.numeric_adr[0])
         prog = np.array(model.numeric_data[adr:adr + int(model.numeric_size[0])])
         control = np.ascontiguousarray(jerk[k if jerk.shape[0] > 1 else 0])
-        rk4_replay(x, control, model.opt.timestep, substeps, lin, prog, native_forces.HEADER, nv,
-                   _rows(sensors, model.nsensordata, nx, nv, rows), out[k])
+        rk4_replay(x, control, model.opt.timestep, substeps, lin, prog, native_forces.HEADER, nv, sensors, out[k])
 
     if threads > 1 and len(models) > 1:
         with ThreadPoolExecutor(min(threads, len(models))) as pool:

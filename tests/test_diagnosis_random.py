@@ -58,9 +58,11 @@ def test_other_classes_are_judged_by_their_numbers():
 #: a friction sized without it (re-sized beside the damper), a biased table accelerometer that only a
 #: friction in the model shows (sized by re-simulation with it), a P-Delta beside a strong cubic spring
 #: that only the lab's nominal model shows (the identified K takes in the floors' weight); a stiffness
-#: loss whose linear refit diverged on the held-out run (the diagnosis stopped with an error).
+#: loss whose linear refit diverged on the held-out run (the diagnosis stopped with an error); a stop whose
+#: linear fit made two storeys all but rigid (a 63 Hz mode the data do not hold opened the band to noise,
+#: and the open search lost the stop).
 SLOW_CASES = [("gap_brace", 0), ("stop", 9), ("two_storey", 0), ("two_storey", 4), ("two_storey", 5),
-              ("library_fault", 5), ("stiffness_change", 7)]
+              ("library_fault", 5), ("stiffness_change", 7), ("stop", 8)]
 
 
 @pytest.mark.slow

@@ -149,3 +149,18 @@ def test_a_linear_force_adds_no_nonlinear_term():
     # A storey spring missing from the model is linear: the library's nonlinear terms must not be
     # picked to fit its noise.
     assert [c.term for c in found.selected.columns] == ["x", "v"] and found.place == Place(Target.STOREY, 2)
+
+
+def test_the_band_ignores_a_top_mode_the_data_do_not_hold():
+    """A linear fit of a rig meeting a stop made two storeys all but rigid (randomised ``stop 8``: a 62.6 Hz
+    mode beside a nominal 4.8 Hz, the data's power within 10.7 Hz); the band it opened lost the stop in
+    noise.  Such a mode is cut to the data's band; a nominal mode stays the floor; a fit within the
+    data's band is kept as it is."""
+    from momentid.diagnosis.added_mass.residuals import top_mode
+
+    assert top_mode(62.6, 4.8, 10.7) == 10.7
+    assert top_mode(5.2, 4.8, 10.7) == 5.2
+    assert top_mode(3.1, 4.8, 10.7) == 4.8           # a disturbed fit does not shrink the band
+    assert top_mode(float("nan"), 4.8, 10.7) == 4.8
+    assert top_mode(30.0, None, 10.7) == 10.7
+    assert top_mode(12.0, 20.0, 10.7) == 20.0          # the lab's model stands above the data's band

@@ -29,7 +29,7 @@ from momentid.estimation.reconstruct import Prefilter, prepare_run, suggest_band
 from momentid.estimation.reconstruct import band_filter
 
 __all__ = ["LinearModel", "ResidualRow", "EquationResiduals", "fit_linear_model", "equation_residuals",
-           "band_signals", "blocks", "replay_outputs", "replay_noise", "nrmse"]
+           "band_signals", "top_mode", "blocks", "replay_outputs", "replay_noise", "nrmse"]
 
 #: Band of the diagnosis (noisy data): at least this multiple of the top natural frequency, so the
 #: band reaches well above the modes, where a nonlinear storey force puts its harmonics ...
@@ -164,6 +164,34 @@ def nominal_result(structure: Structure, like: Identification) -> Identification
                    mu=structure.rayleigh_mu, kappa=structure.rayleigh_kappa, covariance=None)
 
 
+def top_mode(identified: float, nominal: float | None, shown: float) -> float:
+    """The top natural frequency (Hz) the diagnosis works to: its band, refit and checks scale with it.
+
+    The identified model's top mode, except that a badly disturbed fit (a linear fit of a strongly
+    nonlinear rig) must neither shrink the band nor widen it with a mode the data do not hold:
+
+    - the top mode of the nominal model the lab states, when it states one, is a floor;
+    - a top mode above both that and ``shown``, the band where the data hold their power
+      (:func:`~momentid.estimation.reconstruct.suggest_band`: twice the frequency below which 99.5 % of
+      the floors' relative acceleration power lies), is an artefact of the fit and is cut to the larger
+      of the two.  (A linear fit of a rig that meets a stop can make a storey all but rigid: a mode at
+      tens of hertz, six times the data's band, that would open the band to noise.)
+
+    Parameters
+    ----------
+    identified : float
+        The identified model's top natural frequency (Hz; not finite for an unstable fit).
+    nominal : float or None
+        The nominal model's top natural frequency (Hz), None without one.
+    shown : float
+        The data's band (Hz).
+    """
+    floor = nominal if nominal is not None else 0.0
+    if not math.isfinite(identified):
+        return nominal if nominal is not None else identified
+    return min(max(identified, floor), max(floor, shown))
+
+
 def fit_linear_model(experiment: Experiment, result: Identification | None = None) -> LinearModel:
     """Stage 1: identify the linear model from the training runs; choose the band.
 
@@ -176,16 +204,15 @@ def fit_linear_model(experiment: Experiment, result: Identification | None = Non
     hold = runs[-1] if len(runs) >= 3 else None
     train = replace(experiment, runs=tuple(r for r in runs if r is not hold))
     result = identify(train) if result is None else result
-    f_top = float(result.modes().frequency.max())
     nominal = experiment.structure
-    if nominal is not None:   # a badly disturbed fit must not shrink the band
-        f_nom = float(modal_properties(nominal.mass_matrix(), nominal.damping_matrix(),
-                                       nominal.stiffness_matrix()).frequency.max())
-        f_top = max(f_top, f_nom) if np.isfinite(f_top) else f_nom
+    f_nom = None if nominal is None else float(modal_properties(
+        nominal.mass_matrix(), nominal.damping_matrix(), nominal.stiffness_matrix()).frequency.max())
+    shown = suggest_band(runs[0], d)
+    f_top = top_mode(float(result.modes().frequency.max()), f_nom, shown)
     freqs = result.modes().frequency
     f_low = float(np.min(freqs)) if np.all(np.isfinite(freqs)) else 0.5 * f_top
     ideal = result.estimator == "equation"
-    band = Prefilter() if ideal else Prefilter(high=min(max(suggest_band(runs[0], d), BAND_OVER_TOP_MODE * f_top),
+    band = Prefilter() if ideal else Prefilter(high=min(max(shown, BAND_OVER_TOP_MODE * f_top),
                                                          BAND_OVER_SAMPLE_RATE * runs[0].sample_rate))
     return LinearModel(experiment=experiment, holdout=hold, train=train, result=result, nominal=nominal,
                        nominal_result=nominal_result(nominal, result) if nominal is not None else None,

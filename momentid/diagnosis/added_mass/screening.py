@@ -123,9 +123,38 @@ class DampingPattern:
     info: dict
 
 
+@dataclass(frozen=True)
+class _Fixed:
+    """Confound columns fitted with every candidate of one residual (the signatures of mechanisms already
+    found), cut to the train and test blocks once, with their products among themselves and with the
+    target: a candidate's fit then multiplies only its own few columns over the samples."""
+
+    train: np.ndarray
+    test: np.ndarray
+    G: np.ndarray
+    H: np.ndarray
+    g: np.ndarray
+    h: np.ndarray
+    finite: bool
+
+    @classmethod
+    def of(cls, columns: list[np.ndarray], target: np.ndarray, train: np.ndarray, test: np.ndarray) -> _Fixed:
+        """The fixed columns (n,) each, the target (n,) and the block masks (n,)."""
+        E = np.column_stack(columns) if columns else np.empty((len(target), 0))
+        Etr, Ete = E[train], E[test]
+        return cls(Etr, Ete, Etr.T @ Etr, Ete.T @ Ete, Etr.T @ target[train], Ete.T @ target[test],
+                   bool(np.all(np.isfinite(E))))
+
+
+def _products(A: np.ndarray, y: np.ndarray, E: np.ndarray, EE: np.ndarray, Ey: np.ndarray):
+    """Gram matrix and target products of the columns ``[A, E]`` (on one block), ``E``'s own given."""
+    AE = A.T @ E
+    return np.block([[A.T @ A, AE], [AE.T, EE]]), np.concatenate([A.T @ y, Ey]), float(y @ y)
+
+
 def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndarray, train, test,
-         noise_rss_test: float):
-    """LS of ``target`` on signature + confound columns on ``train``; score on ``test``.
+         noise_rss_test: float, fixed: _Fixed | None = None):
+    """LS of ``target`` on signature + confound columns (then the ``fixed`` ones) on ``train``; score on ``test``.
 
     A handful of columns over many samples: solved through the (scaled) normal equations of each
     half, so every sum of squares below is a quadratic form of small Gram matrices.  Returns
@@ -133,16 +162,17 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     column is zero, or a column or the target is not finite (a replay of an unstable identified model
     that overflowed: nothing to fit).
     """
-    X = np.column_stack(columns + confounds)
-    if not (np.all(np.isfinite(X)) and np.all(np.isfinite(target))):
+    fixed = _Fixed.of([], target, train, test) if fixed is None else fixed
+    A = np.column_stack(columns + confounds)
+    if not (fixed.finite and np.all(np.isfinite(A)) and np.all(np.isfinite(target))):
         return None
-    Xtr, ytr, Xte, yte = X[train], target[train], X[test], target[test]
-    scale = np.linalg.norm(Xtr, axis=0)
+    G, g, yy = _products(A[train], target[train], fixed.train, fixed.G, fixed.g)
+    H, h, zz = _products(A[test], target[test], fixed.test, fixed.H, fixed.h)
+    scale = np.sqrt(np.diag(G))
     if np.any(scale == 0):
         return None
-    Xtr, Xte = Xtr / scale, Xte / scale
-    G, g, yy = Xtr.T @ Xtr, Xtr.T @ ytr, float(ytr @ ytr)
-    H, h, zz = Xte.T @ Xte, Xte.T @ yte, float(yte @ yte)
+    G, H = G / np.outer(scale, scale), H / np.outer(scale, scale)
+    g, h = g / scale, h / scale
     k = len(columns)
 
     def solve(idx):
@@ -151,16 +181,16 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     def test_rss(idx, c):
         return max(zz - 2 * float(c @ h[idx]) + float(c @ H[np.ix_(idx, idx)] @ c), 0.0)
 
-    every = np.arange(X.shape[1])
+    every = np.arange(G.shape[0])
     coef = solve(every)
     after = test_rss(every, coef)
     # Confounds alone: the part of the improvement that needs no mechanism.
-    base = test_rss(every[k:], solve(every[k:])) if confounds else zz
+    base = test_rss(every[k:], solve(every[k:])) if G.shape[0] > k else zz
     if base <= NOTHING_TO_EXPLAIN * noise_rss_test:
         return coef[:k] / scale[:k], np.zeros(k), 0.0
     explained = (base - after) / (base - noise_rss_test)
     rss = max(yy - 2 * float(coef @ g) + float(coef @ G @ coef), 0.0)
-    dof = max(int(train.sum()) - X.shape[1], 1)
+    dof = max(int(train.sum()) - G.shape[0], 1)
     cov = np.linalg.pinv(G) * (rss / dof)
     # A signature nearly collinear with its confounds (a tuned-mass damper's body tuned far above the motion
     # moves with its floor) leaves a variance of round-off size, of either sign: no variance is below 0.
@@ -175,11 +205,11 @@ def _fitter(target: np.ndarray, train: np.ndarray, test: np.ndarray, noise_rss: 
     """
     d = target.shape[1]
     train_d, test_d, y = np.repeat(train, d), np.repeat(test, d), target.ravel()
-    extra = [c.ravel() for c in extra]
+    fixed = _Fixed.of([c.ravel() for c in extra], y, train_d, test_d)
 
     def fit(columns, confounds, place, to_params) -> list[Screened]:
-        res = _fit([c.ravel() for c in columns], [c.ravel() for c in confounds] + extra, y, train_d, test_d,
-                   noise_rss)
+        res = _fit([c.ravel() for c in columns], [c.ravel() for c in confounds], y, train_d, test_d, noise_rss,
+                   fixed)
         if res is None:
             return []
         coef, std, explained = res
@@ -334,10 +364,12 @@ def screen_storeys(result: Identification, rows: tuple[ResidualRow, ...], f_top:
         if noise_ms <= 0 or np.mean(left[test] ** 2) <= EXCESS ** 2 * noise_ms:
             continue
 
-        def fit(columns, confounds, place, to_params, s=s, extra=extra):
+        fixed = _Fixed.of(extra, V[:, s], train, test)
+
+        def fit(columns, confounds, place, to_params, s=s, fixed=fixed):
             confounds = [c[:, s] for c in map(storey_shear, confounds) if np.any(c[train, s] != 0)]
-            res = _fit([storey_shear(c)[:, s] for c in columns], confounds + extra, V[:, s], train, test,
-                       noise_ms * int(test.sum()))
+            res = _fit([storey_shear(c)[:, s] for c in columns], confounds, V[:, s], train, test,
+                       noise_ms * int(test.sum()), fixed)
             if res is None:
                 return []
             coef, std, explained = res

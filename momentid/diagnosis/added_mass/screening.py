@@ -287,18 +287,28 @@ def remaining_excess(result: Identification, rows: tuple[ResidualRow, ...], nois
 
     The equation residual's excess given what is already found: near 1 when nothing is left.
     """
+    signals = _equation_signals(result, rows, f_top)
+    columns = [c for kind, place in found for c in signature_columns(kind, signals, place)]
+    return _excess_left(rows, noise_floor, columns)
+
+
+def _excess_left(rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, columns: list[np.ndarray]) -> np.ndarray:
+    """:func:`remaining_excess` once the found mechanisms' ``columns`` (N, d) each are known.  Their
+    least squares goes through the scaled normal equations: a few dozen columns over the samples, whose
+    Gram matrix is small (the fit's residual is what counts, not the coefficients of columns that may be
+    nearly collinear)."""
     fs = rows[0].run.sample_rate
     train = np.concatenate([blocks(r.signals["a"].shape[0], fs)[0] for r in rows])
     target = np.concatenate([r.residual for r in rows])
-    signals = _equation_signals(result, rows, f_top)
-    columns = [c for kind, place in found for c in signature_columns(kind, signals, place)]
     left = target[~train]
     if columns:
         X = np.stack(columns, axis=-1)                                        # (N, d, m)
-        scale = np.linalg.norm(X[train].reshape(-1, X.shape[-1]), axis=0)
-        X = X / np.where(scale > 0, scale, 1.0)
-        coef = np.linalg.lstsq(X[train].reshape(-1, X.shape[-1]), target[train].ravel(), rcond=None)[0]
-        left = left - X[~train] @ coef
+        Xtr = X[train].reshape(-1, X.shape[-1])
+        scale = np.linalg.norm(Xtr, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        Xtr = Xtr / scale
+        coef = np.linalg.lstsq(Xtr.T @ Xtr, Xtr.T @ target[train].ravel(), rcond=1e-12)[0]
+        left = left - X[~train] @ (coef / scale)
     return np.sqrt(np.mean(left ** 2, axis=0)) / noise_floor
 
 
@@ -314,13 +324,15 @@ def linear_springs_left(result: Identification, rows: tuple[ResidualRow, ...], n
     nonlinearity elsewhere, which distorts the identified model more than the added masses change
     the storey, what the lab's model leaves at that storey is the evidence; re-simulation decides.
     """
-    before = remaining_excess(result, rows, noise_floor, f_top, found) ** 2
+    signals = _equation_signals(result, rows, f_top)
+    columns = [c for kind, place in found for c in signature_columns(kind, signals, place)]
+    before = _excess_left(rows, noise_floor, columns) ** 2
     if before.max() <= EXCESS ** 2:
         return []
     out = []
     for c in candidates:
         if c.kind.linear_spring:
-            after = remaining_excess(result, rows, noise_floor, f_top, list(found) + [(c.kind, c.place)]) ** 2
+            after = _excess_left(rows, noise_floor, columns + signature_columns(c.kind, signals, c.place)) ** 2
             share = float(np.sum(before - after) / np.sum(np.maximum(before - 1.0, 0.0)))
             out.append(Candidate(c.kind, c.place, c.parameters, c.std, share, c.domain))
     return out

@@ -54,7 +54,7 @@ def whitened_jacobian(layout: Layout, theta: np.ndarray, sp: Spectra) -> np.ndar
     """
     theta = np.asarray(theta, float)
     m = _Model(layout, theta, sp)
-    cols, terms = [], np.zeros((2 * sp.Y.size, theta.size))
+    cols, terms = [], np.zeros((m.Q.shape[1], theta.size))
     for i in range(layout.p):
         column, terms[:, i] = m.column(_directions(layout, i, sp.added_mass))
         cols.append(column)
@@ -62,7 +62,7 @@ def whitened_jacobian(layout: Layout, theta: np.ndarray, sp: Spectra) -> np.ndar
         cols.append(m.whiten(-m.Gf[:, :, k] * sp.F[None, :, k].T))
     J = np.sqrt(2.0) * np.concatenate([np.array([c.real.ravel() for c in cols]),
                                        np.array([c.imag.ravel() for c in cols])], axis=1).T
-    return J - m.Q @ (m.Q.T @ J) + terms
+    return J - m.Q @ (m.Q.T @ J - terms)       # the second projection terms -Q c_i of every column at once
 
 
 def _directions(layout: Layout, i: int, added_mass: np.ndarray):
@@ -113,7 +113,7 @@ class _Model:
         self.coef_f = theta[layout.p:]
         self._whitening(sp)
         T = np.einsum("oj,mj,jl->mol", self.HV, self.R * sp.z[:, None], self.Vinv) * self.inv_sd[None, :, None]
-        self.T = T
+        self.T, self.T_conj = T, np.conj(T)
         self._project(e, T)
 
     @staticmethod
@@ -174,22 +174,23 @@ class _Model:
 
     def transient_term(self, dH: np.ndarray, W: np.ndarray, dg: np.ndarray) -> np.ndarray:
         """Golub and Pereyra's second term ``-B^+T dB^T r`` of a column (``B`` the whitened transient
-        columns, ``r`` the projected residual), shape (2 bins n_out,)."""
+        columns, ``r`` the projected residual) as ``Q c``: its coefficients ``c`` on the transient's
+        orthonormal basis ``Q``, shape (n_keep,)."""
         rz = np.conj(self.R * self.sp.z[:, None])
         inner = (rz * (self.rho_s @ np.conj(dH @ self.V))).sum(axis=0)
         inner = inner + (rz * ((np.conj(self.R) * self.rho_hv) @ np.conj(W))).sum(axis=0)
         inner = inner @ np.conj(self.Vinv)                      # sum over bins of dT^H W rho
-        gdg = np.einsum("mo,mo->m", np.conj(self.g), dg)
-        T_dg = np.einsum("mol,mo->ml", np.conj(self.T), dg)
+        gdg = np.sum(np.conj(self.g) * dg, axis=1)
+        T_dg = (dg[:, None, :] @ self.T_conj)[:, 0, :]            # T^H dg per bin
         dW = (self.dphi * 2.0 * gdg.real * self.g_rho)[:, None] * self.T_g + self.phi[:, None] * (
-            T_dg * self.g_rho[:, None] + self.T_g * np.einsum("mo,mo->m", np.conj(dg), self.rho)[:, None])
+            T_dg * self.g_rho[:, None] + self.T_g * np.sum(np.conj(dg) * self.rho, axis=1)[:, None])
         x = 2.0 * (inner + dW.sum(axis=0)).real                  # dB^T r
         s, Vt, norms = self._pinv
-        return -self.Q @ ((Vt @ (x / norms)) / s)
+        return -(Vt @ (x / norms)) / s
 
     def column(self, directions) -> tuple[np.ndarray, np.ndarray]:
         """Along one direction of ``(M, C, K)``: ``d(W v)`` with ``beta`` fixed, shape (bins, n_out), and the
-        column's second projection term (:meth:`transient_term`), shape (2 bins n_out,)."""
+        column's second projection term's coefficients on ``Q`` (:meth:`transient_term`), shape (n_keep,)."""
         dM, dC, dK = directions
         d, h, sp = self.d, self.h, self.sp
         lower = -self.Minv @ (np.hstack([dK, dC]) + dM @ self.A[d:])
@@ -206,17 +207,15 @@ class _Model:
                                                                self._rows(dF, False)])
         W = self.Vinv @ dPhi @ self.V
         X = self.R[:, :, None] * self.VB[None]                  # (bins, 2d, nw): R V^-1 Bd
-        Y = self.R[:, :, None] * (np.einsum("jl,mlw->mjw", W, X) + (self.Vinv @ dBd)[None])
-        dG = (np.einsum("oj,mjw->mow", dH @ self.V, X) + np.einsum("oj,mjw->mow", self.HV, Y)
-              + dD[None]) * self.inv_sd[None, :, None]
+        Y = self.R[:, :, None] * (W @ X + (self.Vinv @ dBd)[None])          # matmul per bin
+        dG = ((dH @ self.V) @ X + self.HV @ Y + dD[None]) * self.inv_sd[None, :, None]
         t = self.R * sp.z[:, None] * self.gamma[None, :]         # (bins, 2d): R z V^-1 beta
         dTb = (t @ (dH @ self.V).T + (self.R * (t @ W.T)) @ self.HV.T) * self.inv_sd[None, :]
         dg = dG[:, :, 0]
         term = self.transient_term(dH, W, dg)
         dv = -dg * sp.U[:, None] - dTb
         if nw > 1:
-            dv = dv - np.einsum("mok,mk->mo", dG[:, :, 1:], sp.F * self.coef_f[None, :])
-        gdg = np.einsum("mo,mo->m", np.conj(self.g), dg)
-        kappa = (self.dphi * 2.0 * gdg.real * self.gv
-                 + self.phi * np.einsum("mo,mo->m", np.conj(dg), self.v))
+            dv = dv - (dG[:, :, 1:] @ (sp.F * self.coef_f[None, :])[:, :, None])[:, :, 0]
+        gdg = np.sum(np.conj(self.g) * dg, axis=1)
+        kappa = self.dphi * 2.0 * gdg.real * self.gv + self.phi * np.sum(np.conj(dg) * self.v, axis=1)
         return self.whiten(dv) + self.g * kappa[:, None] + self.phi[:, None] * dg * self.gv[:, None], term

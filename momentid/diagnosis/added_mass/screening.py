@@ -127,7 +127,8 @@ class DampingPattern:
 class _Fixed:
     """Confound columns fitted with every candidate of one residual (the signatures of mechanisms already
     found), cut to the train and test blocks once, with their products among themselves and with the
-    target: a candidate's fit then multiplies only its own few columns over the samples."""
+    target (itself cut once: ``y_train``, ``y_test``): a candidate's fit then multiplies only its own few
+    columns over the samples.  ``finite``: the columns and the target are."""
 
     train: np.ndarray
     test: np.ndarray
@@ -135,15 +136,17 @@ class _Fixed:
     H: np.ndarray
     g: np.ndarray
     h: np.ndarray
+    y_train: np.ndarray
+    y_test: np.ndarray
     finite: bool
 
     @classmethod
     def of(cls, columns: list[np.ndarray], target: np.ndarray, train: np.ndarray, test: np.ndarray) -> _Fixed:
         """The fixed columns (n,) each, the target (n,) and the block masks (n,)."""
         E = np.column_stack(columns) if columns else np.empty((len(target), 0))
-        Etr, Ete = E[train], E[test]
-        return cls(Etr, Ete, Etr.T @ Etr, Ete.T @ Ete, Etr.T @ target[train], Ete.T @ target[test],
-                   bool(np.all(np.isfinite(E))))
+        Etr, Ete, ytr, yte = E[train], E[test], target[train], target[test]
+        return cls(Etr, Ete, Etr.T @ Etr, Ete.T @ Ete, Etr.T @ ytr, Ete.T @ yte, ytr, yte,
+                   bool(np.all(np.isfinite(E)) and np.all(np.isfinite(target))))
 
 
 def _products(A: np.ndarray, y: np.ndarray, E: np.ndarray, EE: np.ndarray, Ey: np.ndarray):
@@ -164,10 +167,10 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     """
     fixed = _Fixed.of([], target, train, test) if fixed is None else fixed
     A = np.column_stack(columns + confounds)
-    if not (fixed.finite and np.all(np.isfinite(A)) and np.all(np.isfinite(target))):
+    if not (fixed.finite and np.all(np.isfinite(A))):
         return None
-    G, g, yy = _products(A[train], target[train], fixed.train, fixed.G, fixed.g)
-    H, h, zz = _products(A[test], target[test], fixed.test, fixed.H, fixed.h)
+    G, g, yy = _products(A[train], fixed.y_train, fixed.train, fixed.G, fixed.g)
+    H, h, zz = _products(A[test], fixed.y_test, fixed.test, fixed.H, fixed.h)
     scale = np.sqrt(np.diag(G))
     if np.any(scale == 0):
         return None

@@ -163,7 +163,8 @@ def _fit(columns: list[np.ndarray], confounds: list[np.ndarray], target: np.ndar
     half, so every sum of squares below is a quadratic form of small Gram matrices.  Returns
     (coefficients, standard errors, share explained) of the signature columns, or None when a
     column is zero, or a column or the target is not finite (a replay of an unstable identified model
-    that overflowed: nothing to fit).
+    that overflowed: nothing to fit).  ``fixed``, when given, was built on this ``target`` and these
+    blocks (:meth:`_Fixed.of`), and the target is read from it.
     """
     fixed = _Fixed.of([], target, train, test) if fixed is None else fixed
     A = np.column_stack(columns + confounds)
@@ -290,9 +291,14 @@ def remaining_excess(result: Identification, rows: tuple[ResidualRow, ...], nois
 
     The equation residual's excess given what is already found: near 1 when nothing is left.
     """
+    return _excess_left(rows, noise_floor, _found_columns(result, rows, f_top, found)[1])
+
+
+def _found_columns(result: Identification, rows: tuple[ResidualRow, ...], f_top: float,
+                   found: Sequence[tuple[MechanismKind, Place]]) -> tuple[EquationSignals, list[np.ndarray]]:
+    """The rows' equation signals and the signature columns (N, d) each of the mechanisms ``found``."""
     signals = _equation_signals(result, rows, f_top)
-    columns = [c for kind, place in found for c in signature_columns(kind, signals, place)]
-    return _excess_left(rows, noise_floor, columns)
+    return signals, [c for kind, place in found for c in signature_columns(kind, signals, place)]
 
 
 def _excess_left(rows: tuple[ResidualRow, ...], noise_floor: np.ndarray, columns: list[np.ndarray]) -> np.ndarray:
@@ -327,8 +333,7 @@ def linear_springs_left(result: Identification, rows: tuple[ResidualRow, ...], n
     nonlinearity elsewhere, which distorts the identified model more than the added masses change
     the storey, what the lab's model leaves at that storey is the evidence; re-simulation decides.
     """
-    signals = _equation_signals(result, rows, f_top)
-    columns = [c for kind, place in found for c in signature_columns(kind, signals, place)]
+    signals, columns = _found_columns(result, rows, f_top, found)
     before = _excess_left(rows, noise_floor, columns) ** 2
     if before.max() <= EXCESS ** 2:
         return []

@@ -56,3 +56,14 @@ settings.register_profile("fuzz-fast", max_examples=150, deadline=None, derandom
                           suppress_health_check=[HealthCheck.too_slow])
 settings.register_profile("fuzz-slow", max_examples=5000, deadline=None, derandomize=False, database=None,
                           suppress_health_check=[HealthCheck.too_slow])
+
+
+def rollout_and_replay(path, models, zdd, dt: float, substeps: int, monkeypatch) -> tuple:
+    """``(mujoco.rollout's, the compiled replay's)`` readings of ``models`` under ``zdd``: ``path`` (a replay
+    module with an ``ENABLED`` switch, e.g. :mod:`momentid.lab.native_replay`) off, then on."""
+    from momentid.lab import resim
+
+    with monkeypatch.context() as m:
+        m.setattr(path, "ENABLED", False)
+        rolled = resim.simulate(models, zdd, dt, substeps)
+    return rolled, resim.simulate(models, zdd, dt, substeps)

@@ -14,7 +14,7 @@ from momentid.errors import ModelError
 from momentid.lab import native_replay, resim
 from momentid.twin import fit as twin_fit
 
-from conftest import DATA
+from conftest import DATA, rollout_and_replay
 
 #: Relative agreement of the two replays: the linear part's maps are centred differences of a linear map
 #: (exact to round-off) and both integrate the classical RK4 tableau with the same compiled laws; measured
@@ -29,14 +29,6 @@ def _bouc_wen_twin(rig: str, start_trial: str, trial: str):
     return twin_fit.mechanism_start(linear_start(experiment, start_trial), "bouc_wen", storeys, [tr]), tr
 
 
-def _both(models, zdd, dt, substeps, monkeypatch):
-    """(rollout, compiled replay) of ``models`` under ``zdd``."""
-    with monkeypatch.context() as m:
-        m.setattr(native_replay, "ENABLED", False)
-        rolled = resim.simulate(models, zdd, dt, substeps)
-    return rolled, resim.simulate(models, zdd, dt, substeps)
-
-
 @pytest.mark.parametrize("rig, start_trial, trial", [("stiff_1storey", "el_centro_1", "northridge_1"),
                                                      ("flexible_3storey", "sine_1p0", "northridge")])
 def test_a_bouc_wen_twin_replays_as_mujocos_rollout(rig, start_trial, trial, monkeypatch):
@@ -45,7 +37,7 @@ def test_a_bouc_wen_twin_replays_as_mujocos_rollout(rig, start_trial, trial, mon
     models = resim.compile_models([twin.rig(), twin.rig()], tr.dt / substeps)
     assert native_replay.applies(models)
     program = models[0].numeric_data.copy()
-    rolled, replayed = _both(models, tr.zdd, tr.dt, substeps, monkeypatch)
+    rolled, replayed = rollout_and_replay(native_replay, models, tr.zdd, tr.dt, substeps, monkeypatch)
     assert replayed.shape == rolled.shape
     scale = np.sqrt(np.mean(rolled ** 2))
     assert np.max(np.abs(replayed - rolled)) <= ROUND_OFF * scale
@@ -63,7 +55,7 @@ def test_each_model_its_own_drive(monkeypatch):
     other = twin_fit.FittedRig(twin.masses, 1.1 * twin.stiffness, twin.damping_ratio, twin.friction)
     models = resim.compile_models([twin.rig(), other.rig()], tr.dt / substeps)
     drives = np.stack([tr.zdd, 0.5 * tr.zdd + 0.01])
-    rolled, replayed = _both(models, drives, tr.dt, substeps, monkeypatch)
+    rolled, replayed = rollout_and_replay(native_replay, models, drives, tr.dt, substeps, monkeypatch)
     scale = np.sqrt(np.mean(rolled ** 2))
     assert np.max(np.abs(replayed - rolled)) <= ROUND_OFF * scale
     alone = resim.simulate(models[1:], drives[1], tr.dt, substeps)[0]
@@ -91,7 +83,7 @@ def test_a_diverging_twin_is_reset_as_mujocos_step_resets_it(monkeypatch):
     unstable = twin_fit.FittedRig(twin.masses, twin.stiffness, np.array([-0.5]), twin.friction)
     substeps = resim.substeps_for(tr.dt)
     models = resim.compile_models([unstable.rig()], tr.dt / substeps)
-    rolled, replayed = _both(models, tr.zdd, tr.dt, substeps, monkeypatch)
+    rolled, replayed = rollout_and_replay(native_replay, models, tr.zdd, tr.dt, substeps, monkeypatch)
     assert np.all(np.isfinite(replayed))
     blown = np.flatnonzero(np.abs(rolled[0, :, 0]) > 1e6)
     assert blown.size and np.max(np.abs(replayed)) > 1e8           # both blew up

@@ -12,7 +12,7 @@ with ``x`` the positions, velocities and activations, ``u`` the table's jerk and
 laws put on the dofs (their states' rates replace those activations' rows), and its sensors
 ``y = y0 + C x + d u + G f``.  :func:`maps` reads ``r0, A, b, F`` and ``y0, C, d, G`` off ``mj_forward`` by
 centred differences, exact to round-off for a linear map, on a copy of the model whose program is emptied (so
-the callbacks, whoever installed them, add nothing); :func:`simulate` steps classical RK4 on that rate in a
+the callbacks, whoever installed them, add nothing); :func:`replay` steps classical RK4 on that rate in a
 numba loop calling the same compiled laws through the same program (:func:`momentid.lab.native_dispatch.rk4_replay`):
 MuJoCo's RK4 step, whose stages are those of the classical tableau.  A Bouc-Wen storey's rollout of the
 shipped flexible rig's twin costs about 6 us a step in MuJoCo, a fraction of that here.
@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import copy
 from collections.abc import Sequence
-from concurrent.futures import ThreadPoolExecutor
 
 import mujoco
 import numpy as np
@@ -34,8 +33,9 @@ import numpy as np
 from momentid.errors import ModelError
 from momentid.lab import native_forces
 from momentid.lab.linear_replay import FD_EPS, nonlinear_elements
+from momentid.lab.replay_batch import accepts
 
-__all__ = ["check", "applies", "maps", "simulate", "ENABLED"]
+__all__ = ["check", "applies", "maps", "replay", "ENABLED"]
 
 #: Replay such twins in compiled code (tests set it False to compare with ``mujoco.rollout``).
 ENABLED = True
@@ -76,14 +76,7 @@ def check(model: mujoco.MjModel) -> None:
 
 def applies(models: Sequence[mujoco.MjModel]) -> bool:
     """True when every one of ``models`` passes :func:`check` (and :data:`ENABLED`)."""
-    if not ENABLED or not models:
-        return False
-    try:
-        for m in models:
-            check(m)
-    except ModelError:
-        return False
-    return True
+    return ENABLED and accepts(check, models)
 
 
 def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -138,52 +131,17 @@ def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> tuple[np.ndar
     return lin, np.concatenate([y0[rows], C[rows].ravel(), d[rows], G[rows].ravel()])
 
 
-def simulate(models: Sequence[mujoco.MjModel], jerk: np.ndarray, act0: float, rows: np.ndarray, substeps: int,
-             threads: int = 1) -> np.ndarray:
-    """Sensor readings of RK4 twins with compiled laws under a table jerk, one reading per sample.
+def replay(model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray, control: np.ndarray,
+           out: np.ndarray) -> None:
+    """Replay one twin with compiled laws (module docstring) by RK4 from state ``x`` under the table's jerk.
 
-    Parameters
-    ----------
-    models : sequence of mujoco.MjModel
-        Twins that pass :func:`check`, one layout.
-    jerk : ndarray, shape (n_steps,) or (len(models), n_steps)
-        The table actuator's control at each integrator step (m/s^3), for every model or one per model.
-    act0 : float or ndarray, shape (len(models),)
-        The table's acceleration (m/s^2) at the start (its actuator's activation); the rest at rest.
-    rows : ndarray of int, shape (k,)
-        The sensordata entries read.
-    substeps : int
-        Integrator steps per sample: readings at steps 0, ``substeps``, ...
-    threads : int
-        Models replayed at once (the loop releases the GIL).
-
-    Returns
-    -------
-    ndarray, shape (len(models), ceil(n_steps / substeps), len(rows))
-        The readings, as ``mujoco.rollout`` returns them at those steps.
+    The :class:`~momentid.lab.replay_batch.Replay` of :func:`~momentid.lab.replay_batch.replay_batch` (its
+    parameters): ``model`` passes :func:`check`; ``x`` (2 nv + na,) the state, ``control`` (n_steps,) the jerk
+    (m/s^3), ``out`` (ceil(n_steps / substeps), k) the readings of sensordata ``rows``, written.
     """
     from momentid.lab.native_dispatch import rk4_replay
 
-    jerk = np.atleast_2d(np.asarray(jerk, float))
-    act0 = np.broadcast_to(np.asarray(act0, float), (len(models),))
-    rows = np.asarray(rows, int)
-    out = np.empty((len(models), -(-jerk.shape[1] // substeps), rows.size))
-
-    def one(k):
-        model = models[k]
-        lin, sensors = maps(model, rows)
-        nv = model.nv
-        x = np.zeros(2 * nv + model.na)
-        x[2 * nv + int(model.actuator_actadr[0])] = act0[k]
-        adr = int(model.numeric_adr[0])
-        prog = np.array(model.numeric_data[adr:adr + int(model.numeric_size[0])])
-        control = np.ascontiguousarray(jerk[k if jerk.shape[0] > 1 else 0])
-        rk4_replay(x, control, model.opt.timestep, substeps, lin, prog, native_forces.HEADER, nv, sensors, out[k])
-
-    if threads > 1 and len(models) > 1:
-        with ThreadPoolExecutor(min(threads, len(models))) as pool:
-            list(pool.map(one, range(len(models))))
-    else:
-        for k in range(len(models)):
-            one(k)
-    return out
+    lin, sensors = maps(model, rows)
+    adr = int(model.numeric_adr[0])
+    prog = np.array(model.numeric_data[adr:adr + int(model.numeric_size[0])])
+    rk4_replay(x, control, model.opt.timestep, substeps, lin, prog, native_forces.HEADER, model.nv, sensors, out)

@@ -12,7 +12,7 @@ first trial on one thread:
 * momentid: ``lab.resim.simulate`` as the twin's fit calls it, which picks the path: MuJoCo's own step map
   for a linear twin (``lab.linear_replay``), compiled RK4 for a twin whose only nonlinear forces are compiled
   laws (``lab.native_replay``: Bouc-Wen), the step map with its sliders' friction rows solved in the loop for a
-  twin whose only nonlinearity is friction loss (``lab.friction_replay``: joint friction), else
+  twin whose only nonlinearity is friction loss (``lab.step_replay``: joint friction), else
   ``mujoco.rollout``;
 * the baseline: the same call with the compiled paths off, ``mujoco.rollout`` of the same models, states
   and controls (the native callbacks installed where the twin has them).
@@ -59,19 +59,19 @@ def twins(rig: str) -> tuple:
 
 def _path(models, linear: bool) -> str:
     """The replay ``lab.resim.simulate`` takes for ``models`` (``linear``: as the twin's fit asks)."""
-    from momentid.lab import friction_replay, native_replay
+    from momentid.lab import step_replay, native_replay
 
     if native_replay.applies(models):
         return "compiled RK4 (native_replay)"
-    if friction_replay.applies(models):
-        return "step map and friction rows (friction_replay)"
+    if step_replay.applies(models):
+        return "step map and friction rows (step_replay)"
     return "step map (linear_replay)" if linear else "mujoco.rollout"
 
 
 def measure(rig: str, repeat: int, batch: int) -> list[dict]:
     """One row per physics of ``rig``: best wall seconds of momentid's replay and of the rollout, their ratio,
     the path and the readings' largest difference relative to their RMS."""
-    from momentid.lab import friction_replay, native_replay, resim
+    from momentid.lab import step_replay, native_replay, resim
 
     tr, physics = twins(rig)
     substeps = resim.substeps_for(tr.dt)
@@ -84,14 +84,14 @@ def measure(rig: str, repeat: int, batch: int) -> list[dict]:
         out = {}
         for _ in range(repeat):
             for side in ("momentid", "rollout"):
-                native_replay.ENABLED = friction_replay.ENABLED = side == "momentid"
+                native_replay.ENABLED = step_replay.ENABLED = side == "momentid"
                 try:
                     start = time.perf_counter()
                     out[side] = resim.simulate(models, drive, tr.dt, substeps, threads=1,
                                                linear=linear and side == "momentid")
                     best[side] = min(best[side], time.perf_counter() - start)
                 finally:
-                    native_replay.ENABLED = friction_replay.ENABLED = True
+                    native_replay.ENABLED = step_replay.ENABLED = True
         scale = float(np.sqrt(np.mean(out["rollout"] ** 2)))
         rows.append({"rig": rig, "physics": name, "path": _path(models, linear), "models": batch,
                      "steps": int(len(drive) * substeps), "momentid_s": best["momentid"],

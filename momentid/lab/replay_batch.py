@@ -1,7 +1,7 @@
 """The batch around a compiled replay: many models of one layout under one table drive or one each, replayed
 on threads (the compiled loops release the GIL), each read at the same sensordata entries.
 
-:mod:`momentid.lab.native_replay` and :mod:`momentid.lab.friction_replay` replay one model at a time; this
+:mod:`momentid.lab.native_replay` and :mod:`momentid.lab.step_replay` replay one model at a time; this
 module shapes their inputs and output and spreads their models over threads.
 """
 
@@ -21,7 +21,7 @@ __all__ = ["Replay", "replay_batch", "accepts"]
 
 class Replay(Protocol):
     """How a compiled path replays one model (:func:`momentid.lab.native_replay.replay`,
-    :func:`momentid.lab.friction_replay.replay`)."""
+    :func:`momentid.lab.step_replay.replay`)."""
 
     def __call__(self, model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray, control: np.ndarray,
                  out: np.ndarray) -> None:

@@ -137,7 +137,7 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
         is not linear raises :class:`~momentid.errors.ModelError`.  Twins whose only nonlinear forces are
         compiled laws (Bouc-Wen's, under RK4) replay in compiled code whatever ``linear`` says
         (:mod:`momentid.lab.native_replay`: the same readings to round-off), and so do twins whose only
-        nonlinearity is their joints' friction loss (:mod:`momentid.lab.friction_replay`).
+        nonlinearity is their joints' friction loss (:mod:`momentid.lab.step_replay`).
 
     Returns
     -------
@@ -169,12 +169,12 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
                                   for m, j, z in zip(models, jerk, drives)])
         return _finite(out)
     nthread = max(1, min(threads or ROLLOUT_THREADS or os.cpu_count() or 1, len(models)))
-    from momentid.lab import friction_replay, native_replay
+    from momentid.lab import step_replay, native_replay
     from momentid.lab.replay_batch import replay_batch
 
     # compiled laws the only nonlinear forces, or the sliders' friction loss the only nonlinearity: no MuJoCo
     # in the loop
-    for path in (native_replay, friction_replay):
+    for path in (native_replay, step_replay):
         if path.applies(models):
             return _finite(replay_batch(models, jerk, drives[:, 0], index, substeps, nthread, path.replay))
     datas = [mujoco.MjData(first) for _ in range(nthread)]

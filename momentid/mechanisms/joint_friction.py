@@ -14,7 +14,7 @@ floor below the storey, with the slider's ``frictionloss`` ``f_j`` (MuJoCo's dry
 and a fixed tendon ``jenkins<s>_<j> = q_s - q_(s-1) - p`` (the storey's drift less the slip) with
 stiffness ``k_j``.  No Python runs in the loop: the elements live in the MJCF and a stock
 ``mujoco.MjModel`` carries them (a real rig's twin with them replays MuJoCo's step in compiled code,
-:mod:`momentid.lab.friction_replay`).  The ``SLIDERS`` elements sit at geometric slip drifts from
+:mod:`momentid.lab.step_replay`).  The ``SLIDERS`` elements sit at geometric slip drifts from
 ``delta_max / SPAN`` to ``delta_max``, each weighted by the density's share of its bin.  The storey
 tendon keeps ``k - stiffness`` so that the stuck joint (small drifts) has the storey's stiffness ``k``.
 

@@ -11,9 +11,9 @@ first trial on one thread:
 
 * momentid: ``lab.resim.simulate`` as the twin's fit calls it, which picks the path: MuJoCo's own step map
   for a linear twin (``lab.linear_replay``), compiled RK4 for a twin whose only nonlinear forces are compiled
-  laws (``lab.native_replay``: Bouc-Wen), the step map with its sliders' friction rows solved in the loop for a
-  twin whose only nonlinearity is friction loss (``lab.step_replay``: joint friction), else
-  ``mujoco.rollout``;
+  laws (``lab.native_replay``: Bouc-Wen), the step map with its sliders' friction rows and its tendons'
+  polynomial forces solved in the loop for a twin with those nonlinearities alone (``lab.step_replay``: joint
+  friction, cubic spring, quadratic damping), else ``mujoco.rollout``;
 * the baseline: the same call with the compiled paths off, ``mujoco.rollout`` of the same models, states
   and controls (the native callbacks installed where the twin has them).
 
@@ -59,19 +59,19 @@ def twins(rig: str) -> tuple:
 
 def _path(models, linear: bool) -> str:
     """The replay ``lab.resim.simulate`` takes for ``models`` (``linear``: as the twin's fit asks)."""
-    from momentid.lab import step_replay, native_replay
+    from momentid.lab import native_replay, step_replay
 
     if native_replay.applies(models):
         return "compiled RK4 (native_replay)"
     if step_replay.applies(models):
-        return "step map and friction rows (step_replay)"
+        return "step map and nonlinear inputs (step_replay)"
     return "step map (linear_replay)" if linear else "mujoco.rollout"
 
 
 def measure(rig: str, repeat: int, batch: int) -> list[dict]:
     """One row per physics of ``rig``: best wall seconds of momentid's replay and of the rollout, their ratio,
     the path and the readings' largest difference relative to their RMS."""
-    from momentid.lab import step_replay, native_replay, resim
+    from momentid.lab import native_replay, resim, step_replay
 
     tr, physics = twins(rig)
     substeps = resim.substeps_for(tr.dt)

@@ -1,13 +1,14 @@
-"""A twin whose step is linear but for its sliders' friction loss and its tendons' polynomial springs (joint
-friction, a cubic spring), replayed in compiled code: the same readings as MuJoCo's own steps to round-off,
-several times faster.
+"""A twin whose step is linear but for its sliders' friction loss and its tendons' polynomial springs and
+dampers (joint friction, a cubic spring, quadratic damping), replayed in compiled code: the same readings as
+MuJoCo's own steps to round-off, several times faster.
 
 A real rig's twin under ``implicitfast`` is springs and dampers on tendons and the table driven by its jerk
 actuator, plus what its physics adds: joint friction's Iwan sliders, whose friction loss is a constraint row
-each (:mod:`momentid.mechanisms.joint_friction`, solved by PGS), or a cubic spring's polynomial stiffness
-on a storey tendon (:mod:`momentid.mechanisms.cubic_spring`).  MuJoCo treats a constraint force as any
-other generalized force in the implicit update, and integrates a tendon's spring explicitly, so given those
-forces ``g`` (the rows' forces, then the polynomial part of each such tendon's force) the step is linear:
+each (:mod:`momentid.mechanisms.joint_friction`, solved by PGS), or a polynomial stiffness or damping on a
+storey tendon (:mod:`momentid.mechanisms.cubic_spring`, :mod:`momentid.mechanisms.quadratic_damping`).
+MuJoCo treats a constraint force as any other generalized force in the implicit update and integrates a
+tendon's spring explicitly, so given those forces ``g`` (the rows' forces, then the polynomial part of each
+such tendon's force) the step is linear:
 
     x+ = A x + b u + F g,        y = y0 + C x + d u + G g,
 
@@ -21,16 +22,19 @@ problem PGS solves splits row by row and its solution is exact in one sweep,
 ``a0`` the slider's unconstrained acceleration, ``v`` its velocity, ``B`` the reference acceleration's
 damping (MuJoCo's ``efc_KBIP``), ``A_ii + R_i`` the row's regularised inverse inertia (``efc_AR``), ``F_i``
 its friction loss.  A fixed tendon of length ``L = l + Lx x`` stretched ``D = L - L0`` from its spring's
-length adds ``-(k2 D^2 + k3 D^3)`` (its ``stiffnesspoly``, MuJoCo's law).  :func:`maps` reads ``A, b, F,
-C, d, G, P, p, Lx, l`` by centred differences of ``mj_step`` and ``mj_forward`` of a copy without those
-nonlinear terms (exact to round-off for a linear map; ``g`` put in as applied forces) and ``B, A_ii + R_i``
-off ``mj_forward`` of the model itself; :func:`replay` steps them in a numba loop.  It reads what
-``mujoco.rollout`` reads to 3e-11 of the signal over the flexible rig's 12 000-sample Northridge
-(``tests/test_step_replay.py``; stick-slip switches amplify round-off, so not to 1e-15).
+length, moving at ``V``, adds ``-(k2 D^2 + k3 D^3 + b2 V |V| + b3 V^3)`` (its ``stiffnesspoly`` and
+``dampingpoly``: MuJoCo's laws).  implicitfast also puts the dampers' slope into its update's matrix: a
+diagonal term on the dofs they span, which the loop carries by Woodbury (:func:`_implicit`).  :func:`maps`
+reads the maps by centred differences of ``mj_step`` and ``mj_forward`` of a copy without those nonlinear
+terms (exact to round-off for a linear map; ``g`` put in as applied forces) and ``B, A_ii + R_i`` off
+``mj_forward`` of the model itself; :func:`replay` steps them in a numba loop.  It reads what
+``mujoco.rollout`` reads to 3e-11 of the signal over the flexible rig's 12 000-sample Northridge with joint
+friction, 3e-13 with quadratic damping (``tests/test_step_replay.py``; stick-slip switches amplify
+round-off, so not to 1e-15).
 
-Anything else nonlinear (compiled laws, polynomial damping, which implicitfast differentiates, limits,
-contacts, tendon friction loss), another integrator, friction rows under another solver, or rows that
-couple, is refused (:func:`check`): the replay is then ``mujoco.rollout``'s.
+Anything else nonlinear (compiled laws, limits, contacts, tendon friction loss, a damper across dofs the
+implicit update couples), another integrator, friction rows under another solver, or rows that couple, is
+refused (:func:`check`): the replay is then ``mujoco.rollout``'s.
 """
 
 from __future__ import annotations
@@ -73,16 +77,31 @@ def _rows(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
 
 
 def _polynomial_tendons(model: mujoco.MjModel) -> np.ndarray:
-    """The tendons with a polynomial spring."""
-    return np.flatnonzero(np.any(model.tendon_stiffnesspoly != 0, axis=1))
+    """The tendons with a polynomial spring or damper."""
+    return np.flatnonzero(np.any(np.hstack([model.tendon_stiffnesspoly, model.tendon_dampingpoly]) != 0, axis=1))
 
 
 def _linear_part(model: mujoco.MjModel) -> mujoco.MjModel:
-    """A copy of ``model`` without its dofs' friction loss and its tendons' polynomial springs."""
+    """A copy of ``model`` without its dofs' friction loss and its tendons' polynomial springs and dampers."""
     free = copy.copy(model)
     free.dof_frictionloss[:] = 0.0
     free.tendon_stiffnesspoly[:] = 0.0
+    free.tendon_dampingpoly[:] = 0.0
     return free
+
+
+def _coupled_dampers(model: mujoco.MjModel) -> bool:
+    """Whether a tendon's polynomial damper spans two dofs whose entry implicitfast's derivative keeps (its
+    sparsity: a dof and its ancestors).  The derivative of a damper across sibling dofs (a storey's floors)
+    keeps only its diagonal, which :func:`_implicit` carries."""
+    pattern = {(i, int(model.D_colind[model.D_rowadr[i] + k])) for i in range(model.nv)
+               for k in range(model.D_rownnz[i])}
+    for t in np.flatnonzero(np.any(model.tendon_dampingpoly != 0, axis=1)):
+        adr = model.tendon_adr[t]
+        touched = {int(model.jnt_dofadr[model.wrap_objid[w]]) for w in range(adr, adr + model.tendon_num[t])}
+        if any(i != j and (i, j) in pattern for i in touched for j in touched):
+            return True
+    return False
 
 
 def _unlike(model: mujoco.MjModel) -> list[str]:
@@ -103,7 +122,9 @@ def _unlike(model: mujoco.MjModel) -> list[str]:
         wraps = model.wrap_type[model.tendon_adr[t]:model.tendon_adr[t] + model.tendon_num[t]]
         lengths = model.tendon_lengthspring[t]
         if np.any(wraps != mujoco.mjtWrap.mjWRAP_JOINT) or lengths[0] != lengths[1]:
-            why.append(f"a polynomial spring on tendon {t} that is not fixed, or has a dead band")
+            why.append(f"a polynomial spring or damper on tendon {t} that is not fixed, or has a dead band")
+    if _coupled_dampers(model):
+        why.append("a polynomial damper across dofs that implicitfast's update couples")
     if np.any(model.dof_frictionloss) and (model.opt.solver != mujoco.mjtSolver.mjSOL_PGS
                                            or model.opt.noslip_iterations):
         why.append("friction loss under a solver other than PGS (or noslip iterations)")
@@ -115,7 +136,7 @@ def _unlike(model: mujoco.MjModel) -> list[str]:
 def check(model: mujoco.MjModel) -> None:
     """Raise :class:`~momentid.errors.ModelError` unless ``model`` is an implicitfast twin whose only
     nonlinearities are its dofs' friction loss (under PGS, each row uncoupled from the others) and its fixed
-    tendons' polynomial springs (module docstring).
+    tendons' polynomial springs and dampers (module docstring).
 
     Parameters
     ----------
@@ -137,7 +158,7 @@ def check(model: mujoco.MjModel) -> None:
     if why:
         raise ModelError(f"the twin's model has {', '.join(why)}: expected an implicitfast twin whose only "
                          f"nonlinearities are its sliders' friction loss and its fixed tendons' polynomial springs "
-                         f"(its replay is mujoco.rollout's)")
+                         f"and dampers (its replay is mujoco.rollout's)")
 
 
 def applies(models: Sequence[mujoco.MjModel]) -> bool:
@@ -171,9 +192,17 @@ class StepMaps:
     velocity : ndarray of int, shape (nf,)
         Each row's velocity's index in the state.
     Lx, stretch : ndarray, shapes (nt, nx), (nt,)
-        Each polynomial tendon's stretch ``D = stretch + Lx x`` (m) from its spring's length.
-    poly : ndarray, shape (nt, 2)
-        Its ``k2`` (N/m^2) and ``k3`` (N/m^3): the force ``-(k2 D^2 + k3 D^3)``.
+        Each polynomial tendon's stretch ``D = stretch + Lx x`` (m) from its spring's length; its velocity is
+        ``V = Lx[:, :nv] v`` (a fixed tendon's Jacobian is that of its length).
+    poly : ndarray, shape (nt, 4)
+        Its ``k2`` (N/m^2), ``k3`` (N/m^3), ``b2`` (N s^2/m^2), ``b3`` (N s^3/m^3): the force
+        ``-(k2 D^2 + k3 D^3 + b2 V |V| + b3 V^3)``.
+    damped : ndarray of int, shape (nd,)
+        The dofs the polynomial dampers span.
+    Fd : ndarray, shape (nx, nd)
+        Next state per unit generalized force (N) on each of them (:func:`_implicit`).
+    J2 : ndarray, shape (nt, nd)
+        The square of each tendon's Jacobian entry on each of them.
     """
 
     A: np.ndarray
@@ -192,6 +221,9 @@ class StepMaps:
     Lx: np.ndarray
     stretch: np.ndarray
     poly: np.ndarray
+    damped: np.ndarray
+    Fd: np.ndarray
+    J2: np.ndarray
 
 
 def _friction_rows(model: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -224,8 +256,9 @@ def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> StepMaps:
     free = _linear_part(model)                 # no constraints, no polynomials: the step with g as applied forces
     fd = mujoco.MjData(free)
     nv, nx, nf, nt = model.nv, 2 * model.nv + model.na, dofs.size, tendons.size
-    spread = np.zeros((nv, nf + nt))           # generalized force per unit of each g: the row's dof, ...
+    spread = np.zeros((nv, nf + nt + nv))      # generalized force per unit of each g: the row's dof, ...
     spread[dofs, np.arange(nf)] = 1.0
+    spread[:, nf + nt:] = np.eye(nv)           # (and per unit on each dof, for the dampers' implicit share)
 
     def at(x, u, g):              # (next state, readings, the rows' unconstrained accelerations, tendon lengths)
         fd.qpos[:], fd.qvel[:], fd.act[:] = x[:nv], x[nv:2 * nv], x[2 * nv:]
@@ -242,20 +275,23 @@ def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> StepMaps:
         plus, minus = at(*direction(FD_EPS, x, u, g)), at(*direction(-FD_EPS, x, u, g))
         return [(p - m) / (2 * FD_EPS) for p, m in zip(plus, minus)]
 
-    x0, g0 = np.zeros(nx), np.zeros(nf + nt)
+    x0, g0 = np.zeros(nx), np.zeros(nf + nt + nv)
     _, y0, _, rest = at(x0, 0.0, g0)
     A, C, P, Lx = np.zeros((nx, nx)), np.zeros((y0.size, nx)), np.zeros((nf, nx)), np.zeros((nt, nx))
     for j in range(nx):
         A[:, j], C[:, j], P[:, j], Lx[:, j] = centred(x0, 0.0, g0, lambda e, x, u, g: (x + e * np.eye(nx)[j], u, g))
     b, d, p, _ = centred(x0, 0.0, g0, lambda e, x, u, g: (x, u + e, g))
-    spread[:, nf:] = Lx[:, :nv].T              # ... and the tendon's Jacobian (a fixed tendon's: constant)
-    F, G = np.zeros((nx, nf + nt)), np.zeros((y0.size, nf + nt))
-    for j in range(nf + nt):
-        F[:, j], G[:, j], _, _ = centred(x0, 0.0, g0, lambda e, x, u, g: (x, u, g + e * np.eye(nf + nt)[j]))
+    spread[:, nf:nf + nt] = Lx[:, :nv].T      # ... and the tendon's Jacobian (a fixed tendon's: constant)
+    F, G = np.zeros((nx, nf + nt + nv)), np.zeros((y0.size, nf + nt + nv))
+    for j in range(nf + nt + nv):
+        F[:, j], G[:, j], _, _ = centred(x0, 0.0, g0, lambda e, x, u, g: (x, u, g + e * np.eye(g0.size)[j]))
     rows = np.arange(y0.size) if rows is None else np.asarray(rows, int)
-    return StepMaps(A, b, F, C[rows], d[rows], G[rows], y0[rows], P, p, damping, inverse_inertia,
-                    model.dof_frictionloss[dofs].copy(), nv + dofs, Lx, rest - model.tendon_lengthspring[tendons, 0],
-                    model.tendon_stiffnesspoly[tendons].copy())
+    poly = np.hstack([model.tendon_stiffnesspoly[tendons], model.tendon_dampingpoly[tendons]])
+    damped = np.flatnonzero(np.any(Lx[poly[:, 2:].any(axis=1), :nv] != 0, axis=0))
+    return StepMaps(A, b, F[:, :nf + nt], C[rows], d[rows], G[rows, :nf + nt], y0[rows], P, p, damping,
+                    inverse_inertia, model.dof_frictionloss[dofs].copy(), nv + dofs, Lx,
+                    rest - model.tendon_lengthspring[tendons, 0], poly, damped, F[:, nf + nt + damped],
+                    Lx[:, damped] ** 2)
 
 
 def replay(model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray, control: np.ndarray,
@@ -269,7 +305,8 @@ def replay(model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray
     mp = maps(model, rows)
     _run(*_sparse(np.hstack([mp.A, mp.F])), mp.b, *_sparse(mp.P), mp.p, np.hstack([mp.C, mp.G]), mp.d, mp.y0,
          mp.damping, mp.inverse_inertia, mp.limit, mp.velocity, np.ascontiguousarray(mp.Lx), mp.stretch,
-         np.ascontiguousarray(mp.poly), model.nv, model.opt.timestep, x, control, substeps, out)
+         mp.poly, mp.damped, np.ascontiguousarray(mp.Fd), np.ascontiguousarray(mp.J2), model.nv, model.opt.timestep,
+         x, control, substeps, out)
 
 
 def _sparse(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -283,6 +320,15 @@ def _sparse(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 @disk_cached(numba.njit, inline="always")
+def _dot(a, b, start, stop):   # pragma: no cover  (compiled; tested)
+    """``sum(a[i] * b[start + i] for i < stop - start)``: a short dot product without BLAS's call overhead."""
+    s = 0.0
+    for i in range(stop - start):
+        s += a[i] * b[start + i]
+    return s
+
+
+@disk_cached(numba.njit, inline="always")
 def _forces(x, u, z, p_start, p_column, p_value, p, damping, inverse_inertia, limit, velocity, Lx, stretch,
             poly):   # pragma: no cover  (compiled; tested)
     """``z = [x; g]``: the friction rows' forces, then the polynomial tendons' (module docstring)."""
@@ -293,9 +339,12 @@ def _forces(x, u, z, p_start, p_column, p_value, p, damping, inverse_inertia, li
         for e in range(p_start[r], p_start[r + 1]):
             a += p_value[e] * x[p_column[e]]
         z[nx + r] = min(max(-a / inverse_inertia[r], -limit[r]), limit[r])
+    nv = (nx - 1) // 2
     for t in range(stretch.size):
-        D = stretch[t] + np.dot(Lx[t], x)
-        z[nx + nf + t] = -(poly[t, 0] * D * D + poly[t, 1] * D * D * D)
+        D = stretch[t] + _dot(Lx[t], x, 0, nx)
+        V = _dot(Lx[t], x, nv, 2 * nv)
+        z[nx + nf + t] = -(poly[t, 0] * D * D + poly[t, 1] * D * D * D
+                           + poly[t, 2] * V * abs(V) + poly[t, 3] * V * V * V)
 
 
 @disk_cached(numba.njit, inline="always")
@@ -308,18 +357,58 @@ def _next(z, u, w_start, w_column, w_value, b, nxt):   # pragma: no cover  (comp
         nxt[i] = s
 
 
+@disk_cached(numba.njit, inline="always")
+def _implicit(x, nxt, Lx, poly, damped, Fd, J2, work, rhs):   # pragma: no cover  (compiled; tested)
+    """Correct ``nxt``, the step without the polynomial dampers' share of implicitfast's matrix, for it.
+    MuJoCo's update solves ``(M - h D + h diag(e)) dv = h f`` with ``e_j = sum_t s_t J_tj^2`` on the dampers'
+    dofs, ``s_t = 2 b2 |V_t| + 3 b3 V_t^2`` each damper's slope at the step's start (implicitfast keeps the
+    derivative's entries on its sparsity only: a storey's floors are siblings, so its diagonal).  By Woodbury
+    ``dv`` is the step's ``dv0`` less ``Fd w``, ``(I + diag(e) Wd) w = diag(e) dv0`` on those dofs with ``Wd``
+    ``Fd``'s velocity rows of them, and the positions follow the velocities: ``nxt -= Fd w``."""
+    nt, nd, nx = J2.shape[0], J2.shape[1], x.size
+    nv = (nx - 1) // 2
+    if nd == 0:
+        return
+    for j in range(nd):
+        rhs[j] = 0.0
+    for t in range(nt):
+        V = _dot(Lx[t], x, nv, 2 * nv)
+        slope = 2.0 * poly[t, 2] * abs(V) + 3.0 * poly[t, 3] * V * V
+        for j in range(nd):
+            rhs[j] += slope * J2[t, j]          # e_j for now
+    for r in range(nd):
+        for c in range(nd):
+            work[r, c] = (1.0 if r == c else 0.0) + rhs[r] * Fd[nv + damped[r], c]
+        rhs[r] *= nxt[nv + damped[r]] - x[nv + damped[r]]
+    for c in range(nd):                  # Gauss without pivots: I + E Wd is similar to I + E^1/2 Wd E^1/2 (SPD)
+        for r in range(c + 1, nd):
+            factor = work[r, c] / work[c, c]
+            for j in range(c, nd):
+                work[r, j] -= factor * work[c, j]
+            rhs[r] -= factor * rhs[c]
+    for c in range(nd - 1, -1, -1):
+        for j in range(c + 1, nd):
+            rhs[c] -= work[c, j] * rhs[j]
+        rhs[c] /= work[c, c]
+    for i in range(nx):
+        nxt[i] -= _dot(Fd[i], rhs, 0, nd)
+
+
 @disk_cached(numba.njit, nogil=True)
 def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0, damping, inverse_inertia,
-         limit, velocity, Lx, stretch, poly, nv, h, x, jerk, substeps, out):   # pragma: no cover  (compiled; tested)
+         limit, velocity, Lx, stretch, poly, damped, Fd, J2, nv, h, x, jerk, substeps,
+         out):   # pragma: no cover  (compiled; tested)
     """The replay loop on ``z = [x; g]`` (:func:`_forces`): the readings ``y0 + d u + [C G] z`` at every
     ``substeps``-th step, the next state ``W z + b u`` (``W = [A F]`` and ``P`` in compressed rows,
-    :func:`_sparse`).  As ``mj_step`` does, a position or velocity that is NaN or beyond 1e10 resets the twin
-    to rest (control 0 for the step), and so does an acceleration beyond 1e10 (here the step's velocity change
-    over ``h``, MuJoCo's reads its ``qacc``: the same step but where the implicit update's share decides), after
-    which the step's readings are those at rest."""
-    nx, k = x.size, y0.size
-    z = np.empty(nx + limit.size + stretch.size)
+    :func:`_sparse`) with the polynomial dampers' implicit share (:func:`_implicit`).  As ``mj_step`` does, a
+    position or velocity that is NaN or beyond 1e10 resets the twin to rest (control 0 for the step), and so
+    does an acceleration beyond 1e10 (here the step's velocity change over ``h``, MuJoCo's reads its ``qacc``:
+    the same step but where the implicit update's share decides), after which the step's readings are those
+    at rest."""
+    nx, k, nt = x.size, y0.size, stretch.size
+    z = np.empty(nx + limit.size + nt)
     nxt = np.empty(nx)
+    work, rhs = np.empty((damped.size, damped.size)), np.empty(damped.size)
     for step in range(jerk.size):
         u = jerk[step]
         for i in range(2 * nv):
@@ -329,6 +418,7 @@ def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0
                 break
         _forces(x, u, z, p_start, p_column, p_value, p, damping, inverse_inertia, limit, velocity, Lx, stretch, poly)
         _next(z, u, w_start, w_column, w_value, b, nxt)
+        _implicit(x, nxt, Lx, poly, damped, Fd, J2, work, rhs)
         for i in range(nv, 2 * nv):
             if not abs(nxt[i] - x[i]) <= 1e10 * h:
                 x[:] = 0.0
@@ -339,5 +429,5 @@ def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0
                 break
         if step % substeps == 0:
             for i in range(k):
-                out[step // substeps, i] = y0[i] + d[i] * u + np.dot(CG[i], z)
+                out[step // substeps, i] = y0[i] + d[i] * u + _dot(CG[i], z, 0, z.size)
         x[:] = nxt

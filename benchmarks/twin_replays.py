@@ -61,11 +61,11 @@ def _path(models, linear: bool) -> str:
     """The replay ``lab.resim.simulate`` takes for ``models`` (``linear``: as the twin's fit asks)."""
     from momentid.lab import native_replay, step_replay
 
+    if linear:
+        return "step map (linear_replay)"
     if native_replay.applies(models):
         return "compiled RK4 (native_replay)"
-    if step_replay.applies(models):
-        return "step map and nonlinear inputs (step_replay)"
-    return "step map (linear_replay)" if linear else "mujoco.rollout"
+    return "step map and nonlinear inputs (step_replay)" if step_replay.applies(models) else "mujoco.rollout"
 
 
 def measure(rig: str, repeat: int, batch: int) -> list[dict]:

@@ -116,7 +116,7 @@ def test_a_twin_with_a_compiled_law_is_refused():
     twin = twin_fit.FittedRig(np.array([0.179]), np.array([[3400.0]]), np.array([0.002]),
                               (Mechanism("bouc_wen", 1, bouc_wen),))
     model = resim.compile_models([twin.rig()], 1.0 / 240)[0]
-    with pytest.raises(ModelError, match="friction loss and its fixed tendons' polynomial springs"):
+    with pytest.raises(ModelError, match="its sliders' friction loss and its fixed tendons'"):
         step_replay.check(model)
     assert not step_replay.applies([model])
 

@@ -215,8 +215,10 @@ def _rk4(x, jerk, h, substeps, lin, prog, base, header, nv, sensors, out):   # p
     every ``substeps``-th step (``sensors`` packs ``[y0 | C (k x nx) | d | G (k x nv)]``).  A state or
     acceleration MuJoCo calls bad resets the model as ``mj_step`` does (``mj_resetData``: at rest, the
     table's activation, time and control at 0 for that step) and the replay goes on from rest: a diverged twin
-    reads its blow-up, finite, as its rollout does (which stops stepping it meanwhile)."""
+    reads its blow-up, finite, as its rollout does (which stops stepping it meanwhile).  Returns the number of
+    such resets (MuJoCo's warnings)."""
     nx, k = x.size, out.shape[1]
+    resets = 0
     applied, k1, k2, k3, k4, stage = (np.empty(nv), np.empty(nx), np.empty(nx), np.empty(nx), np.empty(nx),
                                       np.empty(nx))
     t = 0.0
@@ -225,10 +227,12 @@ def _rk4(x, jerk, h, substeps, lin, prog, base, header, nv, sensors, out):   # p
         if _bad(x, 0, 2 * nv):           # MuJoCo's checks of positions and velocities: reset
             x[:] = 0.0
             t, u = 0.0, 0.0
+            resets += 1
         _derivative(x, u, t, lin, prog, base, header, nv, applied, k1)
         if _bad(k1, nv, 2 * nv):         # and of accelerations: reset, forward again
             x[:] = 0.0
             t, u = 0.0, 0.0
+            resets += 1
             _derivative(x, u, t, lin, prog, base, header, nv, applied, k1)
         if step % substeps == 0:
             row = step // substeps
@@ -251,10 +255,11 @@ def _rk4(x, jerk, h, substeps, lin, prog, base, header, nv, sensors, out):   # p
         for i in range(nx):
             x[i] += h * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]) / 6.0
         t += h
+    return resets
 
 
 def rk4_replay(x: np.ndarray, jerk: np.ndarray, h: float, substeps: int, lin: np.ndarray, prog: np.ndarray,
-               header: int, nv: int, sensors: np.ndarray, out: np.ndarray) -> None:
+               header: int, nv: int, sensors: np.ndarray, out: np.ndarray) -> int:
     """Replay a model's RK4 steps from state ``x`` (modified) under the control ``jerk``, its forces the
     program ``prog``'s compiled laws (:mod:`momentid.lab.native_replay` builds the arguments).
 
@@ -278,6 +283,12 @@ def rk4_replay(x: np.ndarray, jerk: np.ndarray, h: float, substeps: int, lin: np
         Degrees of freedom.
     out : ndarray, shape (ceil(n_steps / substeps), k)
         The readings, written.
+
+    Returns
+    -------
+    int
+        How many times MuJoCo's checks reset the model to rest (a position, velocity or acceleration NaN or
+        beyond 1e10: each a warning of ``mj_step``).
     """
-    _rk4(x, jerk, float(h), int(substeps), lin, prog, np.int64(prog.ctypes.data), np.int64(header), np.int64(nv),
-         sensors, out)
+    return int(_rk4(x, jerk, float(h), int(substeps), lin, prog, np.int64(prog.ctypes.data), np.int64(header),
+                    np.int64(nv), sensors, out))

@@ -132,16 +132,18 @@ def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> tuple[np.ndar
 
 
 def replay(model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray, control: np.ndarray,
-           out: np.ndarray) -> None:
+           out: np.ndarray) -> int:
     """Replay one twin with compiled laws (module docstring) by RK4 from state ``x`` under the table's jerk.
 
     The :class:`~momentid.lab.replay_batch.Replay` of :func:`~momentid.lab.replay_batch.replay_batch` (its
     parameters): ``model`` passes :func:`check`; ``x`` (2 nv + na,) the state, ``control`` (n_steps,) the jerk
-    (m/s^3), ``out`` (ceil(n_steps / substeps), k) the readings of sensordata ``rows``, written.
+    (m/s^3), ``out`` (ceil(n_steps / substeps), k) the readings of sensordata ``rows``, written; returns the
+    number of resets.
     """
     from momentid.lab.native_dispatch import rk4_replay
 
     lin, sensors = maps(model, rows)
     adr = int(model.numeric_adr[0])
     prog = np.array(model.numeric_data[adr:adr + int(model.numeric_size[0])])
-    rk4_replay(x, control, model.opt.timestep, substeps, lin, prog, native_forces.HEADER, model.nv, sensors, out)
+    return rk4_replay(x, control, model.opt.timestep, substeps, lin, prog, native_forces.HEADER, model.nv, sensors,
+                      out)

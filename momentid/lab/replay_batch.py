@@ -24,7 +24,7 @@ class Replay(Protocol):
     :func:`momentid.lab.step_replay.replay`)."""
 
     def __call__(self, model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray, control: np.ndarray,
-                 out: np.ndarray) -> None:
+                 out: np.ndarray) -> int:
         """Replay ``model`` from state ``x`` under the table's jerk ``control``.
 
         Parameters
@@ -41,6 +41,12 @@ class Replay(Protocol):
             The table actuator's control (m/s^3) at each step.
         out : ndarray, shape (ceil(n_steps / substeps), k)
             The readings, written as ``mujoco.rollout`` reads them.
+
+        Returns
+        -------
+        int
+            How many times the model was reset to rest as ``mj_step`` resets it (a state or acceleration NaN
+            or beyond 1e10: each a MuJoCo warning).
         """
 
 
@@ -102,3 +108,4 @@ def accepts(check: Callable[[mujoco.MjModel], None], models: Sequence[mujoco.MjM
     except ModelError:
         return False
     return True
+

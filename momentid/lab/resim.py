@@ -169,14 +169,12 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
                                   for m, j, z in zip(models, jerk, drives)])
         return _finite(out)
     nthread = max(1, min(threads or ROLLOUT_THREADS or os.cpu_count() or 1, len(models)))
-    from momentid.lab import step_replay, native_replay
+    from momentid.lab.compiled_paths import compiled_path
     from momentid.lab.replay_batch import replay_batch
 
-    # compiled laws the only nonlinear forces, or the sliders' friction loss the only nonlinearity: no MuJoCo
-    # in the loop
-    for path in (native_replay, step_replay):
-        if path.applies(models):
-            return _finite(replay_batch(models, jerk, drives[:, 0], index, substeps, nthread, path.replay))
+    path = compiled_path(models)           # compiled laws, or friction rows and polynomial tendons: no MuJoCo
+    if path is not None:                   # in the loop
+        return _finite(replay_batch(models, jerk, drives[:, 0], index, substeps, nthread, path))
     datas = [mujoco.MjData(first) for _ in range(nthread)]
     full = mujoco.mjtState.mjSTATE_FULLPHYSICS
     states = []

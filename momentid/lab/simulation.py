@@ -523,6 +523,26 @@ def run_experiment(scenario: Scenario, path: str | os.PathLike, *, progress: boo
     )
 
 
+def _compiled_replay(model: mujoco.MjModel, nodes: np.ndarray, h: float, index: np.ndarray, mechanisms, structure
+                     ) -> tuple[np.ndarray, list[tuple[str, int]]] | None:
+    """:func:`_roll`'s readings of ``model`` from rest, and its warnings, by a compiled replay that steps it as
+    MuJoCo does (:func:`momentid.lab.compiled_paths.compiled_path`: its callback forces' compiled laws under RK4,
+    or a linear step), else None."""
+    from momentid.lab.compiled_paths import compiled_path
+
+    if rig.needs_callback(mechanisms) and not native_forces.load_program(
+            model, mechanisms, structure.storey_stiffness if structure is not None else None):
+        return None
+    path = compiled_path([model])
+    if path is None:
+        return None
+    x = np.zeros(2 * model.nv + model.na)
+    x[2 * model.nv + int(model.actuator_actadr[0])] = nodes[0]
+    out = np.empty((len(nodes) - 1, len(index)))
+    resets = path(model, index, 1, x, table_jerk(nodes, h), out)
+    return out, [("mjWARN_BADQACC", resets)] if resets else []
+
+
 def replay(structure: Structure, mechanisms: Sequence[Mechanism], run: RunData, zdd: np.ndarray | None = None
            ) -> dict[str, np.ndarray]:
     """Replay a recorded run's table acceleration through a MuJoCo model.
@@ -561,9 +581,13 @@ def replay(structure: Structure, mechanisms: Sequence[Mechanism], run: RunData, 
     names = [f"{g}{i + 1}" for g in ("a", "q", "v") for i in range(d)]
     index = np.array([layout[c] for c in names])
     nodes = np.append(zdd, zdd[-1])            # the table holds its last acceleration
-    with rig.mujoco_warnings_counted_not_printed():   # a trial model may go unstable: an answer
-        out, warnings = _roll(model, initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h), 1, index,
-                              mechanisms=mechanisms, structure=structure)
+    compiled = _compiled_replay(model, nodes, h, index, mechanisms, structure)
+    if compiled is not None:
+        out, warnings = compiled
+    else:
+        with rig.mujoco_warnings_counted_not_printed():   # a trial model may go unstable: an answer
+            out, warnings = _roll(model, initial_state(model, 0.0, 0.0, nodes[0]), table_jerk(nodes, h), 1, index,
+                                  mechanisms=mechanisms, structure=structure)
     if warnings or not np.all(np.isfinite(out)):
         raise SimulationError(
             f"replay of run {run.name!r}: MuJoCo warnings {warnings} or a diverging response: expected "

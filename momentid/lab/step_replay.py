@@ -32,9 +32,10 @@ terms (exact to round-off for a linear map; ``g`` put in as applied forces) and 
 friction, 3e-13 with quadratic damping (``tests/test_step_replay.py``; stick-slip switches amplify
 round-off, so not to 1e-15).
 
-Anything else nonlinear (compiled laws, limits, contacts, tendon friction loss, a damper across dofs the
-implicit update couples), another integrator, friction rows under another solver, or rows that couple, is
-refused (:func:`check`): the replay is then ``mujoco.rollout``'s.
+A model with none of them is linear, and replays so under any integrator (a lab rig's RK4).  Anything else
+nonlinear (compiled laws, limits, contacts, tendon friction loss, a damper across dofs the implicit update
+couples), those nonlinearities under another integrator than implicitfast, friction rows under another solver,
+or rows that couple, is refused (:func:`check`): the replay is then ``mujoco.rollout``'s.
 """
 
 from __future__ import annotations
@@ -107,8 +108,10 @@ def _coupled_dampers(model: mujoco.MjModel) -> bool:
 def _unlike(model: mujoco.MjModel) -> list[str]:
     """What in ``model`` this replay cannot carry, in words (empty: nothing)."""
     why = []
-    if model.opt.integrator != mujoco.mjtIntegrator.mjINT_IMPLICITFAST:
-        why.append(f"integrator {mujoco.mjtIntegrator(model.opt.integrator).name}")
+    inputs = np.any(model.dof_frictionloss) or _polynomial_tendons(model).size
+    if inputs and model.opt.integrator != mujoco.mjtIntegrator.mjINT_IMPLICITFAST:      # a linear step: any
+        why.append(f"friction loss or polynomial tendons under integrator "
+                   f"{mujoco.mjtIntegrator(model.opt.integrator).name}")
     if model.nu != 1 or model.na != 1:
         why.append(f"{model.nu} actuators and {model.na} activations (the table's jerk actuator alone)")
     if model.nnumeric and model.numeric(0).name == native_forces.PROGRAM:
@@ -134,9 +137,9 @@ def _unlike(model: mujoco.MjModel) -> list[str]:
 
 
 def check(model: mujoco.MjModel) -> None:
-    """Raise :class:`~momentid.errors.ModelError` unless ``model`` is an implicitfast twin whose only
-    nonlinearities are its dofs' friction loss (under PGS, each row uncoupled from the others) and its fixed
-    tendons' polynomial springs and dampers (module docstring).
+    """Raise :class:`~momentid.errors.ModelError` unless ``model``'s only nonlinearities are its dofs' friction
+    loss (under PGS, each row uncoupled from the others) and its fixed tendons' polynomial springs and dampers,
+    under implicitfast, or it has none (module docstring).
 
     Parameters
     ----------
@@ -156,9 +159,9 @@ def check(model: mujoco.MjModel) -> None:
             if off > MAX_COUPLING:
                 why.append(f"friction rows coupled by {off:.3g} of their inertia (at most {MAX_COUPLING:g})")
     if why:
-        raise ModelError(f"the twin's model has {', '.join(why)}: expected an implicitfast twin whose only "
-                         f"nonlinearities are its sliders' friction loss and its fixed tendons' polynomial springs "
-                         f"and dampers (its replay is mujoco.rollout's)")
+        raise ModelError(f"the twin's model has {', '.join(why)}: expected a linear model, or an implicitfast twin "
+                         f"whose only nonlinearities are its sliders' friction loss and its fixed tendons' "
+                         f"polynomial springs and dampers (its replay is mujoco.rollout's)")
 
 
 def applies(models: Sequence[mujoco.MjModel]) -> bool:
@@ -295,18 +298,19 @@ def maps(model: mujoco.MjModel, rows: np.ndarray | None = None) -> StepMaps:
 
 
 def replay(model: mujoco.MjModel, rows: np.ndarray, substeps: int, x: np.ndarray, control: np.ndarray,
-           out: np.ndarray) -> None:
+           out: np.ndarray) -> int:
     """Replay one twin (module docstring) from state ``x`` under the table's jerk.
 
     The :class:`~momentid.lab.replay_batch.Replay` of :func:`~momentid.lab.replay_batch.replay_batch` (its
     parameters): ``model`` passes :func:`check`; ``x`` (2 nv + na,) the state, ``control`` (n_steps,) the jerk
-    (m/s^3), ``out`` (ceil(n_steps / substeps), k) the readings of sensordata ``rows``, written.
+    (m/s^3), ``out`` (ceil(n_steps / substeps), k) the readings of sensordata ``rows``, written; returns the
+    number of resets.
     """
     mp = maps(model, rows)
-    _run(*_sparse(np.hstack([mp.A, mp.F])), mp.b, *_sparse(mp.P), mp.p, np.hstack([mp.C, mp.G]), mp.d, mp.y0,
-         mp.damping, mp.inverse_inertia, mp.limit, mp.velocity, np.ascontiguousarray(mp.Lx), mp.stretch,
-         mp.poly, mp.damped, np.ascontiguousarray(mp.Fd), np.ascontiguousarray(mp.J2), model.nv, model.opt.timestep,
-         x, control, substeps, out)
+    return int(_run(*_sparse(np.hstack([mp.A, mp.F])), mp.b, *_sparse(mp.P), mp.p, np.hstack([mp.C, mp.G]), mp.d,
+                    mp.y0, mp.damping, mp.inverse_inertia, mp.limit, mp.velocity, np.ascontiguousarray(mp.Lx),
+                    mp.stretch, mp.poly, mp.damped, np.ascontiguousarray(mp.Fd), np.ascontiguousarray(mp.J2), model.nv,
+                    model.opt.timestep, x, control, substeps, out))
 
 
 def _sparse(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -404,8 +408,9 @@ def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0
     position or velocity that is NaN or beyond 1e10 resets the twin to rest (control 0 for the step), and so
     does an acceleration beyond 1e10 (here the step's velocity change over ``h``, MuJoCo's reads its ``qacc``:
     the same step but where the implicit update's share decides), after which the step's readings are those
-    at rest."""
+    at rest.  Returns the number of resets."""
     nx, k, nt = x.size, y0.size, stretch.size
+    resets = 0
     z = np.empty(nx + limit.size + nt)
     nxt = np.empty(nx)
     work, rhs = np.empty((damped.size, damped.size)), np.empty(damped.size)
@@ -415,6 +420,7 @@ def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0
             if not abs(x[i]) <= 1e10:
                 x[:] = 0.0
                 u = 0.0
+                resets += 1
                 break
         _forces(x, u, z, p_start, p_column, p_value, p, damping, inverse_inertia, limit, velocity, Lx, stretch, poly)
         _next(z, u, w_start, w_column, w_value, b, nxt)
@@ -423,6 +429,7 @@ def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0
             if not abs(nxt[i] - x[i]) <= 1e10 * h:
                 x[:] = 0.0
                 u = 0.0
+                resets += 1
                 _forces(x, u, z, p_start, p_column, p_value, p, damping, inverse_inertia, limit, velocity, Lx,
                         stretch, poly)
                 _next(z, u, w_start, w_column, w_value, b, nxt)
@@ -431,3 +438,4 @@ def _run(w_start, w_column, w_value, b, p_start, p_column, p_value, p, CG, d, y0
             for i in range(k):
                 out[step // substeps, i] = y0[i] + d[i] * u + _dot(CG[i], z, 0, z.size)
         x[:] = nxt
+    return resets

@@ -19,7 +19,7 @@ shipped flexible rig's twin costs about 6 us a step in MuJoCo, a fraction of tha
 
 A model with anything else nonlinear (friction loss, polynomial springs, limits, contacts, plugins, an
 actuator that pushes beyond the table's) or another integrator is refused (:func:`check`): its replay is
-``mujoco.rollout``'s.
+another path's (:mod:`momentid.lab.compiled_paths`) or ``mujoco.rollout``'s.
 """
 
 from __future__ import annotations

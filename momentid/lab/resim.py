@@ -137,7 +137,8 @@ def simulate(models: Iterable[mujoco.MjModel], zdd: np.ndarray, dt: float, subst
         is not linear raises :class:`~momentid.errors.ModelError`.  Twins whose only nonlinear forces are
         compiled laws (Bouc-Wen's, under RK4) replay in compiled code whatever ``linear`` says
         (:mod:`momentid.lab.native_replay`: the same readings to round-off), and so do twins whose only
-        nonlinearity is their joints' friction loss (:mod:`momentid.lab.step_replay`).
+        nonlinearities are their joints' friction loss and their tendons' polynomial springs and dampers
+        (:mod:`momentid.lab.step_replay`); the choice is :func:`momentid.lab.compiled_paths.compiled_path`'s.
 
     Returns
     -------

@@ -548,7 +548,8 @@ def replay(structure: Structure, mechanisms: Sequence[Mechanism], run: RunData, 
     """Replay a recorded run's table acceleration through a MuJoCo model.
 
     The table follows the samples of ``zdd``, linear between them (one step
-    per sample).
+    per sample).  Stepped in compiled code as MuJoCo steps it where a compiled
+    path carries the model (:mod:`momentid.lab.compiled_paths`), else rolled out.
 
     Parameters
     ----------

@@ -397,8 +397,8 @@ class _Problem:
         point = _compiled_by_step([model], self.trials, self.substeps) if self.layout.k else {}
         columns = np.flatnonzero(ok)
         rows = np.cumsum([0, *self.sizes])
-        # linear twins replay in compiled loops that release the GIL: the trials run side by side; a
-        # mechanism's rollouts spread their models over MuJoCo's threads instead
+        # linear twins replay one step map per trial: the trials run side by side; a mechanism's twins
+        # (compiled loops or MuJoCo's rollouts) spread the batch's models over threads instead
         linear = not any(m.friction for m in valid)
 
         def block(k):                  # trial k's rows: the perturbed models read by the point's own sensors
